@@ -1,0 +1,46 @@
+# Set-up and entry points. `make demo` and `make test` work on a fresh Debian
+# machine with no display: they install the Debian libraries Open3D needs
+# (as root, when missing), create .venv and install the package into it.
+
+PYTHON ?= $(shell command -v python3.11 || command -v python3)
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+# Shared libraries open3d loads (OpenGL, EGL, OpenMP, USB).
+DEBIAN_PACKAGES := libgl1 libegl1 libgomp1 libusb-1.0-0
+
+.PHONY: demo test bench system-deps install clean
+
+demo: install
+	$(BIN)/fracref run configs/example.yaml --out runs/example --force
+	@echo "results: runs/example (preview: runs/example/fields/preview.png, manifest: runs/example/manifest.json)"
+
+test: install
+	$(BIN)/python -m pytest
+
+bench: install
+	$(BIN)/python benchmarks/bench_fields.py
+
+install: system-deps $(STAMP)
+
+system-deps:
+	@if command -v dpkg >/dev/null 2>&1; then \
+	  missing=""; \
+	  for p in $(DEBIAN_PACKAGES); do dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \
+	  $(PYTHON) -c 'import ensurepip, venv' >/dev/null 2>&1 || missing="$$missing python3-venv"; \
+	  if [ -n "$$missing" ]; then \
+	    echo "installing Debian packages:$$missing"; \
+	    if [ "$$(id -u)" -eq 0 ]; then SUDO=""; else SUDO="sudo"; fi; \
+	    $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq --no-install-recommends $$missing; \
+	  fi; \
+	fi
+
+$(STAMP): pyproject.toml
+	@$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), "Python >= 3.11 is required, found " + sys.version' 
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e '.[test]'
+	@touch $(STAMP)
+
+clean:
+	rm -rf $(VENV) runs .pytest_cache

@@ -1,0 +1,112 @@
+"""From meshes to the strength pyramid: zeta, xi and psi on one grid."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from fields.grid import Grid, grid_shape_for_box
+from fields.pyramid import StrengthPyramid
+from fields.strength import strength_field
+from fields.stress import distance_to_surface, modified_strength, stress_from_distance
+
+
+@dataclass
+class FieldSet:
+    """The fields of one object, sampled on ``grid``.
+
+    Attributes
+    ----------
+    grid : Grid
+    zeta : (nx, ny, nz) float
+        Material strength.
+    distance : (nx, ny, nz) float
+        Distance to the coarse fracture surface.
+    xi : (nx, ny, nz) float
+        Estimated stress.
+    psi : (nx, ny, nz) float
+        Modified strength, ``strength_weight * zeta - stress_weight * xi``.
+    pyramid : StrengthPyramid
+        Levels of psi and the level-averaged gradient.
+    """
+
+    grid: Grid
+    zeta: np.ndarray
+    distance: np.ndarray
+    xi: np.ndarray
+    psi: np.ndarray
+    pyramid: StrengthPyramid
+
+    def field(self, name: str) -> np.ndarray:
+        """``zeta``, ``xi``, ``psi`` or ``distance`` by name."""
+        if name not in ("zeta", "xi", "psi", "distance"):
+            raise ValueError(f"unknown field {name!r}, expected zeta, xi, psi or distance")
+        return getattr(self, name)
+
+
+def padded_bounds(V: np.ndarray, padding: float) -> tuple[np.ndarray, np.ndarray]:
+    """Bounding box of ``V`` grown by ``padding`` times its largest extent on every side."""
+    lo, hi = V.min(axis=0), V.max(axis=0)
+    pad = padding * float((hi - lo).max())
+    return lo - pad, hi + pad
+
+
+def build_fields(
+    exterior_V: np.ndarray,
+    fracture_V: np.ndarray,
+    fracture_F: np.ndarray,
+    *,
+    resolution,
+    padding: float,
+    layers: list[dict],
+    seed: int,
+    normalize: bool = True,
+    stress_length: float = 0.1,
+    strength_weight: float = 1.0,
+    stress_weight: float = 1.0,
+    levels: int = 5,
+    sigma: float = 1.0,
+    step: Callable[[str], None] | None = None,
+) -> FieldSet:
+    """Sample zeta, xi and psi over the object's box and build the pyramid.
+
+    Parameters
+    ----------
+    exterior_V : (n, 3) float
+        Vertices of the exterior surface B; their box (padded) is the grid box
+        and the frame of the procedural strength.
+    fracture_V, fracture_F : (m, 3) float, (k, 3) int
+        The coarse fracture surface (the stress estimate's source).
+    resolution : int or (3,) int
+        See :func:`fields.grid.grid_shape_for_box`.
+    padding : float
+        Grid margin around the object, relative to its largest extent.
+    layers, seed, normalize
+        Strength layers, see :func:`fields.strength.strength_field`.
+    stress_length : float
+        Decay length of xi relative to the diagonal of the object's box.
+    strength_weight, stress_weight : float
+        Weights of psi, see :func:`fields.stress.modified_strength`.
+    levels, sigma
+        Pyramid, see :class:`fields.pyramid.StrengthPyramid`.
+    step : callable, optional
+        Called with the name of each finished step (progress reporting).
+    """
+    step = step or (lambda name: None)
+    obj_lo, obj_hi = exterior_V.min(axis=0), exterior_V.max(axis=0)
+    lo, hi = padded_bounds(exterior_V, padding)
+    grid = Grid.from_bounds(lo, hi, grid_shape_for_box(lo, hi, resolution))
+    X = grid.points()
+
+    zeta = strength_field(X, (obj_lo, obj_hi), layers, seed, normalize).reshape(grid.shape)
+    step("strength")
+    distance = distance_to_surface(X, fracture_V, fracture_F).reshape(grid.shape)
+    diagonal = float(np.linalg.norm(obj_hi - obj_lo))
+    xi = stress_from_distance(distance, stress_length * diagonal)
+    step("stress")
+    psi = modified_strength(zeta, xi, strength_weight, stress_weight)
+    pyramid = StrengthPyramid(grid, psi, levels=levels, sigma=sigma)
+    step("pyramid")
+    return FieldSet(grid, zeta, distance, xi, psi, pyramid)

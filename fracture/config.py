@@ -1,0 +1,230 @@
+"""Experiment configs: YAML files layered on shared defaults, validated as a whole.
+
+A config file is a YAML mapping. It may start with a ``defaults`` list of other
+config files (paths relative to it, ``.yaml`` optional) that are merged first,
+in order; the file's own keys are merged on top, then ``--set`` overrides.
+Every key has a default in :data:`SCHEMA`, so an experiment lists only what it
+changes. Mappings merge key by key; lists and scalars replace.
+
+Loading validates everything before anything runs: an unknown key, a wrong type
+or an out-of-range value raises :class:`~fracture.schema.ConfigError` naming
+the file that set the value, the key path, what was given and what was
+expected. YAML is read with ``yaml.safe_load`` (no object construction), and
+paths are relative to the file that sets them.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import Any, Iterable
+
+import yaml
+
+from fields.colormap import NAMES as COLORMAPS
+from fields.strength import KINDS, LAYER_COMMON
+from fracture.schema import ConfigError, Layers, Param, schema_defaults, validate
+
+SET_SOURCE = "--set"
+
+SCHEMA: dict[str, Any] = {
+    "name": Param(None, "str", nullable=True, doc="experiment name; null: the config file's name"),
+    "seed": Param(0, "int", lo=0, hi=2**32 - 1, doc="seed of every random choice of the run"),
+    "input": {
+        "exterior": Param(None, "path", nullable=True, doc="mesh file of the exterior surface B (closed)"),
+        "fracture": Param(None, "path", nullable=True, doc="mesh file of the coarse fracture surface"),
+    },
+    "grid": {
+        "resolution": Param(50, "int3", lo=4, hi=1024,
+                            doc="nodes along the longest axis, or [nx, ny, nz] (e.g. [150, 50, 10])"),
+        "padding": Param(0.05, lo=0.0, hi=1.0, doc="grid margin around the object, relative to its largest extent"),
+    },
+    "strength": {
+        "layers": Layers(
+            kinds={name: spec for name, (_, spec) in KINDS.items()},
+            common=LAYER_COMMON,
+            default=({"kind": "marble"},),
+        ),
+        "normalize": Param(True, "bool", doc="rescale the summed layers to [0, 1]"),
+    },
+    "stress": {
+        "length": Param(0.1, lo=1e-4, hi=10.0,
+                        doc="decay length of the stress estimate, relative to the object's box diagonal"),
+    },
+    "psi": {
+        "strength_weight": Param(1.0, lo=0.0, hi=100.0, doc="weight of zeta in psi"),
+        "stress_weight": Param(1.0, lo=0.0, hi=100.0,
+                               doc="weight of xi in psi; larger keeps the result closer to the coarse surface"),
+    },
+    "pyramid": {
+        "levels": Param(5, "int", lo=1, hi=8, doc="Gaussian pyramid levels (the paper uses 4 to 6)"),
+        "sigma": Param(1.0, lo=0.01, hi=64.0, doc="width of level 1 in voxels; doubles per level"),
+    },
+    "preview": {
+        "axis": Param(None, "str", choices=("x", "y", "z"), nullable=True,
+                      doc="normal of the preview slices; null: the axis with the fewest nodes"),
+        "offset": Param(0.5, lo=0.0, hi=1.0, doc="relative position of the preview slices"),
+        "colormap": Param("viridis", "str", choices=COLORMAPS),
+    },
+}
+
+
+def read_yaml(path: Path) -> dict:
+    """Read one YAML mapping safely, with errors that name the file and line."""
+    if not path.is_file():
+        raise ConfigError(str(path), "", "config file not found")
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f"{path}:{mark.line + 1}" if mark is not None else str(path)
+        problem = getattr(exc, "problem", None) or str(exc)
+        raise ConfigError(where, "", f"invalid YAML: {problem}") from None
+    except UnicodeDecodeError:
+        raise ConfigError(str(path), "", "not a UTF-8 text file") from None
+    if data is None:
+        return {}
+    if not isinstance(data, dict):
+        raise ConfigError(str(path), "", f"top level is a {type(data).__name__}, expected a mapping of keys")
+    return data
+
+
+class _Merged:
+    """A config tree being merged, with the source of every key path."""
+
+    def __init__(self):
+        self.tree: dict = schema_defaults(SCHEMA)
+        self.origins: dict[str, str] = {}
+
+    def merge(self, update: dict, source: str, prefix: str = "", into: dict | None = None) -> None:
+        into = self.tree if into is None else into
+        for key, value in update.items():
+            path = f"{prefix}.{key}" if prefix else str(key)
+            if isinstance(value, dict) and isinstance(into.get(key), dict):
+                self.merge(value, source, path, into[key])
+            else:
+                into[key] = value
+                self.origins[path] = source
+                for sub in [p for p in self.origins if p.startswith(path + ".") or p.startswith(path + "[")]:
+                    self.origins[sub] = source
+
+    def origin(self, key: str) -> str:
+        """The source of ``key``: the file that set it or its closest parent."""
+        while key:
+            if key in self.origins:
+                return self.origins[key]
+            key = re.sub(r"(\.[^.\[]*|\[\d+\])$", "", key) if ("." in key or "[" in key) else ""
+        return "defaults"
+
+
+def _collect(path: Path, merged: _Merged, stack: tuple[Path, ...]) -> None:
+    path = path.resolve()
+    if path in stack:
+        chain = " -> ".join(str(p) for p in stack + (path,))
+        raise ConfigError(str(stack[-1]), "defaults", f"cycle of defaults: {chain}")
+    data = read_yaml(path)
+    includes = data.pop("defaults", [])
+    if isinstance(includes, str):
+        includes = [includes]
+    if not isinstance(includes, list) or not all(isinstance(i, str) for i in includes):
+        raise ConfigError(str(path), "defaults", f"got {includes!r}, expected a list of config file paths")
+    for item in includes:
+        target = path.parent / item
+        if target.suffix not in (".yaml", ".yml"):
+            target = target.with_name(target.name + ".yaml")
+        if not target.is_file():
+            raise ConfigError(str(path), "defaults", f"included config {item!r} not found (looked for {target})")
+        _collect(target, merged, stack + (path,))
+    merged.merge(data, str(path))
+
+
+_KEY_TOKEN = re.compile(r"([^.\[\]]+)|\[(\d+)\]")
+
+
+def parse_override(text: str) -> tuple[list[str | int], Any]:
+    """Split ``key.path[0].name=value`` into key tokens and a YAML-parsed value."""
+    if "=" not in text:
+        raise ConfigError(SET_SOURCE, "", f"got {text!r}, expected key.path=value")
+    key, raw = text.split("=", 1)
+    tokens: list[str | int] = []
+    pos = 0
+    for m in _KEY_TOKEN.finditer(key):
+        if m.start() != pos and key[pos:m.start()] != ".":
+            break
+        tokens.append(m.group(1) if m.group(1) is not None else int(m.group(2)))
+        pos = m.end()
+    if not key or pos != len(key) or not tokens or not isinstance(tokens[0], str):
+        raise ConfigError(SET_SOURCE, key, f"got {text!r}, expected key.path=value (e.g. psi.stress_weight=2)")
+    try:
+        value = yaml.safe_load(raw) if raw.strip() else None
+    except yaml.YAMLError:
+        raise ConfigError(SET_SOURCE, key, f"cannot parse the value {raw!r} as YAML") from None
+    return tokens, value
+
+
+def _apply_override(merged: _Merged, text: str) -> None:
+    tokens, value = parse_override(text)
+    source = f"{SET_SOURCE} {text}"
+    node: Any = merged.tree
+    path = ""
+    for i, tok in enumerate(tokens):
+        last = i == len(tokens) - 1
+        path = f"{path}[{tok}]" if isinstance(tok, int) else (f"{path}.{tok}" if path else tok)
+        if isinstance(tok, int):
+            if not isinstance(node, list) or not -len(node) <= tok < len(node):
+                raise ConfigError(source, path, "no such list item")
+        elif not isinstance(node, dict):
+            raise ConfigError(source, path, "the parent key is not a mapping")
+        if last:
+            node[tok] = value
+            merged.origins[path] = source
+        else:
+            if isinstance(tok, str) and tok not in node:
+                node[tok] = {}
+            node = node[tok]
+
+
+def load_config(path: str | Path, overrides: Iterable[str] = ()) -> dict:
+    """Load, merge and validate an experiment config.
+
+    Parameters
+    ----------
+    path : str or Path
+        The experiment's YAML file.
+    overrides : iterable of str
+        ``key.path=value`` strings (values parsed as YAML), applied last.
+
+    Returns
+    -------
+    dict
+        The fully resolved config: every key present, paths absolute,
+        ``name`` filled in.
+
+    Raises
+    ------
+    ConfigError
+        On any problem, before anything is written.
+    """
+    path = Path(path)
+    merged = _Merged()
+    _collect(path, merged, ())
+    for text in overrides:
+        _apply_override(merged, text)
+
+    def resolve(key: str, value: str) -> str:
+        source = merged.origin(key)
+        base = Path.cwd() if source.startswith(SET_SOURCE) or source == "defaults" else Path(source).parent
+        target = (base / value).resolve()
+        if not target.is_file():
+            raise ConfigError(source, key, f"file not found: {value!r} (resolved to {target})")
+        return str(target)
+
+    cfg = validate(merged.tree, SCHEMA, merged.origin, resolve)
+    if cfg["name"] is None:
+        cfg["name"] = path.stem
+    return cfg
+
+
+def dump_config(cfg: dict) -> str:
+    """The resolved config as YAML that :func:`load_config` reads back unchanged."""
+    return yaml.safe_dump(cfg, sort_keys=False, default_flow_style=None, width=100)

@@ -1,0 +1,87 @@
+"""Reading and checking triangle meshes at the door."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import igl
+import numpy as np
+
+from fracture.errors import InputError
+
+MESH_SUFFIXES = (".obj", ".ply", ".off", ".stl")
+
+
+def check_triangle_mesh(V, F, what: str, closed: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Validate a triangle mesh and return it as ``float64`` / ``int64`` arrays.
+
+    Parameters
+    ----------
+    V : (n, 3) array_like of float
+    F : (m, 3) array_like of int
+    what : str
+        Names the mesh in error messages (file, config key, piece).
+    closed : bool
+        Also require every edge to have exactly two incident triangles
+        (a closed, edge-manifold surface).
+
+    Raises
+    ------
+    InputError
+        With expected versus actual.
+    """
+    V = np.asarray(V)
+    F = np.asarray(F)
+    if V.ndim != 2 or V.shape[1] != 3 or V.shape[0] == 0:
+        raise InputError(f"{what}: vertices have shape {V.shape}, expected (n, 3) with n > 0")
+    if F.ndim != 2 or F.shape[1] != 3 or F.shape[0] == 0:
+        raise InputError(f"{what}: faces have shape {F.shape}, expected (m, 3) triangles with m > 0")
+    if not np.issubdtype(V.dtype, np.number) or not np.issubdtype(F.dtype, np.integer):
+        raise InputError(f"{what}: expected float vertices and integer faces, got {V.dtype} and {F.dtype}")
+    V = np.ascontiguousarray(V, np.float64)
+    F = np.ascontiguousarray(F, np.int64)
+    bad = ~np.isfinite(V).all(axis=1)
+    if bad.any():
+        raise InputError(f"{what}: {int(bad.sum())} vertices have NaN or infinite coordinates (first: vertex {int(np.flatnonzero(bad)[0])})")
+    if F.min() < 0 or F.max() >= len(V):
+        raise InputError(f"{what}: face indices span [{int(F.min())}, {int(F.max())}], expected [0, {len(V) - 1}]")
+    repeated = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
+    if repeated.any():
+        raise InputError(f"{what}: {int(repeated.sum())} faces repeat a vertex (first: face {int(np.flatnonzero(repeated)[0])})")
+    if closed:
+        E = np.sort(F[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+        _, counts = np.unique(E, axis=0, return_counts=True)
+        if np.any(counts != 2):
+            open_edges = int((counts == 1).sum())
+            nonmanifold = int((counts > 2).sum())
+            raise InputError(
+                f"{what}: expected a closed surface (every edge shared by exactly 2 triangles), "
+                f"found {open_edges} boundary edges and {nonmanifold} edges shared by more than 2 triangles"
+            )
+    return V, F
+
+
+def read_mesh(path: str | Path, what: str | None = None, closed: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Read a triangle mesh (OBJ, PLY, OFF, STL; polygons are fan-triangulated).
+
+    Parameters
+    ----------
+    path : str or Path
+    what : str, optional
+        Prefix for error messages (default: the path).
+    closed : bool
+        See :func:`check_triangle_mesh`.
+    """
+    path = Path(path)
+    what = f"{what} ({path})" if what else str(path)
+    if not path.is_file():
+        raise InputError(f"{what}: mesh file not found")
+    if path.suffix.lower() not in MESH_SUFFIXES:
+        raise InputError(f"{what}: unsupported mesh format {path.suffix!r}, expected one of {', '.join(MESH_SUFFIXES)}")
+    if path.stat().st_size == 0:
+        raise InputError(f"{what}: file is empty")
+    try:
+        V, F = igl.read_triangle_mesh(str(path))
+    except Exception as exc:  # libigl raises RuntimeError with little detail
+        raise InputError(f"{what}: cannot read mesh ({exc})") from None
+    return check_triangle_mesh(V, F, what, closed=closed)

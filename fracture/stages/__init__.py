@@ -1,0 +1,3 @@
+"""Pipeline stages; importing this package registers them with the runner."""
+
+from fracture.stages import fields  # noqa: F401

@@ -1,0 +1,94 @@
+"""The ``fields`` stage: zeta, xi, psi and the strength pyramid on a grid."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fields.build import build_fields
+from fields.slices import axis_slice, slice_image
+from fracture.errors import InputError
+from fracture.meshio import read_mesh
+from fracture.runner import RunContext, stage
+
+PREVIEW_FIELDS = ("zeta", "xi", "psi")
+# Target width in pixels of one preview slice (pixels are repeated up to it).
+_PREVIEW_WIDTH = 400
+_PREVIEW_GAP = 8
+
+
+def input_meshes(ctx: RunContext) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
+    """The exterior B and the coarse fracture surface.
+
+    From the ``coarse`` stage when it ran, else from the mesh files named by
+    ``input.exterior`` and ``input.fracture`` (hand-edited coarse surfaces).
+    """
+    if "exterior" in ctx.products and "coarse_fracture" in ctx.products:
+        return ctx.products["exterior"], ctx.products["coarse_fracture"]
+    inp = ctx.cfg["input"]
+    missing = [k for k in ("exterior", "fracture") if not inp.get(k)]
+    if missing:
+        raise InputError(
+            "fields: needs the object's exterior and coarse fracture surface; set "
+            + " and ".join(f"input.{k}" for k in missing)
+            + " to mesh files (OBJ, PLY, OFF or STL)"
+        )
+    exterior = read_mesh(inp["exterior"], "input.exterior", closed=True)
+    fracture = read_mesh(inp["fracture"], "input.fracture")
+    return exterior, fracture
+
+
+@stage("fields")
+def fields_stage(ctx: RunContext) -> None:
+    cfg = ctx.cfg
+    (BV, BF), (SV, SF) = input_meshes(ctx)
+    with ctx.bar(3, "fields") as bar:
+        fs = build_fields(
+            BV, SV, SF,
+            resolution=cfg["grid"]["resolution"],
+            padding=cfg["grid"]["padding"],
+            layers=cfg["strength"]["layers"],
+            seed=cfg["seed"],
+            normalize=cfg["strength"]["normalize"],
+            stress_length=cfg["stress"]["length"],
+            strength_weight=cfg["psi"]["strength_weight"],
+            stress_weight=cfg["psi"]["stress_weight"],
+            levels=cfg["pyramid"]["levels"],
+            sigma=cfg["pyramid"]["sigma"],
+            step=lambda name: (bar.set_postfix_str(name), bar.update()),
+        )
+    ctx.products.update(exterior=(BV, BF), coarse_fracture=(SV, SF), fields=fs)
+
+    ctx.save_json("fields/grid.json", fs.grid.to_dict())
+    for name in PREVIEW_FIELDS:
+        ctx.save_array(f"fields/{name}.npy", fs.field(name).astype(np.float32))
+    ctx.save_array("fields/pyramid.npy", fs.pyramid.levels.astype(np.float32))
+    ctx.save_png("fields/preview.png", preview_image(fs, cfg["preview"]))
+
+    ctx.counts.update(
+        grid_nodes=fs.grid.size,
+        pyramid_levels=fs.pyramid.n_levels,
+        exterior_triangles=int(len(BF)),
+        coarse_fracture_triangles=int(len(SF)),
+    )
+    ctx.stats["fields"] = {
+        "grid_shape": list(fs.grid.shape),
+        **{f"{n}_range": [float(fs.field(n).min()), float(fs.field(n).max())] for n in PREVIEW_FIELDS},
+    }
+
+
+def preview_image(fs, preview: dict) -> np.ndarray:
+    """zeta, xi and psi side by side on one slice plane, as an RGB image."""
+    axis = preview["axis"]
+    if axis is None:
+        axis = int(np.argmin(fs.grid.shape))
+    panels = []
+    for name in PREVIEW_FIELDS:
+        plane, _ = axis_slice(fs.grid, fs.field(name), axis, preview["offset"])
+        scale = max(1, _PREVIEW_WIDTH // plane.shape[0])
+        panels.append(slice_image(plane, preview["colormap"], scale=scale))
+    height = panels[0].shape[0]
+    gap = np.full((height, _PREVIEW_GAP, 3), 255, np.uint8)
+    row = [panels[0]]
+    for p in panels[1:]:
+        row += [gap, p]
+    return np.concatenate(row, axis=1)

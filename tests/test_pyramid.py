@@ -1,0 +1,90 @@
+import numpy as np
+import pytest
+
+from fields.grid import Grid
+from fields.pyramid import StrengthPyramid, gaussian_level, level_sigmas
+
+
+def _grid(shape=(24, 16, 12)):
+    return Grid.from_bounds([0.0, 0.0, 0.0], [1.2, 0.75, 0.55], shape)
+
+
+def test_gradient_of_a_linear_field_is_exact_on_every_level():
+    grid = _grid()
+    a = np.array([1.5, -0.5, 3.0])
+    psi = (grid.points() @ a + 2.0).reshape(grid.shape)
+    pyr = StrengthPyramid(grid, psi, levels=5, sigma=1.5)
+    P = np.random.default_rng(0).uniform(grid.lo, grid.hi, (2000, 3))
+    for k in range(pyr.n_levels):
+        # Odd reflection keeps linear fields linear up to the grid boundary.
+        np.testing.assert_allclose(pyr.level_gradient(k, P), np.broadcast_to(a, P.shape), atol=1e-9)
+    value, grad = pyr.value_and_gradient(P)
+    np.testing.assert_allclose(grad, np.broadcast_to(a, P.shape), atol=1e-9)
+    np.testing.assert_allclose(value, P @ a + 2.0, atol=1e-12)
+
+
+def test_mean_gradient_equals_average_of_level_gradients():
+    grid = _grid()
+    psi = np.random.default_rng(1).normal(size=grid.shape)
+    pyr = StrengthPyramid(grid, psi, levels=4, sigma=1.0)
+    P = np.random.default_rng(2).uniform(grid.lo, grid.hi, (500, 3))
+    average = np.mean([pyr.level_gradient(k, P) for k in range(4)], axis=0)
+    np.testing.assert_allclose(pyr.gradient(P), average, atol=1e-10)
+
+
+def test_level_zero_is_the_field_and_levels_get_smoother():
+    grid = _grid((32, 32, 32))
+    psi = np.random.default_rng(3).normal(size=grid.shape)
+    pyr = StrengthPyramid(grid, psi, levels=5, sigma=1.0)
+    np.testing.assert_array_equal(pyr.levels[0], psi)
+    roughness = [np.abs(np.diff(level, axis=0)).mean() for level in pyr.levels]
+    assert all(b < 0.75 * a for a, b in zip(roughness, roughness[1:])), roughness
+
+
+def test_gaussian_level_attenuates_a_sinusoid_as_predicted():
+    # A Gaussian of width s multiplies a sinusoid of angular frequency w by exp(-s^2 w^2 / 2).
+    n = 128
+    grid = Grid.from_bounds([0, 0, 0], [1, 1, 1], (n, 8, 8))
+    x = grid.axes()[0]
+    w = 2 * np.pi * 6
+    psi = np.broadcast_to(np.sin(w * x)[:, None, None], grid.shape).copy()
+    for k, s in enumerate(level_sigmas(grid, 4, 1.0)):
+        smooth = gaussian_level(psi, s)[:, 4, 4]
+        sigma_world = s[0] * grid.spacing[0]
+        expected = np.exp(-0.5 * (sigma_world * w) ** 2) * np.sin(w * x)
+        inner = slice(n // 4, 3 * n // 4)
+        np.testing.assert_allclose(smooth[inner], expected[inner], atol=2e-3, err_msg=f"level {k}")
+
+
+def test_level_sigmas_are_isotropic_in_material_space():
+    grid = Grid.from_bounds([0, 0, 0], [3.0, 1.0, 0.2], (150, 50, 10))
+    s = level_sigmas(grid, 5, 1.0)
+    world = s * grid.spacing
+    assert np.all(world[0] == 0)
+    np.testing.assert_allclose(world[1:, 0], world[1:, 1])
+    np.testing.assert_allclose(world[1:, 0], world[1:, 2])
+    np.testing.assert_allclose(world[2:, 0] / world[1:-1, 0], 2.0)
+
+
+def test_finite_difference_gradient_converges_quadratically():
+    errors = []
+    for n in (9, 17, 33, 65):
+        grid = Grid.from_bounds([0, 0, 0], [1, 1, 1], (n, n, n))
+        X = grid.points()
+        psi = (np.sin(2 * X[:, 0]) * np.cos(X[:, 1]) + X[:, 2] ** 2).reshape(grid.shape)
+        pyr = StrengthPyramid(grid, psi, levels=1)
+        P = np.random.default_rng(4).uniform(0.25, 0.75, (400, 3))
+        exact = np.stack([2 * np.cos(2 * P[:, 0]) * np.cos(P[:, 1]), -np.sin(2 * P[:, 0]) * np.sin(P[:, 1]), 2 * P[:, 2]], 1)
+        errors.append(np.abs(pyr.gradient(P) - exact).max())
+    rates = np.log2(np.array(errors[:-1]) / np.array(errors[1:]))
+    assert np.all(rates > 1.7), (errors, rates)
+
+
+def test_pyramid_rejects_bad_input():
+    grid = _grid()
+    with pytest.raises(ValueError, match="shape"):
+        StrengthPyramid(grid, np.zeros((3, 3, 3)))
+    bad = np.zeros(grid.shape)
+    bad[1, 2, 3] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        StrengthPyramid(grid, bad)
