@@ -80,8 +80,42 @@ def read_mesh(path: str | Path, what: str | None = None, closed: bool = False) -
         raise InputError(f"{what}: unsupported mesh format {path.suffix!r}, expected one of {', '.join(MESH_SUFFIXES)}")
     if path.stat().st_size == 0:
         raise InputError(f"{what}: file is empty")
-    try:
-        V, F = igl.read_triangle_mesh(str(path))
-    except Exception as exc:  # libigl raises RuntimeError with little detail
-        raise InputError(f"{what}: cannot read mesh ({exc})") from None
+    if path.suffix.lower() == ".obj":
+        V, F = read_obj(path, what)
+    else:
+        try:
+            V, F = igl.read_triangle_mesh(str(path))
+        except Exception as exc:  # libigl raises RuntimeError with little detail
+            raise InputError(f"{what}: cannot read mesh ({exc})") from None
     return check_triangle_mesh(V, F, what, closed=closed)
+
+
+def read_obj(path: Path, what: str) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices and fan-triangulated faces of a Wavefront OBJ file.
+
+    Our own reader rather than libigl's, so that errors can name the line
+    and non-finite coordinates reach :func:`check_triangle_mesh` (libigl
+    rejects them with a message on stderr only). Accepts ``v/vt/vn`` face
+    tokens and negative (relative) indices; ignores other records.
+    """
+    verts: list[list[float]] = []
+    faces: list[list[int]] = []
+    with open(path, encoding="utf-8", errors="replace") as f:
+        for lineno, line in enumerate(f, 1):
+            parts = line.split()
+            if not parts:
+                continue
+            try:
+                if parts[0] == "v":
+                    verts.append([float(x) for x in parts[1:4]])
+                    if len(verts[-1]) != 3:
+                        raise ValueError("a vertex needs 3 coordinates")
+                elif parts[0] == "f":
+                    idx = [int(tok.split("/")[0]) for tok in parts[1:]]
+                    if len(idx) < 3:
+                        raise ValueError("a face needs at least 3 vertices")
+                    idx = [i - 1 if i > 0 else len(verts) + i for i in idx]
+                    faces.extend([idx[0], idx[k], idx[k + 1]] for k in range(1, len(idx) - 1))
+            except ValueError as exc:
+                raise InputError(f"{what}: line {lineno}: {exc}: {line.strip()[:80]!r}") from None
+    return np.array(verts, np.float64).reshape(-1, 3), np.array(faces, np.int64).reshape(-1, 3)

@@ -1,0 +1,138 @@
+import numpy as np
+import pytest
+
+from fields.grid import Grid
+from fields.strength import KINDS, UnitFrame, bricks, inclusions, load_volume, marble, radial, strength_field
+from fracture.errors import InputError
+
+BOUNDS = (np.array([0.0, 0.0, 0.0]), np.array([2.0, 1.0, 0.5]))
+FRAME = UnitFrame(*BOUNDS)
+
+
+def params(kind, **changes):
+    return {**{k: p.default for k, p in KINDS[kind][1].items()}, **changes}
+
+
+def layer(kind, **changes):
+    return {"kind": kind, "weight": 1.0, **params(kind, **changes)}
+
+
+def sample_points(n=20000, seed=0):
+    return np.random.default_rng(seed).uniform(BOUNDS[0], BOUNDS[1], (n, 3))
+
+
+@pytest.mark.parametrize("kind", ["marble", "elongated", "radial", "bricks", "inclusions"])
+def test_every_kind_is_normalised_finite_and_seeded(kind):
+    X = sample_points()
+    a = strength_field(X, BOUNDS, [layer(kind)], seed=3)
+    b = strength_field(X, BOUNDS, [layer(kind)], seed=3)
+    assert np.all(np.isfinite(a)) and a.min() == 0.0 and a.max() == 1.0
+    np.testing.assert_array_equal(a, b)
+    if kind != "radial":  # radial has no randomness
+        c = strength_field(X, BOUNDS, [layer(kind)], seed=4)
+        assert np.abs(a - c).mean() > 1e-3
+
+
+def test_marble_hard_region_is_strong_and_grainy():
+    U = FRAME.to_unit(sample_points(40000))
+    rng = lambda: np.random.default_rng(0)
+    p = params("marble", grain_contrast=0.0, soft_contrast=0.0, edge_width=1e-3)
+    z = marble(U, FRAME, rng(), **p)
+    hard = np.isclose(z, p["hard_strength"])
+    soft = np.isclose(z, p["soft_strength"])
+    assert hard.sum() + soft.sum() > 0.95 * len(z)
+    # The share of hard material follows hard_fraction (the veins are turbulent, so loosely).
+    assert abs(hard.mean() - p["hard_fraction"]) < 0.12
+    # With grain noise on, the hard region varies much faster than the soft one.
+    zg = marble(U, FRAME, rng(), **params("marble"))
+    d = 0.004
+    zg_shift = marble(U + [d, 0, 0], FRAME, rng(), **params("marble"))
+    var_hard = np.abs(zg_shift - zg)[hard].mean()
+    var_soft = np.abs(zg_shift - zg)[soft].mean()
+    assert var_hard > 2 * var_soft
+
+
+def test_elongated_noise_is_smoother_along_its_axis():
+    X = sample_points(20000)
+    f = lambda Y: strength_field(Y, BOUNDS, [layer("elongated", axis="y", stretch=8.0)], seed=1, normalize=False)
+    base = f(X)
+    d = 0.02
+    along = np.abs(f(X + [0, d, 0]) - base).mean()
+    across = np.abs(f(X + [d, 0, 0]) - base).mean()
+    assert along < 0.4 * across
+
+
+def test_radial_is_soft_inside_and_hard_outside():
+    U = np.array([[1.0, 0.25, 0.0], [1.0, 0.25, 0.2], [1.0, 0.0, 0.0], [1.0, 0.4, 0.5]])  # axis x through box centre
+    z = radial(U, FRAME, None, **params("radial", axis="x", inner=0.1, outer=0.9, exponent=1.0))
+    # centre of the (y, z) cross-section is (0.25, 0.125); the inscribed radius is 0.125
+    assert z[0] == pytest.approx(0.1 + 0.8 * (0.125 / 0.125))  # on the low z face: at the radius
+    centre = radial(np.array([[0.3, 0.25, 0.125]]), FRAME, None, **params("radial", axis="x", inner=0.1, outer=0.9))
+    assert centre[0] == pytest.approx(0.1)
+    r = np.linspace(0, 0.125, 20)
+    line = np.stack([np.full_like(r, 1.0), 0.25 + r, np.full_like(r, 0.125)], 1)
+    values = radial(line, FRAME, None, **params("radial", axis="x"))
+    assert np.all(np.diff(values) > 0)
+
+
+def test_bricks_are_weak_on_interfaces_only():
+    p = params("bricks", noise_contrast=0.0)
+    bl, bh, m = p["brick_length"], p["brick_height"], p["mortar"]
+    rng = np.random.default_rng(0)
+    brick_centre = np.array([[m + 0.5 * (bl - m), m + 0.5 * (bh - m), 0.1]])
+    interface = np.array([[m, m + 0.5 * (bh - m), 0.1]])  # head-joint / brick boundary
+    bed_middle = np.array([[0.5 * bl, 0.5 * m, 0.1]])  # inside the bed joint
+    z = [bricks(P, FRAME, rng, **p)[0] for P in (brick_centre, interface, bed_middle)]
+    assert z[0] == pytest.approx(p["brick_strength"], abs=1e-4)
+    assert z[1] == pytest.approx(p["interface_strength"], abs=1e-6)
+    assert z[1] < z[2] < p["mortar_strength"] + 1e-9
+    # Running bond: the next course is shifted by half a brick.
+    upper = brick_centre + [0.5 * bl, bh, 0.0]
+    assert bricks(upper, FRAME, rng, **p)[0] == pytest.approx(p["brick_strength"], abs=1e-4)
+
+
+def test_inclusions_are_hard_cubes_in_a_soft_matrix():
+    p = params("inclusions", count=1, size=0.2, noise_contrast=0.0, softness=1e-3)
+    rng = np.random.default_rng(5)
+    U = np.random.default_rng(6).uniform(0, FRAME.extent, (40000, 3))
+    z = inclusions(U, FRAME, rng, **p)
+    hard = z > 0.5 * (p["matrix_strength"] + p["inclusion_strength"])
+    # The hard set is one cube of volume size^3 (in unit coordinates).
+    assert hard.mean() == pytest.approx(0.2**3 / np.prod(FRAME.extent), rel=0.15)
+    assert np.allclose(z[~hard].min(), p["matrix_strength"], atol=1e-3)
+
+
+def test_volume_layer_reproduces_a_user_grid(tmp_path):
+    grid = Grid.from_bounds([-1, -1, -1], [3, 2, 1], (9, 7, 5))
+    values = grid.points() @ np.array([0.5, -1.0, 2.0])
+    np.save(tmp_path / "v.npy", values.reshape(grid.shape))
+    X = sample_points(500)
+    z = strength_field(X, BOUNDS, [{"kind": "volume", "weight": 1.0, "path": str(tmp_path / "v.npy"),
+                                    "bounds": [[-1, -1, -1], [3, 2, 1]]}], seed=0, normalize=False)
+    np.testing.assert_allclose(z, X @ np.array([0.5, -1.0, 2.0]), atol=1e-12)
+
+
+def test_volume_errors_name_the_file(tmp_path):
+    np.save(tmp_path / "flat.npy", np.zeros((4, 4)))
+    nan = np.zeros((3, 3, 3))
+    nan[0, 0, 0] = np.nan
+    np.save(tmp_path / "nan.npy", nan)
+    (tmp_path / "junk.npy").write_bytes(b"not numpy")
+    for name, match in [("missing.npy", "not found"), ("flat.npy", "expected a 3D array"),
+                        ("nan.npy", "NaN"), ("junk.npy", "cannot read")]:
+        with pytest.raises(InputError, match=match) as err:
+            load_volume(tmp_path / name)
+        assert name in str(err.value)
+
+
+def test_layers_add_with_weights():
+    X = sample_points(1000)
+    a = strength_field(X, BOUNDS, [layer("radial")], seed=0, normalize=False)
+    b = strength_field(X, BOUNDS, [layer("bricks")], seed=0, normalize=False)
+    both = strength_field(X, BOUNDS, [{**layer("radial"), "weight": 0.3}, {**layer("bricks"), "weight": 2.0}],
+                          seed=0, normalize=False)
+    # Layer i draws from default_rng([seed, i]); bricks is layer 1 here, so compare its deterministic part.
+    bricks_as_second = strength_field(X, BOUNDS, [{**layer("radial"), "weight": 0.0}, layer("bricks")], seed=0,
+                                      normalize=False)
+    np.testing.assert_allclose(both, 0.3 * a + 2.0 * bricks_as_second, atol=1e-12)
+    assert not np.allclose(bricks_as_second, b)  # a different layer index draws different noise
