@@ -1,0 +1,152 @@
+import textwrap
+from pathlib import Path
+
+import pytest
+import yaml
+
+from conftest import CONFIGS
+from fracture.config import dump_config, load_config, parse_override
+from fracture.errors import ConfigError
+
+EXPERIMENTS = sorted(CONFIGS.glob("*.yaml"))
+GROUPS = sorted(p for p in CONFIGS.glob("*/*.yaml"))
+
+
+def write(path: Path, text: str) -> Path:
+    path.write_text(textwrap.dedent(text))
+    return path
+
+
+def test_there_are_experiments_and_groups():
+    assert any(p.name == "example.yaml" for p in EXPERIMENTS)
+    assert GROUPS
+
+
+@pytest.mark.parametrize("path", EXPERIMENTS, ids=lambda p: p.name)
+def test_every_experiment_loads(path):
+    cfg = load_config(path)
+    assert cfg["name"] == path.stem
+    for key in ("exterior", "fracture"):
+        if cfg["input"][key] is not None:
+            assert Path(cfg["input"][key]).is_absolute() and Path(cfg["input"][key]).is_file()
+
+
+@pytest.mark.parametrize("group", GROUPS, ids=lambda p: f"{p.parent.name}/{p.name}")
+def test_every_group_validates_on_the_defaults(tmp_path, group):
+    cfg = load_config(write(tmp_path / "x.yaml", f"defaults: [{group.with_suffix('')}]\n"))
+    assert cfg["name"] == "x"
+
+
+def test_defaults_fill_everything_and_experiment_overrides(tmp_path, slab_meshes):
+    write(tmp_path / "base.yaml", "grid: {resolution: 30, padding: 0.1}\npsi: {stress_weight: 2.0}\n")
+    cfg = load_config(write(tmp_path / "exp.yaml", """\
+        defaults: [base]
+        grid: {resolution: [10, 11, 12]}
+        input: {exterior: slab.obj}
+        """))
+    assert cfg["grid"] == {"resolution": [10, 11, 12], "padding": 0.1}
+    assert cfg["psi"]["stress_weight"] == 2.0 and cfg["psi"]["strength_weight"] == 1.0
+    assert cfg["pyramid"]["levels"] == 5
+    assert cfg["input"]["exterior"] == str(slab_meshes[0].resolve())
+    assert cfg["strength"]["layers"][0]["kind"] == "marble"
+    assert "grain_frequency" in cfg["strength"]["layers"][0]  # layer defaults filled in
+
+
+def test_resolved_config_round_trips(tmp_path, small_config):
+    cfg = load_config(small_config)
+    again = load_config(write(tmp_path / "resolved.yaml", dump_config(cfg)))
+    assert again == {**cfg, "name": "small"}
+
+
+def test_paths_are_relative_to_the_file_that_sets_them(tmp_path, slab_meshes):
+    sub = tmp_path / "group"
+    sub.mkdir()
+    (sub / "mesh.obj").write_text(slab_meshes[0].read_text())
+    write(sub / "input.yaml", "input: {exterior: mesh.obj}\n")
+    cfg = load_config(write(tmp_path / "exp.yaml", "defaults: [group/input]\n"))
+    assert cfg["input"]["exterior"] == str((sub / "mesh.obj").resolve())
+
+
+def _error(tmp_path, text, overrides=()):
+    path = write(tmp_path / "bad.yaml", text)
+    with pytest.raises(ConfigError) as err:
+        load_config(path, overrides)
+    return str(err.value), path
+
+
+@pytest.mark.parametrize("text, key, words", [
+    ("grdi: {resolution: 5}\n", "grdi", "unknown key"),
+    ("grid: {resolutoin: 5}\n", "grid.resolutoin", "unknown key; expected one of: padding, resolution"),
+    ("grid: {resolution: fifty}\n", "grid.resolution", "got 'fifty' (str), expected an integer or a list of 3 integers"),
+    ("grid: {resolution: [10, 10]}\n", "grid.resolution", "expected an integer or a list of 3 integers"),
+    ("grid: {resolution: 2}\n", "grid.resolution", "in [4, 1024]"),
+    ("pyramid: {levels: 12}\n", "pyramid.levels", "got 12 (int), expected an integer in [1, 8]"),
+    ("pyramid: {levels: 4.5}\n", "pyramid.levels", "expected an integer"),
+    ("psi: {stress_weight: -1}\n", "psi.stress_weight", "expected a number in [0, 100]"),
+    ("psi: {stress_weight: .nan}\n", "psi.stress_weight", "expected a number"),
+    ("strength: {normalize: 1}\n", "strength.normalize", "expected true or false"),
+    ("preview: {axis: w}\n", "preview.axis", "expected one of 'x', 'y', 'z'"),
+    ("strength: {layers: []}\n", "strength.layers", "expected a list of at least 1"),
+    ("strength: {layers: [{kind: granite}]}\n", "strength.layers[0].kind", "expected one of 'marble'"),
+    ("strength: {layers: [{weight: 1}]}\n", "strength.layers[0]", "with a 'kind' key"),
+    ("strength: {layers: [{kind: bricks, brick_size: 1}]}\n", "strength.layers[0].brick_size", "unknown key"),
+    ("strength: {layers: [{kind: radial, axis: w}]}\n", "strength.layers[0].axis", "one of 'x', 'y', 'z'"),
+    ("input: {exterior: nowhere.obj}\n", "input.exterior", "file not found: 'nowhere.obj'"),
+    ("input: 3\n", "input", "expected a mapping"),
+])
+def test_config_errors_name_file_key_given_and_expected(tmp_path, text, key, words):
+    message, path = _error(tmp_path, text)
+    assert message.startswith(f"{path}: {key}: "), message
+    assert words in message
+
+
+def test_errors_name_the_group_file_that_set_the_value(tmp_path):
+    group = write(tmp_path / "group.yaml", "pyramid: {sigma: 0}\n")
+    message, _ = _error(tmp_path, "defaults: [group]\n")
+    assert message.startswith(f"{group}: pyramid.sigma: got 0")
+
+
+def test_yaml_problems(tmp_path):
+    message, path = _error(tmp_path, "grid: {resolution: [1, 2\n")
+    assert message.startswith(f"{path}:2: invalid YAML")
+    message, _ = _error(tmp_path, "- a\n- b\n")
+    assert "expected a mapping" in message
+    # Safe loading: no Python objects are constructed from tags.
+    message, _ = _error(tmp_path, "name: !!python/object/apply:os.system ['echo hi']\n")
+    assert "invalid YAML" in message
+    message, _ = _error(tmp_path, "defaults: [missing]\n")
+    assert "included config 'missing' not found" in message
+    write(tmp_path / "a.yaml", "defaults: [b]\n")
+    write(tmp_path / "b.yaml", "defaults: [a]\n")
+    with pytest.raises(ConfigError, match="cycle of defaults"):
+        load_config(tmp_path / "a.yaml")
+    with pytest.raises(ConfigError, match="config file not found"):
+        load_config(tmp_path / "nope.yaml")
+
+
+def test_set_overrides(tmp_path, small_config):
+    cfg = load_config(small_config, ["psi.stress_weight=3", "grid.resolution=[8, 9, 10]",
+                                     "strength.layers[0].grain_frequency=2.5", "name=other"])
+    assert cfg["psi"]["stress_weight"] == 3.0
+    assert cfg["grid"]["resolution"] == [8, 9, 10]
+    assert cfg["strength"]["layers"][0]["grain_frequency"] == 2.5
+    assert cfg["name"] == "other"
+    for bad, words in [("psi.stress_weight", "expected key.path=value"),
+                       ("psi.stress_weight=-2", "--set psi.stress_weight=-2: psi.stress_weight: got -2"),
+                       ("psi.typo=1", "psi.typo: unknown key"),
+                       ("strength.layers[3].weight=1", "no such list item"),
+                       ("a..b=1", "expected key.path=value")]:
+        with pytest.raises(ConfigError) as err:
+            load_config(small_config, [bad])
+        assert words in str(err.value), str(err.value)
+
+
+def test_parse_override_tokens():
+    assert parse_override("strength.layers[1].axis=z") == (["strength", "layers", 1, "axis"], "z")
+    assert parse_override("grid.resolution=[1, 2, 3]")[1] == [1, 2, 3]
+
+
+def test_dumped_config_is_plain_yaml(small_config):
+    text = dump_config(load_config(small_config))
+    assert "!!" not in text
+    assert yaml.safe_load(text)["seed"] == 7

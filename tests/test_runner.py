@@ -1,0 +1,153 @@
+import hashlib
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import yaml
+
+from conftest import CONFIGS
+from fields.grid import Grid
+from fracture import runner
+from fracture.atomic import RunDirectoryExists, atomic_write_text
+from fracture.config import load_config
+from fracture.errors import InputError, StageError
+
+
+def fracref(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "fracture", *map(str, args)], capture_output=True, text=True,
+                          cwd=cwd, timeout=300)
+
+
+def sha256(path):
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def test_cli_run_writes_a_complete_run_directory(tmp_path, small_config):
+    out = tmp_path / "run"
+    res = fracref("run", small_config, "--out", out, "--quiet", "--set", "psi.stress_weight=0.5")
+    assert res.returncode == 0, res.stderr
+    assert f"run complete: {out}" in res.stdout
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["seed"] == 7 and manifest["name"] == "small"
+    assert manifest["stages"]["fields"]["seconds"] > 0
+    assert set(manifest["packages"]) >= {"numpy", "scipy", "open3d", "pymeshlab", "libigl", "noise"}
+    assert manifest["counts"]["grid_nodes"] == int(np.prod(manifest["stats"]["fields"]["grid_shape"]))
+    for rel, entry in manifest["files"].items():
+        assert sha256(out / rel) == entry["sha256"], rel
+    assert {"config.yaml", "fields/psi.npy", "fields/zeta.npy", "fields/xi.npy", "fields/pyramid.npy",
+            "fields/grid.json", "fields/preview.png"} <= set(manifest["files"])
+    # The saved config reproduces the run, including the override.
+    saved = yaml.safe_load((out / "config.yaml").read_text())
+    assert saved["psi"]["stress_weight"] == 0.5
+    grid = Grid.from_dict(json.loads((out / "fields/grid.json").read_text()))
+    psi = np.load(out / "fields/psi.npy")
+    assert psi.shape == grid.shape and np.isfinite(psi).all()
+    assert np.load(out / "fields/pyramid.npy").shape == (3,) + grid.shape
+    # Nothing else is left next to the run (no staging directories).
+    assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(".")) == []
+
+
+def test_same_config_and_seed_give_byte_identical_outputs(tmp_path, small_config):
+    runs = []
+    for i, seed in enumerate((7, 7, 8)):
+        cfg = load_config(small_config, [f"seed={seed}"])
+        runs.append(runner.run(cfg, tmp_path / f"r{i}", progress=False))
+    files = json.loads((runs[0] / "manifest.json").read_text())["files"]
+    numeric = [rel for rel in files if rel.endswith((".npy", ".png", ".json", ".yaml"))]
+    for rel in numeric:
+        assert sha256(runs[0] / rel) == sha256(runs[1] / rel), rel
+    assert sha256(runs[0] / "fields/zeta.npy") != sha256(runs[2] / "fields/zeta.npy")
+
+
+def test_existing_run_is_kept_without_force_and_replaced_with_it(tmp_path, small_config):
+    out = tmp_path / "run"
+    assert fracref("run", small_config, "--out", out, "--quiet").returncode == 0
+    before = sha256(out / "manifest.json")
+    res = fracref("run", small_config, "--out", out, "--quiet", "--set", "seed=1")
+    assert res.returncode == 2 and "run directory exists" in res.stderr and "--force" in res.stderr
+    assert sha256(out / "manifest.json") == before
+    res = fracref("run", small_config, "--out", out, "--quiet", "--set", "seed=1", "--force")
+    assert res.returncode == 0, res.stderr
+    assert json.loads((out / "manifest.json").read_text())["seed"] == 1
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+
+
+def test_failed_run_writes_nothing_and_keeps_the_previous_run(tmp_path, small_config, monkeypatch):
+    out = tmp_path / "run"
+    runner.run(load_config(small_config), out, progress=False)
+    before = {p.name: sha256(p) for p in out.rglob("*") if p.is_file()}
+
+    def explode(ctx):
+        ctx.save_array("fields/psi.npy", np.zeros(3))  # a partial write ...
+        raise KeyboardInterrupt  # ... then an interruption
+
+    monkeypatch.setitem(runner._REGISTRY, "fields", explode)
+    with pytest.raises(KeyboardInterrupt):
+        runner.run(load_config(small_config), out, force=True, progress=False)
+    after = {p.name: sha256(p) for p in out.rglob("*") if p.is_file()}
+    assert after == before
+    assert [p.name for p in tmp_path.iterdir() if p.name != "run" and p.name.startswith(".")] == []
+
+
+def test_bad_input_mesh_fails_before_anything_is_written(tmp_path, small_config):
+    (tmp_path / "open.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    out = tmp_path / "run"
+    res = fracref("run", small_config, "--out", out, "--set", f"input.exterior={tmp_path / 'open.obj'}")
+    assert res.returncode == 2
+    assert "input.exterior" in res.stderr and "open.obj" in res.stderr and "closed surface" in res.stderr
+    assert "Traceback" not in res.stderr
+    assert not out.exists()
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+
+
+def test_config_errors_and_bad_stage_are_reported_without_running(tmp_path, small_config):
+    out = tmp_path / "run"
+    res = fracref("run", small_config, "--out", out, "--set", "pyramid.levels=0")
+    assert res.returncode == 2 and "pyramid.levels: got 0 (int), expected an integer in [1, 8]" in res.stderr
+    res = fracref("run", small_config, "--out", out, "--until", "mesh")
+    assert res.returncode == 2 and "unknown stage" in res.stderr
+    assert not out.exists()
+    with pytest.raises(StageError, match="unknown stage"):
+        runner.stages_until("bogus")
+
+
+def test_missing_inputs_are_explained(tmp_path):
+    cfg_path = tmp_path / "bare.yaml"
+    cfg_path.write_text("seed: 1\n")
+    with pytest.raises(InputError, match="set input.exterior and input.fracture"):
+        runner.run(load_config(cfg_path), tmp_path / "run", progress=False)
+    assert not (tmp_path / "run").exists()
+
+
+def test_cli_config_and_stages(small_config):
+    res = fracref("config", small_config, "--set", "seed=3")
+    assert res.returncode == 0 and yaml.safe_load(res.stdout)["seed"] == 3
+    res = fracref("stages")
+    assert res.returncode == 0 and "fields" in res.stdout.split()
+
+
+def test_atomic_write_replaces_whole_files(tmp_path):
+    target = tmp_path / "a" / "b.txt"
+    atomic_write_text(target, "one")
+    atomic_write_text(target, "two")
+    assert target.read_text() == "two"
+    assert [p.name for p in target.parent.iterdir()] == ["b.txt"]
+
+
+def test_existing_non_directory_is_refused(tmp_path, small_config):
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(RunDirectoryExists):
+        runner.run(load_config(small_config), tmp_path / "file", force=True, progress=False)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("path", sorted(CONFIGS.glob("*.yaml")), ids=lambda p: p.name)
+def test_every_experiment_runs_shrunk(tmp_path, path):
+    cfg = load_config(path, ["grid.resolution=16", "pyramid.levels=2"])
+    out = runner.run(cfg, tmp_path / "run", progress=False)
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert list(manifest["stages"]) == runner.available_stages()
+    psi = np.load(out / "fields/psi.npy")
+    assert np.isfinite(psi).all() and psi.max() > psi.min()

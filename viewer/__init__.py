@@ -1,0 +1,1 @@
+"""The Open3D research viewer (imports fracture/ and fields/, never the reverse)."""
