@@ -1,0 +1,172 @@
+"""Per-frame mesh files of a coarse fracture animation (Blender Cell Fracture + rigid bodies).
+
+A sequence is a directory of OBJ (or PLY) files, one per frame, sorted by name;
+the first is the rest pose. In an OBJ every piece is an object (``o name``)
+and faces may be n-gons; in a PLY, which has no objects, the pieces are the
+connected components of the mesh, named ``piece_000``, ``piece_001``, ... in
+the order of their first vertex. Every frame must have the same pieces, the
+same vertices in the same order and the same faces.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from fracture.errors import InputError
+
+
+@dataclass
+class MeshFrame:
+    """One frame: vertices and, per piece, its polygons (indices into ``V``).
+
+    Attributes
+    ----------
+    path : Path
+    names : list of str
+        Piece names, in file order.
+    V : (n, 3) float
+    polygons : list of list of (k,) int arrays
+        ``polygons[p]`` are the faces of piece ``p``.
+    """
+
+    path: Path
+    names: list[str]
+    V: np.ndarray
+    polygons: list[list[np.ndarray]]
+
+    def piece_vertices(self, p: int) -> np.ndarray:
+        """Indices of the vertices used by piece ``p`` (sorted)."""
+        return np.unique(np.concatenate(self.polygons[p]))
+
+
+def _read_obj_objects(path: Path) -> MeshFrame:
+    verts: list[list[float]] = []
+    names: list[str] = []
+    polys: list[list[np.ndarray]] = []
+    with open(path, encoding="utf-8", errors="replace") as f:
+        for lineno, line in enumerate(f, 1):
+            parts = line.split()
+            if not parts:
+                continue
+            try:
+                if parts[0] == "o" or parts[0] == "g":
+                    name = " ".join(parts[1:]) or f"object_{len(names):03d}"
+                    if parts[0] == "g" and names and not polys[-1]:
+                        continue  # a group name right after an object name
+                    names.append(name)
+                    polys.append([])
+                elif parts[0] == "v":
+                    xyz = [float(x) for x in parts[1:4]]
+                    if len(xyz) != 3:
+                        raise ValueError("a vertex needs 3 coordinates")
+                    verts.append(xyz)
+                elif parts[0] == "f":
+                    idx = [int(tok.split("/")[0]) for tok in parts[1:]]
+                    if len(idx) < 3:
+                        raise ValueError("a face needs at least 3 vertices")
+                    idx = [i - 1 if i > 0 else len(verts) + i for i in idx]
+                    if not names:
+                        names.append("object_000")
+                        polys.append([])
+                    polys[-1].append(np.array(idx, np.int64))
+            except ValueError as exc:
+                raise InputError(f"{path}: line {lineno}: {exc}: {line.strip()[:80]!r}") from None
+    V = np.array(verts, np.float64).reshape(-1, 3)
+    keep = [i for i, p in enumerate(polys) if p]  # objects without faces (empties, cameras) are not pieces
+    return MeshFrame(path, [names[i] for i in keep], V, [polys[i] for i in keep])
+
+
+def _read_ply_pieces(path: Path) -> MeshFrame:
+    import igl
+
+    try:
+        V, F = igl.read_triangle_mesh(str(path))
+    except Exception as exc:
+        raise InputError(f"{path}: cannot read mesh ({exc})") from None
+    if len(F) == 0:
+        return MeshFrame(path, [], np.asarray(V, np.float64).reshape(-1, 3), [])
+    n = len(V)
+    E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]]])
+    A = coo_matrix((np.ones(len(E)), (E[:, 0], E[:, 1])), shape=(n, n))
+    _, label = connected_components(A, directed=False)
+    face_label = label[F[:, 0]]
+    # connected_components numbers components by their lowest vertex, which
+    # is the "order of the first vertex" rule; keep only labels with faces.
+    labels = np.unique(face_label)
+    polys = [list(F[face_label == lab]) for lab in labels]
+    return MeshFrame(path, [f"piece_{i:03d}" for i in range(len(labels))], np.asarray(V, np.float64), polys)
+
+
+def read_frame(path: str | Path) -> MeshFrame:
+    """Read one frame file and check it is not empty and finite."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: frame file not found")
+    if path.stat().st_size == 0:
+        raise InputError(f"{path}: file is empty")
+    suffix = path.suffix.lower()
+    if suffix == ".obj":
+        frame = _read_obj_objects(path)
+    elif suffix == ".ply":
+        frame = _read_ply_pieces(path)
+    else:
+        raise InputError(f"{path}: unsupported frame format {path.suffix!r}, expected .obj or .ply")
+    if len(frame.V) == 0 or not frame.names:
+        raise InputError(f"{path}: no pieces (expected objects with vertices and faces)")
+    for p, polys in enumerate(frame.polygons):
+        for face in polys:
+            if face.min() < 0 or face.max() >= len(frame.V):
+                raise InputError(f"{path}: piece {frame.names[p]!r}: a face refers to vertex {int(face.max()) + 1}, "
+                                 f"but the file has {len(frame.V)} vertices")
+    bad = ~np.isfinite(frame.V).all(axis=1)
+    if bad.any():
+        v = int(np.flatnonzero(bad)[0])
+        owner = next((frame.names[p] for p in range(len(frame.names)) if v in frame.piece_vertices(p)), None)
+        where = f"piece {owner!r}, " if owner else ""
+        raise InputError(f"{path}: {where}vertex {v + 1} has a NaN or infinite coordinate "
+                         f"({int(bad.sum())} such vertices in the file)")
+    return frame
+
+
+def read_sequence(directory: str | Path, pattern: str = "*.obj") -> list[MeshFrame]:
+    """Read and cross-check all frames of a sequence.
+
+    Raises
+    ------
+    InputError
+        Naming the file (and frame number, 1-based) and the piece, when the
+        directory has no frames or frames differ in pieces, vertex counts or
+        faces.
+    """
+    directory = Path(directory)
+    if not directory.is_dir():
+        raise InputError(f"{directory}: mesh sequence directory not found")
+    paths = sorted(p for p in directory.glob(pattern) if p.is_file())
+    if not paths:
+        raise InputError(f"{directory}: no frame files match {pattern!r}")
+    frames = [read_frame(paths[0])]
+    rest = frames[0]
+    for number, path in enumerate(paths[1:], 2):
+        frame = read_frame(path)
+        where = f"{path} (frame {number})"
+        missing = [n for n in rest.names if n not in frame.names]
+        extra = [n for n in frame.names if n not in rest.names]
+        if missing:
+            raise InputError(f"{where}: piece {missing[0]!r} of the rest pose ({rest.path.name}) is missing")
+        if extra:
+            raise InputError(f"{where}: piece {extra[0]!r} is not in the rest pose ({rest.path.name})")
+        if frame.names != rest.names:
+            raise InputError(f"{where}: pieces are in a different order than in the rest pose ({rest.path.name})")
+        if len(frame.V) != len(rest.V):
+            raise InputError(f"{where}: {len(frame.V)} vertices, but the rest pose ({rest.path.name}) has {len(rest.V)}")
+        for p, name in enumerate(rest.names):
+            a, b = rest.polygons[p], frame.polygons[p]
+            if len(a) != len(b) or any(len(x) != len(y) or np.any(x != y) for x, y in zip(a, b)):
+                raise InputError(f"{where}: piece {name!r} has different faces than in the rest pose ({rest.path.name})")
+        frames.append(frame)
+    return frames

@@ -1,0 +1,326 @@
+"""From a set of closed pieces that tile an object to one shared fracture surface.
+
+Real exports (Blender's Cell Fracture) give every piece its own closed surface.
+Two neighbouring pieces cover their common region with faces of opposite
+orientation, but split differently (T-junctions, other n-gons, coordinates
+rounded to 6 decimals, and faces that are only nearly planar), so they cannot
+be matched vertex for vertex. :func:`shared_surface` matches them
+geometrically instead:
+
+1. all corners are welded across pieces, and every corner that lies on an
+   edge of another face is inserted into that edge (T-junctions removed);
+2. a face is shared with another piece when points sampled on it lie on that
+   piece's surface (libigl point-mesh distance, within a gap tolerance) and
+   the surfaces face each other; a face shared with nobody is exterior;
+3. the region between pieces A and B is taken from the faces of one of them
+   (the lower index) and triangulated once, in the plane of each face, by a
+   constrained Delaunay triangulation of its boundary (Triangle, no new
+   points). Since every edge carries every corner on it, the triangulated
+   regions and the exterior surface B meet vertex to vertex: the fracture
+   surface is stored once with the two component ids of every triangle, and B
+   is closed and shares the fracture surface's boundary vertices.
+
+Written here because neither libigl nor pymeshlab matches overlapping faces of
+polygon soups into a conforming, non-manifold surface with side labels.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import igl
+import numpy as np
+import triangle
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+from fracture.errors import InputError
+from fracture.tolerances import tol
+
+
+@dataclass
+class SharedSurface:
+    """The result of :func:`shared_surface`.
+
+    Attributes
+    ----------
+    V : (n, 3) float
+        Welded points of both surfaces.
+    fracture_F : (m, 3) int
+        Fracture triangles; the normal points from ``sides[:, 0]`` into ``sides[:, 1]``.
+    sides : (m, 2) int
+        Piece behind and in front of each fracture triangle.
+    exterior_F : (k, 3) int
+        Triangles of the exterior surface B, outward.
+    exterior_piece : (k,) int
+        The piece each exterior triangle belongs to.
+    piece_fracture_area : (pieces,) float
+        Area of each piece's own faces that were found shared (for checks).
+    notes : list of str
+        Repairs that were made (closed tiny gaps).
+    """
+
+    V: np.ndarray
+    fracture_F: np.ndarray
+    sides: np.ndarray
+    exterior_F: np.ndarray
+    exterior_piece: np.ndarray
+    piece_fracture_area: np.ndarray
+    notes: list[str] = field(default_factory=list)
+
+
+def polygon_normal_area(P: np.ndarray) -> tuple[np.ndarray, float]:
+    """Newell normal (unit) and area of a (nearly) planar polygon ``(k, 3)``."""
+    n = np.cross(P, np.roll(P, -1, axis=0)).sum(axis=0) * 0.5
+    area = float(np.linalg.norm(n))
+    return (n / area if area > 0 else n), area
+
+
+def piece_volume(V: np.ndarray, polygons: list[np.ndarray]) -> float:
+    """Signed volume enclosed by a closed polygon surface (fan triangulation)."""
+    vol = 0.0
+    for f in polygons:
+        P = V[f]
+        vol += np.einsum("ij,ij->i", np.broadcast_to(P[0], P[1:-1].shape), np.cross(P[1:-1], P[2:])).sum()
+    return vol / 6.0
+
+
+def _fan(polygons: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Fan triangles of polygons and the polygon each came from."""
+    tris, owner = [], []
+    for i, f in enumerate(polygons):
+        k = len(f)
+        tris.append(np.stack([np.full(k - 2, f[0]), f[1:-1], f[2:]], 1))
+        owner.append(np.full(k - 2, i))
+    return np.concatenate(tris), np.concatenate(owner)
+
+
+def _weld(P: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """Cluster points closer than ``radius``; returns cluster means and labels."""
+    pairs = cKDTree(P).query_pairs(radius, output_type="ndarray")
+    n = len(P)
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n)) if len(pairs) else \
+        coo_matrix((n, n))
+    _, label = connected_components(graph, directed=False)
+    G = np.zeros((label.max() + 1, 3))
+    np.add.at(G, label, P)
+    G /= np.bincount(label)[:, None]
+    return G, label
+
+
+def _insert_edge_points(loop: np.ndarray, G: np.ndarray, tree: cKDTree, radius: float) -> np.ndarray:
+    """The polygon ``loop`` with every point of ``G`` that lies on one of its edges inserted."""
+    out = []
+    for a, b in zip(loop, np.roll(loop, -1)):
+        if a == b:
+            continue
+        out.append(a)
+        A, B = G[a], G[b]
+        length = float(np.linalg.norm(B - A))
+        cand = np.array(tree.query_ball_point((A + B) / 2, length / 2 + radius), np.int64)
+        cand = cand[(cand != a) & (cand != b)]
+        if len(cand):
+            t = (G[cand] - A) @ (B - A) / length**2
+            dist = np.linalg.norm(G[cand] - (A + t[:, None] * (B - A)), axis=1)
+            on = (dist <= radius) & (t > 0) & (t < 1)
+            out.extend(cand[on][np.argsort(t[on])])
+    return np.array(out, np.int64)
+
+
+def _triangulate_polygon(loop: np.ndarray, G: np.ndarray, where: str) -> np.ndarray:
+    """Constrained Delaunay triangulation of a (nearly planar) polygon, oriented like it."""
+    P = G[loop]
+    n, _ = polygon_normal_area(P)
+    a = np.eye(3)[int(np.argmin(np.abs(n)))]
+    u = np.cross(n, a)
+    u /= np.linalg.norm(u)
+    v = np.cross(n, u)
+    XY = np.stack([(P - P[0]) @ u, (P - P[0]) @ v], 1)
+    k = len(loop)
+    if k == 3:
+        return loop[None, :]
+    segments = np.stack([np.arange(k), (np.arange(k) + 1) % k], 1)
+    tri = triangle.triangulate({"vertices": XY, "segments": segments}, "pQ")
+    if "triangles" not in tri or len(tri["vertices"]) != k:
+        raise InputError(f"{where}cannot triangulate a face with corners {loop.tolist()} (it crosses itself)")
+    T = loop[tri["triangles"]]
+    nrm = np.cross(G[T[:, 1]] - G[T[:, 0]], G[T[:, 2]] - G[T[:, 0]])
+    flip = nrm @ n < 0
+    T[flip] = T[flip][:, ::-1]
+    return T
+
+
+def shared_surface(V: np.ndarray, polygons: list[list[np.ndarray]], names: list[str], source: str = "") -> SharedSurface:
+    """Match the pieces' touching faces and build the conforming surfaces.
+
+    Parameters
+    ----------
+    V : (n, 3) float
+        Rest-pose vertices.
+    polygons : list (per piece) of list of (k,) int
+        Each piece's faces, n-gons allowed; each piece must be closed.
+    names : list of str
+        Piece names, for messages.
+    source : str
+        File the rest pose came from, for messages.
+
+    Raises
+    ------
+    InputError
+        A piece is not closed or inside out, two pieces overlap, or there is
+        a gap between pieces wider than the repair tolerance.
+    """
+    where = f"{source}: " if source else ""
+    V = np.asarray(V, np.float64)
+    diag = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
+    n_pieces = len(polygons)
+
+    volumes = []
+    for p, polys in enumerate(polygons):
+        total, vector = 0.0, np.zeros(3)
+        for f in polys:
+            nrm, area = polygon_normal_area(V[f])
+            total += area
+            vector += nrm * area
+        if total <= tol.area * diag**2 or np.linalg.norm(vector) > tol.closure * 10 * total:
+            raise InputError(f"{where}piece {names[p]!r} is not a closed surface (its faces leave a hole of "
+                             f"about {np.linalg.norm(vector):.3g} square units)")
+        vol = piece_volume(V, polys)
+        if vol <= 0:
+            raise InputError(f"{where}piece {names[p]!r} is inside out or flat (volume {vol:.3g})")
+        volumes.append(vol)
+
+    # 1. weld corners across pieces, insert T-junction points into every edge
+    G, label = _weld(V, tol.weld * diag)
+    tree = cKDTree(G)
+    faces = []  # (piece, loop of welded ids)
+    for p, polys in enumerate(polygons):
+        for f in polys:
+            loop = _insert_edge_points(label[f], G, tree, tol.on_edge * diag)
+            if len(loop) >= 3 and polygon_normal_area(G[loop])[1] > tol.area * diag**2:
+                faces.append((p, loop))
+
+    # 2. which piece (if any) each face is shared with
+    tris, tri_face = _fan([loop for _, loop in faces])
+    tri_piece = np.array([faces[i][0] for i in tri_face])
+    A, B, C = G[tris[:, 0]], G[tris[:, 1]], G[tris[:, 2]]
+    tri_n = np.cross(B - A, C - A)
+    tri_area = 0.5 * np.linalg.norm(tri_n, axis=1)
+    tri_n /= np.maximum(2 * tri_area, tol.zero)[:, None]
+    # samples: the centroid and points toward each corner of every fan triangle
+    centroid = (A + B + C) / 3
+    samples = np.concatenate([centroid] + [centroid + 0.6 * (X - centroid) for X in (A, B, C)])
+    sample_tri = np.tile(np.arange(len(tris)), 4)
+    partner = np.full(len(faces), -1)
+    gap = np.zeros(len(faces))
+    notes = []
+    for p in range(n_pieces):
+        mine = tri_piece[sample_tri] == p
+        other = tri_piece != p
+        if not mine.any():
+            continue
+        d2, hit, _ = igl.point_mesh_squared_distance(samples[mine], G, tris[other])
+        hit_tri = np.flatnonzero(other)[hit]
+        facing = np.einsum("ij,ij->i", tri_n[sample_tri[mine]], tri_n[hit_tri]) < -tol.facing
+        d = np.sqrt(d2)
+        for fi in np.unique(tri_face[sample_tri[mine]]):
+            sel = tri_face[sample_tri[mine]] == fi
+            close = facing[sel] & (d[sel] <= tol.gap_repair * diag)
+            if close.mean() >= 0.5:
+                owners = tri_piece[hit_tri[sel][close]]
+                partner[fi] = np.bincount(owners).argmax()
+                gap[fi] = d[sel][close].max()
+            else:
+                near = facing[sel] & (d[sel] < tol.gap_detect * diag)
+                if near.mean() >= 0.5:
+                    q = tri_piece[hit_tri[sel][near]][0]
+                    raise InputError(f"{where}gap of {d[sel][near].min():.3g} between pieces {names[p]!r} and "
+                                     f"{names[q]!r} (more than the {tol.gap_repair * diag:.3g} that is repaired); "
+                                     f"the pieces must tile the object in the rest pose")
+    big_gap = gap > 100 * tol.weld * diag
+    if big_gap.any():
+        notes.append(f"matched facing faces of neighbouring pieces up to {gap.max():.2g} apart "
+                     f"({int(big_gap.sum())} faces; the lower-numbered piece's faces are kept)")
+
+    # 3. triangulate: exterior faces, and the shared faces of the lower-numbered piece of each pair
+    fracture, sides, exterior, owner = [], [], [], []
+    piece_fracture_area = np.zeros(n_pieces)
+    for fi, (p, loop) in enumerate(faces):
+        q = partner[fi]
+        if q >= 0:
+            piece_fracture_area[p] += polygon_normal_area(G[loop])[1]
+            if p > q:
+                continue
+        T = _triangulate_polygon(loop, G, where)
+        if q >= 0:
+            fracture.append(T)
+            sides.append(np.tile([p, q], (len(T), 1)))
+        else:
+            exterior.append(T)
+            owner.append(np.full(len(T), p))
+    if not fracture:
+        raise InputError(f"{where}no two pieces share a face: nothing to refine (is this a fractured object?)")
+    out = SharedSurface(G, np.concatenate(fracture), np.concatenate(sides).astype(np.int64),
+                        np.concatenate(exterior) if exterior else np.zeros((0, 3), np.int64),
+                        np.concatenate(owner) if owner else np.zeros(0, np.int64), piece_fracture_area, notes)
+    _fill_slivers(out, names, diag, where)
+    _check_tiling(out, volumes, names, diag, where)
+    return out
+
+
+def _fill_slivers(s: SharedSurface, names: list[str], diag: float, where: str) -> None:
+    """Close thin holes in B left where neighbouring pieces disagree on a corner.
+
+    Cell Fracture's pieces can disagree on where a cut meets the surface by a
+    few thousandths of the diagonal, leaving a sliver of the exterior that no
+    piece covers. A hole of B whose mean width (2 area / perimeter) is below
+    the gap tolerance is triangulated and given to the piece that borders it
+    most; wider holes are left for :func:`_check_tiling` to report.
+    """
+    F = s.exterior_F
+    if len(F) == 0:
+        return
+    directed = {(int(a), int(b)): i for i, (a, b) in enumerate(F[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2))}
+    filled, largest = [], 0.0
+    for loop in igl.boundary_loop_all(np.ascontiguousarray(F, np.int64)):
+        loop = np.asarray(loop, np.int64)
+        if len(loop) < 3:
+            continue
+        if (int(loop[0]), int(loop[1])) in directed:
+            loop = loop[::-1]  # the fill runs against the existing boundary edges
+        P = s.V[loop]
+        _, area = polygon_normal_area(P)
+        perimeter = float(np.linalg.norm(P - np.roll(P, -1, axis=0), axis=1).sum())
+        if 2 * area / perimeter > tol.gap_repair * diag:
+            continue
+        T = _triangulate_polygon(loop, s.V, where)
+        lengths = np.linalg.norm(P - np.roll(P, -1, axis=0), axis=1)
+        border = [directed.get((int(b), int(a))) for a, b in zip(loop, np.roll(loop, -1))]
+        owners = [s.exterior_piece[e // 3] for e in border if e is not None]
+        weights = [lengths[i] for i, e in enumerate(border) if e is not None]
+        piece = int(np.bincount(owners, weights=weights).argmax()) if owners else 0
+        s.exterior_F = np.concatenate([s.exterior_F, T])
+        s.exterior_piece = np.concatenate([s.exterior_piece, np.full(len(T), piece)])
+        filled.append(names[piece])
+        largest = max(largest, area)
+    if filled:
+        s.notes.append(f"filled {len(filled)} sliver holes of the exterior where neighbouring pieces disagree "
+                       f"(largest area {largest:.2g}; given to {', '.join(sorted(set(filled)))})")
+
+
+def _check_tiling(s: SharedSurface, volumes: list[float], names: list[str], diag: float, where: str) -> None:
+    F = s.exterior_F
+    E = np.sort(F[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    _, counts = np.unique(E, axis=0, return_counts=True)
+    if np.any(counts != 2):
+        raise InputError(f"{where}the pieces' outer faces do not form a closed surface "
+                         f"({int((counts == 1).sum())} open edges, {int((counts > 2).sum())} edges shared by more "
+                         f"than 2 faces): the pieces leave gaps or overlap")
+    A, B, C = s.V[F[:, 0]], s.V[F[:, 1]], s.V[F[:, 2]]
+    outer = float(np.einsum("ij,ij->i", A, np.cross(B, C)).sum() / 6.0)
+    total = float(sum(volumes))
+    if abs(total - outer) > tol.volume * outer:
+        kind = "overlap" if total > outer else "leave gaps"
+        raise InputError(f"{where}the pieces {kind}: their volumes add up to {total:.6g}, "
+                         f"the object they form has volume {outer:.6g}")
