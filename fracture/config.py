@@ -31,8 +31,16 @@ SCHEMA: dict[str, Any] = {
     "name": Param(None, "str", nullable=True, doc="experiment name; null: the config file's name"),
     "seed": Param(0, "int", lo=0, hi=2**32 - 1, doc="seed of every random choice of the run"),
     "input": {
+        "kind": Param("meshes", "str", choices=("meshes", "mesh_sequence"),
+                      doc="meshes: exterior + coarse fracture surface files; mesh_sequence: per-frame piece meshes"),
         "exterior": Param(None, "path", nullable=True, doc="mesh file of the exterior surface B (closed)"),
         "fracture": Param(None, "path", nullable=True, doc="mesh file of the coarse fracture surface"),
+        "path": Param(None, "dir", nullable=True, doc="mesh_sequence: folder of per-frame OBJ/PLY files"),
+        "glob": Param("*.obj", "str", doc="mesh_sequence: file name pattern of the frames (sorted by name)"),
+        "lattice": Param(2, "int", lo=2, hi=16,
+                         doc="mesh_sequence: lattice nodes per axis fitted to a piece that deforms"),
+        "separation": Param(1e-3, lo=1e-7, hi=0.5,
+                            doc="distance at which two sides count as separated, relative to the box diagonal"),
     },
     "grid": {
         "resolution": Param(50, "int3", lo=4, hi=1024,
@@ -211,15 +219,20 @@ def load_config(path: str | Path, overrides: Iterable[str] = ()) -> dict:
     for text in overrides:
         _apply_override(merged, text)
 
-    def resolve(key: str, value: str) -> str:
+    def resolve(key: str, value: str, kind: str) -> str:
         source = merged.origin(key)
         base = Path.cwd() if source.startswith(SET_SOURCE) or source == "defaults" else Path(source).parent
         target = (base / value).resolve()
-        if not target.is_file():
+        if kind == "dir" and not target.is_dir():
+            raise ConfigError(source, key, f"directory not found: {value!r} (resolved to {target})")
+        if kind == "path" and not target.is_file():
             raise ConfigError(source, key, f"file not found: {value!r} (resolved to {target})")
         return str(target)
 
     cfg = validate(merged.tree, SCHEMA, merged.origin, resolve)
+    if cfg["input"]["kind"] == "mesh_sequence" and cfg["input"]["path"] is None:
+        raise ConfigError(merged.origin("input.kind"), "input.path",
+                          "input.kind is mesh_sequence, expected input.path: the folder of frame files")
     if cfg["name"] is None:
         cfg["name"] = path.stem
     return cfg

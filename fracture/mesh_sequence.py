@@ -170,3 +170,79 @@ def read_sequence(directory: str | Path, pattern: str = "*.obj") -> list[MeshFra
                 raise InputError(f"{where}: piece {name!r} has different faces than in the rest pose ({rest.path.name})")
         frames.append(frame)
     return frames
+
+
+def _compact(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    used, inverse = np.unique(F, return_inverse=True)
+    return V[used], inverse.reshape(F.shape)
+
+
+def load_coarse_sequence(directory: str | Path, pattern: str = "*.obj", lattice: int = 2,
+                         separation: float = 1e-3):
+    """Import a per-frame mesh sequence as a :class:`~fracture.coarse.CoarseFracture`.
+
+    Parameters
+    ----------
+    directory : str or Path
+        Folder of frame files; the first (by name) is the rest pose.
+    pattern : str
+        Glob selecting the frame files.
+    lattice : int
+        Nodes per axis of the lattice fitted to a piece that does not move
+        rigidly (2: trilinear, which includes every affine map).
+    separation : float
+        Two sides of a fracture location have separated once they are this
+        far apart, relative to the object's box diagonal.
+    """
+    from fracture.animation import CoarseAnimation, fit_lattice, lattice_box
+    from fracture.coarse import CoarseFracture, flood_fill_patches, separation_times, special_edges
+    from fracture.tiling import shared_surface
+    from fracture.tolerances import tol
+
+    frames = read_sequence(directory, pattern)
+    rest = frames[0]
+    diag = float(np.linalg.norm(rest.V.max(axis=0) - rest.V.min(axis=0)))
+    shared = shared_surface(rest.V, rest.polygons, rest.names, source=str(rest.path))
+    V, F = _compact(shared.V, shared.fracture_F)
+    BV, BF = _compact(shared.V, shared.exterior_F)
+
+    # each exterior patch cut out by the fracture boundary belongs to one piece
+    sp = special_edges(F, len(V))
+    boundary_points = V[sp.edges[sp.boundary].ravel()]
+    from scipy.spatial import cKDTree
+
+    d, idx = cKDTree(BV).query(boundary_points)
+    cut = idx.reshape(-1, 2)
+    patches = flood_fill_patches(BF, cut)
+    for patch in np.unique(patches):
+        owners = np.unique(shared.exterior_piece[patches == patch])
+        if len(owners) > 1:
+            names = ", ".join(repr(rest.names[o]) for o in owners)
+            raise InputError(f"{rest.path}: the outer surfaces of pieces {names} are not separated by the "
+                             f"fracture surface (a cut does not reach the surface)")
+
+    n_pieces, n_frames = len(rest.names), len(frames)
+    lo, hi = np.empty((n_pieces, 3)), np.empty((n_pieces, 3))
+    nodes = np.empty((n_frames, n_pieces, lattice, lattice, lattice, 3))
+    residual = np.zeros((n_pieces, n_frames))
+    rigid = np.zeros((n_pieces, n_frames))
+    for p in range(n_pieces):
+        vids = rest.piece_vertices(p)
+        X = rest.V[vids]
+        lo[p], hi[p] = lattice_box(X)
+        for t, frame in enumerate(frames):
+            nodes[t, p], residual[p, t], rigid[p, t] = fit_lattice(
+                X, frame.V[vids], lo[p], hi[p], lattice, rigid_tolerance=tol.rigid_fit * diag)
+    animation = CoarseAnimation(lo, hi, nodes)
+    virtual = np.zeros(len(F), bool)
+    face_time, vertex_time = separation_times(V, F, shared.sides, animation, separation * diag, ~virtual)
+    notes = list(shared.notes)
+    deforming = np.flatnonzero(rigid.max(axis=1) > tol.rigid_fit * diag)
+    if len(deforming):
+        notes.append(f"pieces that do not move rigidly, fitted with a {lattice}^3 lattice: "
+                     + ", ".join(rest.names[p] for p in deforming))
+    return CoarseFracture(
+        exterior_V=BV, exterior_F=BF, exterior_component=shared.exterior_piece, V=V, F=F, sides=shared.sides,
+        names=list(rest.names), animation=animation, face_fracture_time=face_time,
+        vertex_fracture_time=vertex_time, virtual=virtual, fit_residual=residual, notes=notes,
+    ), {"rigid_residual": rigid, "piece_fracture_area": shared.piece_fracture_area}

@@ -20,6 +20,7 @@ _TYPE_WORDS = {
     "bool": "true or false",
     "str": "a string",
     "path": "a file path (string)",
+    "dir": "a directory path (string)",
     "vec3": "a list of 3 numbers",
     "int3": "an integer or a list of 3 integers",
     "bounds": "a list of two points [[x0, y0, z0], [x1, y1, z1]] with x0 < x1, y0 < y1, z0 < z1",
@@ -170,6 +171,7 @@ _CONVERT: dict[str, Callable[[Any], Any]] = {
     "bool": _boolean,
     "str": _string,
     "path": _string,
+    "dir": _string,
     "vec3": _vec3,
     "int3": _int3,
     "bounds": _bounds,
@@ -211,7 +213,7 @@ def validate(
     tree: Any,
     schema: Mapping[str, Any],
     origin: Callable[[str], str],
-    resolve_path: Callable[[str, str], str] | None = None,
+    resolve_path: Callable[[str, str, str], str] | None = None,
     prefix: str = "",
 ) -> dict:
     """Check ``tree`` against ``schema`` and return a new, fully populated tree.
@@ -225,8 +227,8 @@ def validate(
     origin : callable
         Maps a dotted key path to the file (or ``--set``) that set it.
     resolve_path : callable, optional
-        ``resolve_path(key, value)`` turns a ``path`` param into an absolute
-        path (relative to the file that set it).
+        ``resolve_path(key, value, type)`` turns a ``path`` or ``dir`` param
+        into an absolute path (relative to the file that set it).
     prefix : str
         Key path of ``tree`` inside the whole config.
     """
@@ -243,8 +245,8 @@ def validate(
         value = tree.get(key, schema_defaults({key: spec})[key])
         if isinstance(spec, Param):
             value = spec.check(value, origin(path), path)
-            if spec.type == "path" and value is not None and resolve_path is not None:
-                value = resolve_path(path, value)
+            if spec.type in ("path", "dir") and value is not None and resolve_path is not None:
+                value = resolve_path(path, value, spec.type)
             out[key] = value
         elif isinstance(spec, Layers):
             out[key] = _validate_layers(value, spec, origin, resolve_path, path)
@@ -257,7 +259,7 @@ def _validate_layers(
     value: Any,
     spec: Layers,
     origin: Callable[[str], str],
-    resolve_path: Callable[[str, str], str] | None,
+    resolve_path: Callable[[str, str, str], str] | None,
     path: str,
 ) -> list[dict]:
     # A list is set as a whole by one file: its items report (and resolve
@@ -274,7 +276,7 @@ def _validate_layers(
             raise ConfigError(origin(path), f"{key}.kind", f"got {_describe(kind)}, expected one of " + ", ".join(repr(k) for k in spec.kinds))
         sub_schema = {**spec.common, **spec.kinds[kind]}
         body = {k: v for k, v in item.items() if k != "kind"}
-        item_resolve = None if resolve_path is None else (lambda _k, v, p=path: resolve_path(p, v))
+        item_resolve = None if resolve_path is None else (lambda _k, v, kind, p=path: resolve_path(p, v, kind))
         checked = validate(body, sub_schema, lambda _k, p=path: origin(p), item_resolve, key)
         items.append({"kind": kind, **checked})
     return items

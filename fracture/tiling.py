@@ -193,6 +193,7 @@ def shared_surface(V: np.ndarray, polygons: list[list[np.ndarray]], names: list[
 
     # 1. weld corners across pieces, insert T-junction points into every edge
     G, label = _weld(V, tol.weld * diag)
+    moved = float(np.linalg.norm(V - G[label], axis=1).max())
     tree = cKDTree(G)
     faces = []  # (piece, loop of welded ids)
     for p, polys in enumerate(polygons):
@@ -238,7 +239,9 @@ def shared_surface(V: np.ndarray, polygons: list[list[np.ndarray]], names: list[
                     raise InputError(f"{where}gap of {d[sel][near].min():.3g} between pieces {names[p]!r} and "
                                      f"{names[q]!r} (more than the {tol.gap_repair * diag:.3g} that is repaired); "
                                      f"the pieces must tile the object in the rest pose")
-    big_gap = gap > 100 * tol.weld * diag
+    if moved > tol.rigid_fit * diag:
+        notes.append(f"welded corners of neighbouring pieces that were up to {2 * moved:.2g} apart")
+    big_gap = gap > tol.weld * diag
     if big_gap.any():
         notes.append(f"matched facing faces of neighbouring pieces up to {gap.max():.2g} apart "
                      f"({int(big_gap.sum())} faces; the lower-numbered piece's faces are kept)")
@@ -274,39 +277,61 @@ def _fill_slivers(s: SharedSurface, names: list[str], diag: float, where: str) -
 
     Cell Fracture's pieces can disagree on where a cut meets the surface by a
     few thousandths of the diagonal, leaving a sliver of the exterior that no
-    piece covers. A hole of B whose mean width (2 area / perimeter) is below
-    the gap tolerance is triangulated and given to the piece that borders it
-    most; wider holes are left for :func:`_check_tiling` to report.
+    piece covers. For a hole of B whose mean width (2 area / perimeter) is
+    below the gap tolerance, the hole's short edges are collapsed (in both
+    surfaces, so the cut's boundary stays on B); what remains of it, if
+    anything, is triangulated and given to the piece that borders it most.
+    Wider holes are left for :func:`_check_tiling` to report.
     """
-    F = s.exterior_F
-    if len(F) == 0:
+    if len(s.exterior_F) == 0:
         return
-    directed = {(int(a), int(b)): i for i, (a, b) in enumerate(F[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2))}
-    filled, largest = [], 0.0
-    for loop in igl.boundary_loop_all(np.ascontiguousarray(F, np.int64)):
-        loop = np.asarray(loop, np.int64)
-        if len(loop) < 3:
+    merged, filled, largest = 0, [], 0.0
+    for _ in range(100):  # each pass closes at least one hole or stops
+        loops = [np.asarray(l, np.int64) for l in igl.boundary_loop_all(np.ascontiguousarray(s.exterior_F, np.int64))]
+        thin = []
+        for loop in loops:
+            P = s.V[loop]
+            _, area = polygon_normal_area(P)
+            perimeter = float(np.linalg.norm(P - np.roll(P, -1, axis=0), axis=1).sum())
+            if len(loop) >= 3 and 2 * area / perimeter <= tol.gap_repair * diag:
+                thin.append((loop, area))
+        if not thin:
+            break
+        loop, area = thin[0]
+        largest = max(largest, area)
+        P = s.V[loop]
+        lengths = np.linalg.norm(P - np.roll(P, -1, axis=0), axis=1)
+        k = int(np.argmin(lengths))
+        if lengths[k] <= tol.gap_repair * diag and len(loop) >= 3:
+            a, b = int(loop[k]), int(loop[(k + 1) % len(loop)])
+            s.V[a] = 0.5 * (s.V[a] + s.V[b])
+            for name in ("exterior_F", "fracture_F"):
+                F = getattr(s, name)
+                F[F == b] = a
+                keep = (F[:, 0] != F[:, 1]) & (F[:, 1] != F[:, 2]) & (F[:, 0] != F[:, 2])
+                setattr(s, name, F[keep])
+                if name == "exterior_F":
+                    s.exterior_piece = s.exterior_piece[keep]
+                else:
+                    s.sides = s.sides[keep]
+            merged += 1
             continue
+        directed = {(int(u), int(v)): i for i, (u, v) in enumerate(s.exterior_F[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2))}
         if (int(loop[0]), int(loop[1])) in directed:
             loop = loop[::-1]  # the fill runs against the existing boundary edges
-        P = s.V[loop]
-        _, area = polygon_normal_area(P)
-        perimeter = float(np.linalg.norm(P - np.roll(P, -1, axis=0), axis=1).sum())
-        if 2 * area / perimeter > tol.gap_repair * diag:
-            continue
         T = _triangulate_polygon(loop, s.V, where)
-        lengths = np.linalg.norm(P - np.roll(P, -1, axis=0), axis=1)
-        border = [directed.get((int(b), int(a))) for a, b in zip(loop, np.roll(loop, -1))]
+        border = [directed.get((int(v), int(u))) for u, v in zip(loop, np.roll(loop, -1))]
+        lengths = np.linalg.norm(s.V[loop] - np.roll(s.V[loop], -1, axis=0), axis=1)
         owners = [s.exterior_piece[e // 3] for e in border if e is not None]
         weights = [lengths[i] for i, e in enumerate(border) if e is not None]
         piece = int(np.bincount(owners, weights=weights).argmax()) if owners else 0
         s.exterior_F = np.concatenate([s.exterior_F, T])
         s.exterior_piece = np.concatenate([s.exterior_piece, np.full(len(T), piece)])
         filled.append(names[piece])
-        largest = max(largest, area)
-    if filled:
-        s.notes.append(f"filled {len(filled)} sliver holes of the exterior where neighbouring pieces disagree "
-                       f"(largest area {largest:.2g}; given to {', '.join(sorted(set(filled)))})")
+    if merged or filled:
+        s.notes.append(f"closed {merged + len(filled)} sliver holes of the exterior where neighbouring pieces "
+                       f"disagree on a corner (largest area {largest:.2g}; {merged} short edges collapsed, "
+                       f"{len(filled)} holes filled)")
 
 
 def _check_tiling(s: SharedSurface, volumes: list[float], names: list[str], diag: float, where: str) -> None:

@@ -39,3 +39,7 @@ tol = SimpleNamespace(
     # Pieces whose volumes add up to more than the object's by this fraction overlap.
     volume=1e-4,
 )
+
+# Imported motion: a rigid fit this close (relative to the diagonal) is taken
+# as rigid; files round to 6 decimals.
+tol.rigid_fit = 1e-5

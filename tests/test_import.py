@@ -1,0 +1,215 @@
+"""Import of per-frame piece meshes (the Blender Cell Fracture sample) and its errors."""
+
+import json
+import shutil
+from pathlib import Path
+
+import igl
+import numpy as np
+import pytest
+
+from conftest import REPO
+from fracture import runner
+from fracture.coarse import flood_fill_patches, special_edges
+from fracture.config import load_config
+from fracture.errors import InputError
+from fracture.mesh_sequence import load_coarse_sequence, read_sequence
+
+SAMPLE = REPO.parent / "shared" / "data" / "blender_cellfracture_cube8"
+pytestmark = pytest.mark.skipif(not SAMPLE.is_dir(), reason="the Blender sample (shared/data) is not beside the repo")
+
+
+@pytest.fixture(scope="module")
+def imported():
+    return load_coarse_sequence(SAMPLE)
+
+
+def area(V, F):
+    return 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1).sum()
+
+
+def test_sample_imports_into_eight_consistent_components(imported):
+    cf, extra = imported
+    assert cf.n_components == 8 and cf.n_frames == 40
+    assert cf.names[0] == "source_cell" and cf.names[7] == "source_cell.007"
+    # every fracture triangle separates two different components, stored once
+    assert np.all(cf.sides[:, 0] != cf.sides[:, 1])
+    key = np.sort(cf.F, axis=1)
+    assert len(np.unique(key, axis=0)) == len(key)
+    # the shared surface's area is half of what the pieces' own fracture faces cover
+    assert area(cf.V, cf.F) == pytest.approx(0.5 * extra["piece_fracture_area"].sum(), rel=1e-3)
+    # the pieces move rigidly: the rigid fit is exact up to the files' 6 decimals
+    assert extra["rigid_residual"].max() < 1e-5 and cf.fit_residual.max() < 1e-5
+
+
+def test_exterior_is_the_closed_cube_and_holds_the_cut_boundary(imported):
+    cf, _ = imported
+    BV, BF = cf.exterior_V, cf.exterior_F
+    E = np.sort(BF[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    assert np.all(np.unique(E, axis=0, return_counts=True)[1] == 2)
+    assert area(BV, BF) == pytest.approx(24.0, rel=1e-6)
+    volume = np.einsum("ij,ij->i", BV[BF[:, 0]], np.cross(BV[BF[:, 1]], BV[BF[:, 2]])).sum() / 6
+    assert volume == pytest.approx(8.0, rel=1e-4)
+    sp = special_edges(cf.F, len(cf.V))
+    assert sp.boundary.any() and sp.nonmanifold.any()
+    d2, _, _ = igl.point_mesh_squared_distance(cf.V[sp.boundary_vertices], BV, BF)
+    assert np.sqrt(d2).max() < 1e-9  # boundary vertices are vertices of B
+    interior = ~sp.boundary_vertices
+    d2, _, _ = igl.point_mesh_squared_distance(cf.V[interior], BV, BF)
+    assert np.sqrt(d2).min() > 1e-3
+
+
+def test_flood_fill_gives_one_exterior_patch_per_piece(imported):
+    cf, _ = imported
+    sp = special_edges(cf.F, len(cf.V))
+    from scipy.spatial import cKDTree
+
+    _, idx = cKDTree(cf.exterior_V).query(cf.V[sp.edges[sp.boundary].ravel()])
+    patches = flood_fill_patches(cf.exterior_F, idx.reshape(-1, 2))
+    assert patches.max() + 1 == 8
+    for p in range(8):
+        assert len(np.unique(cf.exterior_component[patches == p])) == 1
+
+
+def test_fracture_happens_during_the_animation(imported):
+    cf, _ = imported
+    assert cf.face_fracture_time.min() > 0  # not at the rest pose
+    assert np.all(cf.face_fracture_time < cf.n_frames)  # every cut opens (the pieces scatter)
+    # before its fracture time, both sides of every vertex move together
+    for (a, b), f in zip(cf.sides, cf.F):
+        t = cf.face_fracture_time[np.all(cf.sides == (a, b), axis=1)].min()
+        if t > 0:
+            X = cf.V[f]
+            gap = np.linalg.norm(cf.animation.deform(a, t - 1, X) - cf.animation.deform(b, t - 1, X), axis=1)
+            assert gap.max() <= 1e-3 * np.linalg.norm(np.ptp(cf.exterior_V, axis=0)) + 1e-12
+
+
+def test_animation_reproduces_the_files(imported):
+    cf, _ = imported
+    frames = read_sequence(SAMPLE)
+    for p in (0, 5):
+        vids = frames[0].piece_vertices(p)
+        for t in (0, 20, 39):
+            moved = cf.animation.deform(p, t, frames[0].V[vids])
+            assert np.abs(moved - frames[t].V[vids]).max() < 1e-5
+        F = cf.animation.gradient(p, 39, frames[0].V[vids[:3]])
+        assert np.allclose(F @ F.transpose(0, 2, 1), np.eye(3), atol=1e-5)  # a rotation
+
+
+def test_runner_coarse_stage(tmp_path):
+    cfg_path = tmp_path / "user.yaml"
+    cfg_path.write_text(f"input:\n  kind: mesh_sequence\n  path: {SAMPLE}\n")
+    out = runner.run(load_config(cfg_path, ["grid.resolution=16"]), tmp_path / "run", until="coarse", progress=False)
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["counts"] == {"components": 8, "coarse_fracture_triangles": manifest["counts"]["coarse_fracture_triangles"],
+                                  "frames": 40}
+    assert manifest["counts"]["coarse_fracture_triangles"] > 8
+    assert any("sliver" in n for n in manifest["notes"])
+    from fracture.plyio import read_ply
+
+    V, F, vdata, fdata = read_ply(out / "coarse/fracture_surface.ply")
+    assert len(F) == manifest["counts"]["coarse_fracture_triangles"]
+    assert np.all(fdata["side0"] != fdata["side1"])
+
+
+# --- bad input: each case names the file (and frame, piece) and writes nothing ---
+
+def _copy_sample(tmp_path) -> Path:
+    d = tmp_path / "seq"
+    shutil.copytree(SAMPLE, d)
+    return d
+
+
+def _edit(path: Path, fn) -> None:
+    lines = path.read_text().splitlines()
+    path.write_text("\n".join(fn(lines)) + "\n")
+
+
+def _object_lines(lines, name):
+    start = lines.index(f"o {name}")
+    end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("o ")), len(lines))
+    return start, end
+
+
+def _shift_piece(lines, name, delta):
+    start, end = _object_lines(lines, name)
+    out = list(lines)
+    for i in range(start, end):
+        if out[i].startswith("v "):
+            x, y, z = map(float, out[i].split()[1:4])
+            out[i] = f"v {x + delta[0]:.6f} {y + delta[1]:.6f} {z + delta[2]:.6f}"
+    return out
+
+
+def _drop_face(lines, name):
+    start, end = _object_lines(lines, name)
+    face = next(i for i in range(start, end) if lines[i].startswith("f "))
+    return lines[:face] + lines[face + 1:]
+
+
+def _rename(lines, old, new):
+    return [f"o {new}" if l == f"o {old}" else l for l in lines]
+
+
+def _set_nan(lines, name):
+    start, end = _object_lines(lines, name)
+    i = next(i for i in range(start, end) if lines[i].startswith("v "))
+    return lines[:i] + ["v nan 0.0 1.0"] + lines[i + 1:]
+
+
+def _remove_object(lines, name):
+    start, end = _object_lines(lines, name)
+    return lines[:start] + lines[end:]
+
+
+@pytest.mark.parametrize("case, frames, edit, words", [
+    ("vertex count", [5], lambda l: l + ["v 0 0 0"], ["frame_0005.obj (frame 5)", "207 vertices", "206"]),
+    ("renamed piece", [3], lambda l: _rename(l, "source_cell.004", "chunk"), ["frame_0003.obj (frame 3)", "'source_cell.004'", "missing"]),
+    ("missing piece", [2], lambda l: _remove_object(l, "source_cell.007"), ["frame_0002.obj", "'source_cell.007'", "missing"]),
+    ("nan", [4], lambda l: _set_nan(l, "source_cell.003"), ["frame_0004.obj", "'source_cell.003'", "NaN"]),
+    ("empty file", [6], lambda l: [], ["frame_0006.obj", "empty"]),
+    ("open piece", list(range(1, 41)), lambda l: _drop_face(l, "source_cell.002"), ["frame_0001.obj", "'source_cell.002'", "not a closed surface"]),
+    ("moved piece", [1], lambda l: _shift_piece(l, "source_cell.005", (0.05, 0.05, 0.05)), ["frame_0001.obj", "'source_cell.005'", "must tile"]),
+])
+def test_bad_sequences_are_rejected_with_their_place(tmp_path, case, frames, edit, words):
+    d = _copy_sample(tmp_path)
+    for t in frames:
+        path = d / f"frame_{t:04d}.obj"
+        if case == "empty file":
+            path.write_text("")
+        else:
+            _edit(path, edit)
+    with pytest.raises(InputError) as err:
+        load_coarse_sequence(d)
+    for w in words:
+        assert w in str(err.value), str(err.value)
+    # through the runner: nothing is written
+    cfg_path = tmp_path / "c.yaml"
+    cfg_path.write_text(f"input: {{kind: mesh_sequence, path: {d}}}\n")
+    with pytest.raises(InputError):
+        runner.run(load_config(cfg_path), tmp_path / "run", progress=False)
+    assert not (tmp_path / "run").exists()
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+def test_gap_between_pieces_is_reported(tmp_path):
+    d = _copy_sample(tmp_path)
+    # move one corner piece away from its neighbours along the cube's diagonal
+    _edit(d / "frame_0001.obj", lambda l: _shift_piece(l, "source_cell", (-0.02, -0.02, -0.02)))
+    with pytest.raises(InputError, match="gap|overlap|closed surface"):
+        load_coarse_sequence(d)
+
+
+def test_tiny_gap_is_repaired_and_noted(tmp_path):
+    d = _copy_sample(tmp_path)
+    _edit(d / "frame_0001.obj", lambda l: _shift_piece(l, "source_cell.006", (0.0015, 0.0, 0.0)))
+    cf, _ = load_coarse_sequence(d)
+    assert cf.n_components == 8
+    assert any("welded corners" in n for n in cf.notes)
+
+
+def test_missing_directory_and_no_frames(tmp_path):
+    with pytest.raises(InputError, match="not found"):
+        read_sequence(tmp_path / "nope")
+    with pytest.raises(InputError, match="no frame files match"):
+        read_sequence(tmp_path)
