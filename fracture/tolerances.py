@@ -43,3 +43,8 @@ tol = SimpleNamespace(
 # Imported motion: a rigid fit this close (relative to the diagonal) is taken
 # as rigid; files round to 6 decimals.
 tol.rigid_fit = 1e-5
+
+# Virtual fracture: a boundary edge of the fracture surface whose midpoint is
+# farther than this from B (relative to the diagonal) is a crack front inside
+# the object; bisection stops within this of the exterior.
+tol.on_surface = 1e-6

@@ -1,0 +1,152 @@
+"""Virtual fracture (Section 4.1): extend incomplete cuts until they split the object.
+
+An incomplete cut ends inside the object: some boundary edges of the fracture
+surface (its *crack front*) do not lie on the exterior B. :func:`extend_cuts`
+grows the surface from the front in the cut's own separation direction (in
+the plane of the triangle behind each front edge, away from it), one strip of
+triangles per step, until every front vertex has crossed B; the crossing is
+located by bisection on the winding number of B and projected onto B. The
+added triangles are virtual fracture: they separate the object into
+components but never open in the animation.
+"""
+
+from __future__ import annotations
+
+import igl
+import numpy as np
+
+from fracture.coarse import special_edges
+from fracture.errors import InputError
+from fracture.tolerances import tol
+
+
+def crack_front(V: np.ndarray, F: np.ndarray, BV: np.ndarray, BF: np.ndarray) -> np.ndarray:
+    """Boundary edges of the surface ``(V, F)`` that end inside the object, ``(k, 2)``.
+
+    A boundary edge is on B when both its vertices are (its midpoint may not
+    be: on a curved B the coarse boundary edges are chords). Edges are
+    returned in the orientation they have in their triangle.
+    """
+    sp = special_edges(F, len(V))
+    if not sp.boundary.any():
+        return np.zeros((0, 2), np.int64)
+    diag = float(np.linalg.norm(np.ptp(BV, axis=0)))
+    E = sp.edges[sp.boundary]
+    d2, _, _ = igl.point_mesh_squared_distance(V[E.ravel()], BV, np.ascontiguousarray(BF, np.int64))
+    off = (np.sqrt(d2) > 10 * tol.on_surface * diag).reshape(-1, 2)
+    E = E[off.any(axis=1)]
+    # orient as in the owning triangle
+    directed = F[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    key = {(int(a), int(b)) for a, b in directed}
+    return np.array([(a, b) if (int(a), int(b)) in key else (b, a) for a, b in E], np.int64).reshape(-1, 2)
+
+
+def _inside(BV, BF, P):
+    return igl.fast_winding_number(BV, BF, np.ascontiguousarray(P, np.float64)) > 0.5
+
+
+def _crossing(BV, BF, inside_pts, outside_pts, iterations=40):
+    """Points where segments from inside to outside B cross B (bisection, then projection)."""
+    a, b = inside_pts.copy(), outside_pts.copy()
+    for _ in range(iterations):
+        m = 0.5 * (a + b)
+        ins = _inside(BV, BF, m)
+        a[ins], b[~ins] = m[ins], m[~ins]
+    _, _, C = igl.point_mesh_squared_distance(0.5 * (a + b), BV, BF)
+    return C
+
+
+def extend_cuts(V: np.ndarray, F: np.ndarray, BV: np.ndarray, BF: np.ndarray, step: float | None = None,
+                max_steps: int = 500) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Extend every crack front of the fracture surface to the exterior B.
+
+    Parameters
+    ----------
+    V, F : (n, 3) float, (m, 3) int
+        Fracture surface; its boundary may partly lie inside the object.
+    BV, BF : closed exterior surface B.
+    step : float, optional
+        Length of one strip (default: the mean length of the front edges).
+    max_steps : int
+
+    Returns
+    -------
+    V2 : (n2, 3) float
+        The old vertices followed by the new ones.
+    F2 : (m2, 3) int
+        The old triangles followed by the virtual ones.
+    virtual : (m2,) bool
+        True for the added triangles.
+
+    Raises
+    ------
+    InputError
+        When a front does not reach B within ``max_steps`` strips.
+    """
+    BF = np.ascontiguousarray(BF, np.int64)
+    BV = np.ascontiguousarray(BV, np.float64)
+    front = crack_front(V, F, BV, BF)
+    if len(front) == 0:
+        return V, F, np.zeros(len(F), bool)
+    V = [np.asarray(V, np.float64)]
+    n_vertices = len(V[0])
+    Vall = V[0]
+    # separation direction of each front edge: in the plane of its triangle, away from it
+    tri_of_edge = {}
+    for t, f in enumerate(F):
+        for k in range(3):
+            tri_of_edge[(int(f[k]), int(f[(k + 1) % 3]))] = t
+    owner = np.array([tri_of_edge[(int(a), int(b))] for a, b in front])
+    T = F[owner]
+    n = np.cross(Vall[T[:, 1]] - Vall[T[:, 0]], Vall[T[:, 2]] - Vall[T[:, 0]])
+    e = Vall[front[:, 1]] - Vall[front[:, 0]]
+    d = np.cross(e, n)
+    third = T.sum(axis=1) - front.sum(axis=1)
+    mid = 0.5 * (Vall[front[:, 0]] + Vall[front[:, 1]])
+    d *= np.where(np.einsum("ij,ij->i", d, Vall[third] - mid) > 0, -1.0, 1.0)[:, None]
+    length = np.linalg.norm(d, axis=1, keepdims=True)
+    if np.any(length <= tol.zero):
+        raise InputError("virtual fracture: a crack-front triangle is degenerate (zero area)")
+    d /= length
+    verts = np.unique(front)
+    direction = np.zeros((len(verts), 3))
+    np.add.at(direction, np.searchsorted(verts, front[:, 0]), d)
+    np.add.at(direction, np.searchsorted(verts, front[:, 1]), d)
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    h = float(np.linalg.norm(e, axis=1).mean()) if step is None else step
+
+    tip = verts.copy()  # current vertex id at the end of each front vertex's track
+    active = np.ones(len(verts), bool)
+    edges = np.searchsorted(verts, front)  # front edges as indices into verts
+    new_faces = []
+    for _ in range(max_steps):
+        if not active.any():
+            break
+        cur = Vall[tip[active]]
+        nxt = cur + h * direction[active]
+        ins = _inside(BV, BF, nxt)
+        if (~ins).any():
+            nxt[~ins] = _crossing(BV, BF, cur[~ins], nxt[~ins])
+        new_ids = np.arange(len(Vall), len(Vall) + len(nxt))
+        Vall = np.concatenate([Vall, nxt])
+        new_tip = tip.copy()
+        new_tip[active] = new_ids
+        for a, b in edges:  # strips: one or two triangles per front edge
+            a0, b0, a1, b1 = tip[a], tip[b], new_tip[a], new_tip[b]
+            if a1 != a0 and b1 != b0:
+                new_faces += [(b0, a0, a1), (b0, a1, b1)]
+            elif a1 != a0:
+                new_faces.append((b0, a0, a1))
+            elif b1 != b0:
+                new_faces.append((b0, a0, b1))
+        idx = np.flatnonzero(active)
+        active[idx[~ins]] = False
+        # the front edge now runs between the new tips, in the same orientation
+        tip = new_tip
+    else:
+        raise InputError(f"virtual fracture: a crack front did not reach the exterior within {max_steps} steps "
+                         f"of {h:.3g}; is the cut inside a closed exterior?")
+    F2 = np.concatenate([F, np.array(new_faces, np.int64).reshape(-1, 3)])
+    virtual = np.zeros(len(F2), bool)
+    virtual[len(F):] = True
+    return Vall, F2, virtual
