@@ -18,6 +18,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from fracture.errors import InputError
+from fracture.meshio import read_obj_objects
 
 
 @dataclass
@@ -45,40 +46,8 @@ class MeshFrame:
 
 
 def _read_obj_objects(path: Path) -> MeshFrame:
-    verts: list[list[float]] = []
-    names: list[str] = []
-    polys: list[list[np.ndarray]] = []
-    with open(path, encoding="utf-8", errors="replace") as f:
-        for lineno, line in enumerate(f, 1):
-            parts = line.split()
-            if not parts:
-                continue
-            try:
-                if parts[0] == "o" or parts[0] == "g":
-                    name = " ".join(parts[1:]) or f"object_{len(names):03d}"
-                    if parts[0] == "g" and names and not polys[-1]:
-                        continue  # a group name right after an object name
-                    names.append(name)
-                    polys.append([])
-                elif parts[0] == "v":
-                    xyz = [float(x) for x in parts[1:4]]
-                    if len(xyz) != 3:
-                        raise ValueError("a vertex needs 3 coordinates")
-                    verts.append(xyz)
-                elif parts[0] == "f":
-                    idx = [int(tok.split("/")[0]) for tok in parts[1:]]
-                    if len(idx) < 3:
-                        raise ValueError("a face needs at least 3 vertices")
-                    idx = [i - 1 if i > 0 else len(verts) + i for i in idx]
-                    if not names:
-                        names.append("object_000")
-                        polys.append([])
-                    polys[-1].append(np.array(idx, np.int64))
-            except ValueError as exc:
-                raise InputError(f"{path}: line {lineno}: {exc}: {line.strip()[:80]!r}") from None
-    V = np.array(verts, np.float64).reshape(-1, 3)
-    keep = [i for i, p in enumerate(polys) if p]  # objects without faces (empties, cameras) are not pieces
-    return MeshFrame(path, [names[i] for i in keep], V, [polys[i] for i in keep])
+    names, V, polygons = read_obj_objects(path)
+    return MeshFrame(path, names, V, polygons)
 
 
 def _read_ply_pieces(path: Path) -> MeshFrame:

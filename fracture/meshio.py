@@ -90,32 +90,52 @@ def read_mesh(path: str | Path, what: str | None = None, closed: bool = False) -
     return check_triangle_mesh(V, F, what, closed=closed)
 
 
-def read_obj(path: Path, what: str) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices and fan-triangulated faces of a Wavefront OBJ file.
+def read_obj_objects(path: Path, what: str | None = None) -> tuple[list[str], np.ndarray, list[list[np.ndarray]]]:
+    """Objects of a Wavefront OBJ file: names, all vertices, and per object its polygons.
 
-    Our own reader rather than libigl's, so that errors can name the line
-    and non-finite coordinates reach :func:`check_triangle_mesh` (libigl
-    rejects them with a message on stderr only). Accepts ``v/vt/vn`` face
-    tokens and negative (relative) indices; ignores other records.
+    Our own reader rather than libigl's, so that errors can name the line,
+    objects (``o``/``g``) are kept apart, and non-finite coordinates reach the
+    checks (libigl rejects them with a message on stderr only). Accepts
+    ``v/vt/vn`` face tokens and negative (relative) indices; ignores other
+    records. Objects without faces are dropped; faces before any ``o`` line
+    belong to ``object_000``.
     """
+    what = what or str(path)
     verts: list[list[float]] = []
-    faces: list[list[int]] = []
+    names: list[str] = []
+    polys: list[list[np.ndarray]] = []
     with open(path, encoding="utf-8", errors="replace") as f:
         for lineno, line in enumerate(f, 1):
             parts = line.split()
             if not parts:
                 continue
             try:
-                if parts[0] == "v":
-                    verts.append([float(x) for x in parts[1:4]])
-                    if len(verts[-1]) != 3:
+                if parts[0] in ("o", "g"):
+                    if parts[0] == "g" and names and not polys[-1]:
+                        continue  # a group name right after an object name
+                    names.append(" ".join(parts[1:]) or f"object_{len(names):03d}")
+                    polys.append([])
+                elif parts[0] == "v":
+                    xyz = [float(x) for x in parts[1:4]]
+                    if len(xyz) != 3:
                         raise ValueError("a vertex needs 3 coordinates")
+                    verts.append(xyz)
                 elif parts[0] == "f":
                     idx = [int(tok.split("/")[0]) for tok in parts[1:]]
                     if len(idx) < 3:
                         raise ValueError("a face needs at least 3 vertices")
-                    idx = [i - 1 if i > 0 else len(verts) + i for i in idx]
-                    faces.extend([idx[0], idx[k], idx[k + 1]] for k in range(1, len(idx) - 1))
+                    if not names:
+                        names.append("object_000")
+                        polys.append([])
+                    polys[-1].append(np.array([i - 1 if i > 0 else len(verts) + i for i in idx], np.int64))
             except ValueError as exc:
                 raise InputError(f"{what}: line {lineno}: {exc}: {line.strip()[:80]!r}") from None
-    return np.array(verts, np.float64).reshape(-1, 3), np.array(faces, np.int64).reshape(-1, 3)
+    keep = [i for i, p in enumerate(polys) if p]
+    return [names[i] for i in keep], np.array(verts, np.float64).reshape(-1, 3), [polys[i] for i in keep]
+
+
+def read_obj(path: Path, what: str) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices and fan-triangulated faces of all objects of an OBJ file."""
+    _, V, polys = read_obj_objects(path, what)
+    faces = [[f[0], f[k], f[k + 1]] for obj in polys for f in obj for k in range(1, len(f) - 1)]
+    return V, np.array(faces, np.int64).reshape(-1, 3)
