@@ -56,6 +56,32 @@ def box(lo, hi, divisions=(1, 1, 1)) -> tuple[np.ndarray, np.ndarray]:
     return V[first], inverse.reshape(-1)[F]
 
 
+def cylinder(radius: float = 0.5, height: float = 3.0, segments: int = 64, rings: int = 12,
+             axis: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    """A closed, outward-oriented cylinder from 0 to ``height`` along ``axis``.
+
+    The side is ``segments`` x ``rings`` quads (two triangles each); the caps
+    are fans around their centres.
+    """
+    th = np.linspace(0.0, 2.0 * np.pi, segments, endpoint=False)
+    ring = np.stack([radius * np.cos(th), radius * np.sin(th)], 1)
+    P = np.concatenate([np.column_stack([ring, np.full(segments, z)]) for z in np.linspace(0.0, height, rings)])
+    i = np.arange(segments)
+    j = np.arange(rings - 1)[:, None]
+    a = (j * segments + i).ravel()
+    b = (j * segments + (i + 1) % segments).ravel()
+    side = np.concatenate([np.stack([a, b, b + segments], 1), np.stack([a, b + segments, a + segments], 1)])
+    c0, c1 = len(P), len(P) + 1
+    top = (rings - 1) * segments
+    caps = np.concatenate([np.stack([np.full(segments, c0), (i + 1) % segments, i], 1),
+                           np.stack([np.full(segments, c1), top + i, top + (i + 1) % segments], 1)])
+    P = np.vstack([P, [0.0, 0.0, 0.0], [0.0, 0.0, height]])
+    order = [(axis + 1) % 3, (axis + 2) % 3, axis]  # the cylinder's (x, y, z) go to these axes
+    V = np.empty_like(P)
+    V[:, order] = P
+    return V, np.concatenate([side, caps]).astype(np.int64)
+
+
 def sheet(fn, u_range, v_range, nu: int, nv: int) -> tuple[np.ndarray, np.ndarray]:
     """A parametric sheet ``fn(u, v) -> (..., 3)`` on an ``nu x nv`` node grid."""
     U, W = np.meshgrid(np.linspace(*u_range, nu), np.linspace(*v_range, nv), indexing="ij")

@@ -4,25 +4,13 @@ import pytest
 import triangle
 
 from fracture.coarse import special_edges
+from fracture import primitives
 from fracture.errors import InputError
 from fracture.virtual import crack_front, extend_cuts
 
 
 def cylinder(r=0.5, h=3.0, n=64, m=12):
-    """A closed, outward triangulated cylinder along z."""
-    th = np.linspace(0, 2 * np.pi, n, endpoint=False)
-    ring = np.stack([r * np.cos(th), r * np.sin(th)], 1)
-    P = np.concatenate([np.column_stack([ring, np.full(n, z)]) for z in np.linspace(0, h, m)])
-    F = []
-    for j in range(m - 1):
-        for i in range(n):
-            a, b = j * n + i, j * n + (i + 1) % n
-            F += [(a, b, b + n), (a, b + n, a + n)]
-    P = np.vstack([P, [0, 0, 0], [0, 0, h]])
-    c0, c1 = len(P) - 2, len(P) - 1
-    for i in range(n):
-        F += [(c0, (i + 1) % n, i), (c1, (m - 1) * n + i, (m - 1) * n + (i + 1) % n)]
-    return P, np.array(F)
+    return primitives.cylinder(r, h, n, m)
 
 
 def partial_cut(r=0.5, z=1.5, x_front=0.1, n_arc=24, n_front=6):
