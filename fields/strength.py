@@ -251,7 +251,6 @@ def _p(default, type="float", **kw) -> Param:
     return Param(default, type, **kw)
 
 
-_UNIT = dict(lo=0.0)
 _STRENGTH = dict(lo=-10.0, hi=10.0)
 
 KINDS: dict[str, tuple[Callable, dict[str, Param]]] = {

@@ -21,6 +21,11 @@ from fields.grid import Grid
 from fields.interpolate import trilinear
 from fracture.tolerances import tol
 
+# Weight of the pull of the lattice nodes toward the best affine map in
+# `fit_lattice`: small against the data term, large enough to pin nodes that
+# no point constrains.
+AFFINE_PRIOR_WEIGHT = 1e-3
+
 
 @dataclass
 class CoarseAnimation:
@@ -135,8 +140,7 @@ def fit_lattice(X: np.ndarray, Y: np.ndarray, lo, hi, n: int = 2, rigid_toleranc
     A, b = affine_fit(X, Y)
     prior = rest_nodes @ A.T + b
     W = _trilinear_weights(grid, X)
-    lam = 1e-3
-    M = sp.vstack([W, lam * sp.identity(grid.size)]).tocsr()
+    M = sp.vstack([W, AFFINE_PRIOR_WEIGHT * sp.identity(grid.size)]).tocsr()
     nodes = np.empty_like(prior)
     for k in range(3):
         rhs = np.concatenate([Y[:, k] - W @ prior[:, k], np.zeros(grid.size)])

@@ -17,6 +17,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from fracture.animation import CoarseAnimation
+from fracture.topology import directed_edges, unique_edges
 
 
 @dataclass
@@ -47,8 +48,7 @@ class SpecialEdges:
 
 def special_edges(F: np.ndarray, n_vertices: int) -> SpecialEdges:
     """Label the boundary and non-manifold edges and vertices of a triangle mesh."""
-    E = np.sort(F[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    edges, count = np.unique(E, axis=0, return_counts=True)
+    edges, count = unique_edges(F)
     boundary = count == 1
     nonmanifold = count > 2
     bv = np.zeros(n_vertices, bool)
@@ -75,7 +75,7 @@ def flood_fill_patches(F: np.ndarray, cut_edges: np.ndarray) -> np.ndarray:
         Patch id of every triangle, numbered by first triangle.
     """
     m = len(F)
-    E = np.sort(F[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    E = np.sort(directed_edges(F), axis=1)
     tri = np.repeat(np.arange(m), 3)
     key = E[:, 0].astype(np.int64) * (E.max() + 1) + E[:, 1]
     if len(cut_edges):
@@ -94,6 +94,24 @@ def flood_fill_patches(F: np.ndarray, cut_edges: np.ndarray) -> np.ndarray:
     rank = np.empty(len(first), np.int64)
     rank[np.argsort(np.argsort(first))] = np.arange(len(first))  # number by first triangle
     return rank[label]
+
+
+def exterior_patches(V: np.ndarray, F: np.ndarray, BV: np.ndarray, BF: np.ndarray) -> np.ndarray:
+    """Patches of the exterior B cut out by the fracture surface's boundary.
+
+    The boundary vertices of the fracture surface ``(V, F)`` are vertices of
+    B; its boundary edges are the cut edges of :func:`flood_fill_patches`.
+
+    Returns
+    -------
+    (len(BF),) int
+        Patch id of every exterior triangle.
+    """
+    from scipy.spatial import cKDTree
+
+    sp = special_edges(F, len(V))
+    _, on_b = cKDTree(BV).query(V[sp.edges[sp.boundary].ravel()])
+    return flood_fill_patches(BF, on_b.reshape(-1, 2))
 
 
 def separation_times(V: np.ndarray, F: np.ndarray, sides: np.ndarray, animation: CoarseAnimation,
@@ -194,3 +212,7 @@ class CoarseFracture:
 
     def special(self) -> SpecialEdges:
         return special_edges(self.F, len(self.V))
+
+    def exterior_patches(self) -> np.ndarray:
+        """Patch id of every exterior triangle (see :func:`exterior_patches`)."""
+        return exterior_patches(self.V, self.F, self.exterior_V, self.exterior_F)

@@ -45,11 +45,6 @@ class MeshFrame:
         return np.unique(np.concatenate(self.polygons[p]))
 
 
-def _read_obj_objects(path: Path) -> MeshFrame:
-    names, V, polygons = read_obj_objects(path)
-    return MeshFrame(path, names, V, polygons)
-
-
 def _read_ply_pieces(path: Path) -> MeshFrame:
     import igl
 
@@ -80,7 +75,7 @@ def read_frame(path: str | Path) -> MeshFrame:
         raise InputError(f"{path}: file is empty")
     suffix = path.suffix.lower()
     if suffix == ".obj":
-        frame = _read_obj_objects(path)
+        frame = MeshFrame(path, *read_obj_objects(path))
     elif suffix == ".ply":
         frame = _read_ply_pieces(path)
     else:
@@ -164,7 +159,7 @@ def load_coarse_sequence(directory: str | Path, pattern: str = "*.obj", lattice:
         far apart, relative to the object's box diagonal.
     """
     from fracture.animation import CoarseAnimation, fit_lattice, lattice_box
-    from fracture.coarse import CoarseFracture, flood_fill_patches, separation_times, special_edges
+    from fracture.coarse import CoarseFracture, exterior_patches, separation_times
     from fracture.tiling import shared_surface
     from fracture.tolerances import tol
 
@@ -176,13 +171,7 @@ def load_coarse_sequence(directory: str | Path, pattern: str = "*.obj", lattice:
     BV, BF = _compact(shared.V, shared.exterior_F)
 
     # each exterior patch cut out by the fracture boundary belongs to one piece
-    sp = special_edges(F, len(V))
-    boundary_points = V[sp.edges[sp.boundary].ravel()]
-    from scipy.spatial import cKDTree
-
-    d, idx = cKDTree(BV).query(boundary_points)
-    cut = idx.reshape(-1, 2)
-    patches = flood_fill_patches(BF, cut)
+    patches = exterior_patches(V, F, BV, BF)
     for patch in np.unique(patches):
         owners = np.unique(shared.exterior_piece[patches == patch])
         if len(owners) > 1:

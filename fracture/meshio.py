@@ -8,6 +8,7 @@ import igl
 import numpy as np
 
 from fracture.errors import InputError
+from fracture.topology import fan, unique_edges
 
 MESH_SUFFIXES = (".obj", ".ply", ".off", ".stl")
 
@@ -49,8 +50,7 @@ def check_triangle_mesh(V, F, what: str, closed: bool = False) -> tuple[np.ndarr
     if repeated.any():
         raise InputError(f"{what}: {int(repeated.sum())} faces repeat a vertex (first: face {int(np.flatnonzero(repeated)[0])})")
     if closed:
-        E = np.sort(F[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-        _, counts = np.unique(E, axis=0, return_counts=True)
+        _, counts = unique_edges(F)
         if np.any(counts != 2):
             open_edges = int((counts == 1).sum())
             nonmanifold = int((counts > 2).sum())
@@ -137,5 +137,4 @@ def read_obj_objects(path: Path, what: str | None = None) -> tuple[list[str], np
 def read_obj(path: Path, what: str) -> tuple[np.ndarray, np.ndarray]:
     """Vertices and fan-triangulated faces of all objects of an OBJ file."""
     _, V, polys = read_obj_objects(path, what)
-    faces = [[f[0], f[k], f[k + 1]] for obj in polys for f in obj for k in range(1, len(f) - 1)]
-    return V, np.array(faces, np.int64).reshape(-1, 3)
+    return V, fan([f for obj in polys for f in obj])[0]

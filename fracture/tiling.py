@@ -37,6 +37,7 @@ from scipy.spatial import cKDTree
 
 from fracture.errors import InputError
 from fracture.tolerances import tol
+from fracture.topology import directed_edge_face, fan, signed_volume, unique_edges
 
 
 @dataclass
@@ -75,25 +76,6 @@ def polygon_normal_area(P: np.ndarray) -> tuple[np.ndarray, float]:
     n = np.cross(P, np.roll(P, -1, axis=0)).sum(axis=0) * 0.5
     area = float(np.linalg.norm(n))
     return (n / area if area > 0 else n), area
-
-
-def piece_volume(V: np.ndarray, polygons: list[np.ndarray]) -> float:
-    """Signed volume enclosed by a closed polygon surface (fan triangulation)."""
-    vol = 0.0
-    for f in polygons:
-        P = V[f]
-        vol += np.einsum("ij,ij->i", np.broadcast_to(P[0], P[1:-1].shape), np.cross(P[1:-1], P[2:])).sum()
-    return vol / 6.0
-
-
-def _fan(polygons: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """Fan triangles of polygons and the polygon each came from."""
-    tris, owner = [], []
-    for i, f in enumerate(polygons):
-        k = len(f)
-        tris.append(np.stack([np.full(k - 2, f[0]), f[1:-1], f[2:]], 1))
-        owner.append(np.full(k - 2, i))
-    return np.concatenate(tris), np.concatenate(owner)
 
 
 def _weld(P: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
@@ -186,7 +168,7 @@ def shared_surface(V: np.ndarray, polygons: list[list[np.ndarray]], names: list[
         if total <= tol.area * diag**2 or np.linalg.norm(vector) > tol.closure * 10 * total:
             raise InputError(f"{where}piece {names[p]!r} is not a closed surface (its faces leave a hole of "
                              f"about {np.linalg.norm(vector):.3g} square units)")
-        vol = piece_volume(V, polys)
+        vol = signed_volume(V, fan(polys)[0])
         if vol <= 0:
             raise InputError(f"{where}piece {names[p]!r} is inside out or flat (volume {vol:.3g})")
         volumes.append(vol)
@@ -203,7 +185,7 @@ def shared_surface(V: np.ndarray, polygons: list[list[np.ndarray]], names: list[
                 faces.append((p, loop))
 
     # 2. which piece (if any) each face is shared with
-    tris, tri_face = _fan([loop for _, loop in faces])
+    tris, tri_face = fan([loop for _, loop in faces])
     tri_piece = np.array([faces[i][0] for i in tri_face])
     A, B, C = G[tris[:, 0]], G[tris[:, 1]], G[tris[:, 2]]
     tri_n = np.cross(B - A, C - A)
@@ -316,15 +298,14 @@ def _fill_slivers(s: SharedSurface, names: list[str], diag: float, where: str) -
                     s.sides = s.sides[keep]
             merged += 1
             continue
-        directed = {(int(u), int(v)): i for i, (u, v) in enumerate(s.exterior_F[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2))}
-        if (int(loop[0]), int(loop[1])) in directed:
+        if directed_edge_face(s.exterior_F, loop[:2])[0] >= 0:
             loop = loop[::-1]  # the fill runs against the existing boundary edges
         T = _triangulate_polygon(loop, s.V, where)
-        border = [directed.get((int(v), int(u))) for u, v in zip(loop, np.roll(loop, -1))]
+        # the triangles across the hole's edges, weighted by edge length, vote for its piece
+        across = directed_edge_face(s.exterior_F, np.stack([np.roll(loop, -1), loop], 1))
         lengths = np.linalg.norm(s.V[loop] - np.roll(s.V[loop], -1, axis=0), axis=1)
-        owners = [s.exterior_piece[e // 3] for e in border if e is not None]
-        weights = [lengths[i] for i, e in enumerate(border) if e is not None]
-        piece = int(np.bincount(owners, weights=weights).argmax()) if owners else 0
+        known = across >= 0
+        piece = int(np.bincount(s.exterior_piece[across[known]], weights=lengths[known]).argmax()) if known.any() else 0
         s.exterior_F = np.concatenate([s.exterior_F, T])
         s.exterior_piece = np.concatenate([s.exterior_piece, np.full(len(T), piece)])
         filled.append(names[piece])
@@ -335,15 +316,12 @@ def _fill_slivers(s: SharedSurface, names: list[str], diag: float, where: str) -
 
 
 def _check_tiling(s: SharedSurface, volumes: list[float], names: list[str], diag: float, where: str) -> None:
-    F = s.exterior_F
-    E = np.sort(F[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    _, counts = np.unique(E, axis=0, return_counts=True)
+    _, counts = unique_edges(s.exterior_F)
     if np.any(counts != 2):
         raise InputError(f"{where}the pieces' outer faces do not form a closed surface "
                          f"({int((counts == 1).sum())} open edges, {int((counts > 2).sum())} edges shared by more "
                          f"than 2 faces): the pieces leave gaps or overlap")
-    A, B, C = s.V[F[:, 0]], s.V[F[:, 1]], s.V[F[:, 2]]
-    outer = float(np.einsum("ij,ij->i", A, np.cross(B, C)).sum() / 6.0)
+    outer = signed_volume(s.V, s.exterior_F)
     total = float(sum(volumes))
     if abs(total - outer) > tol.volume * outer:
         kind = "overlap" if total > outer else "leave gaps"

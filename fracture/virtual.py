@@ -18,6 +18,7 @@ import numpy as np
 from fracture.coarse import special_edges
 from fracture.errors import InputError
 from fracture.tolerances import tol
+from fracture.topology import directed_edge_face
 
 
 def crack_front(V: np.ndarray, F: np.ndarray, BV: np.ndarray, BF: np.ndarray) -> np.ndarray:
@@ -36,9 +37,7 @@ def crack_front(V: np.ndarray, F: np.ndarray, BV: np.ndarray, BF: np.ndarray) ->
     off = (np.sqrt(d2) > 10 * tol.on_surface * diag).reshape(-1, 2)
     E = E[off.any(axis=1)]
     # orient as in the owning triangle
-    directed = F[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-    key = {(int(a), int(b)) for a, b in directed}
-    return np.array([(a, b) if (int(a), int(b)) in key else (b, a) for a, b in E], np.int64).reshape(-1, 2)
+    return np.where((directed_edge_face(F, E) >= 0)[:, None], E, E[:, ::-1]).astype(np.int64)
 
 
 def _inside(BV, BF, P):
@@ -88,16 +87,9 @@ def extend_cuts(V: np.ndarray, F: np.ndarray, BV: np.ndarray, BF: np.ndarray, st
     front = crack_front(V, F, BV, BF)
     if len(front) == 0:
         return V, F, np.zeros(len(F), bool)
-    V = [np.asarray(V, np.float64)]
-    n_vertices = len(V[0])
-    Vall = V[0]
+    Vall = np.asarray(V, np.float64)
     # separation direction of each front edge: in the plane of its triangle, away from it
-    tri_of_edge = {}
-    for t, f in enumerate(F):
-        for k in range(3):
-            tri_of_edge[(int(f[k]), int(f[(k + 1) % 3]))] = t
-    owner = np.array([tri_of_edge[(int(a), int(b))] for a, b in front])
-    T = F[owner]
+    T = F[directed_edge_face(F, front)]
     n = np.cross(Vall[T[:, 1]] - Vall[T[:, 0]], Vall[T[:, 2]] - Vall[T[:, 0]])
     e = Vall[front[:, 1]] - Vall[front[:, 0]]
     d = np.cross(e, n)
@@ -131,14 +123,13 @@ def extend_cuts(V: np.ndarray, F: np.ndarray, BV: np.ndarray, BF: np.ndarray, st
         Vall = np.concatenate([Vall, nxt])
         new_tip = tip.copy()
         new_tip[active] = new_ids
-        for a, b in edges:  # strips: one or two triangles per front edge
-            a0, b0, a1, b1 = tip[a], tip[b], new_tip[a], new_tip[b]
-            if a1 != a0 and b1 != b0:
-                new_faces += [(b0, a0, a1), (b0, a1, b1)]
-            elif a1 != a0:
-                new_faces.append((b0, a0, a1))
-            elif b1 != b0:
-                new_faces.append((b0, a0, b1))
+        # strips: per front edge (a, b) the quad a0 b0 b1 a1 when both ends
+        # moved, the triangle toward the end that moved otherwise
+        a0, b0, a1, b1 = tip[edges[:, 0]], tip[edges[:, 1]], new_tip[edges[:, 0]], new_tip[edges[:, 1]]
+        ma, mb = a1 != a0, b1 != b0
+        new_faces += [np.stack([b0, a0, a1], 1)[ma],
+                      np.stack([b0, a1, b1], 1)[ma & mb],
+                      np.stack([b0, a0, b1], 1)[~ma & mb]]
         idx = np.flatnonzero(active)
         active[idx[~ins]] = False
         # the front edge now runs between the new tips, in the same orientation
@@ -146,7 +137,7 @@ def extend_cuts(V: np.ndarray, F: np.ndarray, BV: np.ndarray, BF: np.ndarray, st
     else:
         raise InputError(f"virtual fracture: a crack front did not reach the exterior within {max_steps} steps "
                          f"of {h:.3g}; is the cut inside a closed exterior?")
-    F2 = np.concatenate([F, np.array(new_faces, np.int64).reshape(-1, 3)])
+    F2 = np.concatenate([F] + [f.astype(np.int64) for f in new_faces])
     virtual = np.zeros(len(F2), bool)
     virtual[len(F):] = True
     return Vall, F2, virtual

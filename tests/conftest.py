@@ -14,6 +14,11 @@ REPO = Path(__file__).resolve().parents[1]
 CONFIGS = REPO / "configs"
 
 
+def mesh_area(V, F):
+    """Total area of a triangle mesh."""
+    return 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1).sum()
+
+
 @pytest.fixture
 def slab_meshes(tmp_path):
     """A 2 x 1 x 0.5 box and a wavy cut through it, written as OBJ files."""

@@ -8,9 +8,10 @@ import igl
 import numpy as np
 import pytest
 
-from conftest import REPO
+from conftest import REPO, mesh_area as area
 from fracture import runner
-from fracture.coarse import flood_fill_patches, special_edges
+from fracture.coarse import special_edges
+from fracture.topology import signed_volume, unique_edges
 from fracture.config import load_config
 from fracture.errors import InputError
 from fracture.mesh_sequence import load_coarse_sequence, read_sequence
@@ -23,9 +24,6 @@ pytestmark = pytest.mark.skipif(not SAMPLE.is_dir(), reason="the Blender sample 
 def imported():
     return load_coarse_sequence(SAMPLE)
 
-
-def area(V, F):
-    return 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1).sum()
 
 
 def test_sample_imports_into_eight_consistent_components(imported):
@@ -45,11 +43,9 @@ def test_sample_imports_into_eight_consistent_components(imported):
 def test_exterior_is_the_closed_cube_and_holds_the_cut_boundary(imported):
     cf, _ = imported
     BV, BF = cf.exterior_V, cf.exterior_F
-    E = np.sort(BF[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    assert np.all(np.unique(E, axis=0, return_counts=True)[1] == 2)
+    assert np.all(unique_edges(BF)[1] == 2)
     assert area(BV, BF) == pytest.approx(24.0, rel=1e-6)
-    volume = np.einsum("ij,ij->i", BV[BF[:, 0]], np.cross(BV[BF[:, 1]], BV[BF[:, 2]])).sum() / 6
-    assert volume == pytest.approx(8.0, rel=1e-4)
+    assert signed_volume(BV, BF) == pytest.approx(8.0, rel=1e-4)
     sp = special_edges(cf.F, len(cf.V))
     assert sp.boundary.any() and sp.nonmanifold.any()
     d2, _, _ = igl.point_mesh_squared_distance(cf.V[sp.boundary_vertices], BV, BF)
@@ -61,11 +57,7 @@ def test_exterior_is_the_closed_cube_and_holds_the_cut_boundary(imported):
 
 def test_flood_fill_gives_one_exterior_patch_per_piece(imported):
     cf, _ = imported
-    sp = special_edges(cf.F, len(cf.V))
-    from scipy.spatial import cKDTree
-
-    _, idx = cKDTree(cf.exterior_V).query(cf.V[sp.edges[sp.boundary].ravel()])
-    patches = flood_fill_patches(cf.exterior_F, idx.reshape(-1, 2))
+    patches = cf.exterior_patches()
     assert patches.max() + 1 == 8
     for p in range(8):
         assert len(np.unique(cf.exterior_component[patches == p])) == 1

@@ -3,8 +3,10 @@ import numpy as np
 import pytest
 import triangle
 
-from fracture.coarse import special_edges
+from conftest import mesh_area as area
+
 from fracture import primitives
+from fracture.coarse import special_edges
 from fracture.errors import InputError
 from fracture.virtual import crack_front, extend_cuts
 
@@ -34,9 +36,6 @@ def partial_cut(r=0.5, z=1.5, x_front=0.1, n_arc=24, n_front=6):
     V[on_arc] = igl.point_mesh_squared_distance(V[on_arc], BV, BF)[2]
     return V, tri["triangles"].astype(np.int64)
 
-
-def area(V, F):
-    return 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1).sum()
 
 
 def test_partial_cut_is_extended_to_a_complete_cut():

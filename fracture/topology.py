@@ -1,0 +1,62 @@
+"""Edge bookkeeping of triangle meshes, vectorised.
+
+Every module that asks "which edges, how many triangles on each, which
+triangle has this directed edge" asks it here.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def directed_edges(F: np.ndarray) -> np.ndarray:
+    """The three directed edges of every triangle, ``(3m, 2)``; row ``3 f + k`` is edge ``k`` of face ``f``."""
+    return np.asarray(F)[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+
+
+def _keys(E: np.ndarray, n: int) -> np.ndarray:
+    return E[:, 0].astype(np.int64) * n + E[:, 1]
+
+
+def unique_edges(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Undirected edges (sorted vertex pairs) and the number of triangles on each."""
+    return np.unique(np.sort(directed_edges(F), axis=1), axis=0, return_counts=True)
+
+
+def is_closed(F: np.ndarray) -> bool:
+    """Every edge is shared by exactly two triangles."""
+    return bool(len(F)) and bool(np.all(unique_edges(F)[1] == 2))
+
+
+def directed_edge_face(F: np.ndarray, E: np.ndarray) -> np.ndarray:
+    """For each directed edge ``E[i] = (a, b)``, a triangle of ``F`` that has it, or -1.
+
+    (In an oriented manifold mesh the triangle is unique.)
+    """
+    D = directed_edges(F)
+    E = np.asarray(E, np.int64).reshape(-1, 2)
+    n = int(max(D.max(initial=0), E.max(initial=0))) + 1
+    keys = _keys(D, n)
+    order = np.argsort(keys, kind="stable")
+    q = _keys(E, n)
+    pos = np.minimum(np.searchsorted(keys[order], q), len(order) - 1)
+    found = keys[order][pos] == q
+    return np.where(found, order[pos] // 3, -1)
+
+
+def signed_volume(V: np.ndarray, F: np.ndarray) -> float:
+    """Volume enclosed by a closed, outward triangle mesh (negative if inward)."""
+    A, B, C = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    return float(np.einsum("ij,ij->i", A, np.cross(B, C)).sum() / 6.0)
+
+
+def fan(polygons: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Fan triangles of polygons ``(t, 3)`` and the polygon each came from ``(t,)``."""
+    if not polygons:
+        return np.zeros((0, 3), np.int64), np.zeros(0, np.int64)
+    tris, owner = [], []
+    for i, f in enumerate(polygons):
+        k = len(f)
+        tris.append(np.stack([np.full(k - 2, f[0]), f[1:-1], f[2:]], 1))
+        owner.append(np.full(k - 2, i))
+    return np.concatenate(tris).astype(np.int64), np.concatenate(owner)
