@@ -23,11 +23,6 @@ def unique_edges(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.unique(np.sort(directed_edges(F), axis=1), axis=0, return_counts=True)
 
 
-def is_closed(F: np.ndarray) -> bool:
-    """Every edge is shared by exactly two triangles."""
-    return bool(len(F)) and bool(np.all(unique_edges(F)[1] == 2))
-
-
 def directed_edge_face(F: np.ndarray, E: np.ndarray) -> np.ndarray:
     """For each directed edge ``E[i] = (a, b)``, a triangle of ``F`` that has it, or -1.
 
