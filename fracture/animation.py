@@ -73,8 +73,12 @@ class CoarseAnimation:
         return trilinear(g, N, X).reshape(len(X), self.n_frames, 3).transpose(1, 0, 2)
 
 
-def lattice_box(X: np.ndarray, margin: float = 0.02) -> tuple[np.ndarray, np.ndarray]:
-    """A rest-pose lattice box around points, grown by ``margin`` of its diagonal."""
+def lattice_box(X: np.ndarray, margin: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
+    """A rest-pose lattice box around points, grown by ``margin`` of its diagonal.
+
+    Interpolation clamps outside the box, so the margin keeps points near a
+    component (exterior vertices of triangles that straddle a cut) inside it.
+    """
     lo, hi = X.min(axis=0), X.max(axis=0)
     pad = margin * float(np.linalg.norm(hi - lo)) + tol.zero
     return lo - pad, hi + pad

@@ -216,3 +216,26 @@ class CoarseFracture:
     def exterior_patches(self) -> np.ndarray:
         """Patch id of every exterior triangle (see :func:`exterior_patches`)."""
         return exterior_patches(self.V, self.F, self.exterior_V, self.exterior_F)
+
+
+def make_coarse(BV: np.ndarray, BF: np.ndarray, exterior_component: np.ndarray, V: np.ndarray, F: np.ndarray,
+                sides: np.ndarray, names: list[str], animation: CoarseAnimation, separation: float,
+                virtual: np.ndarray | None = None, fit_residual: np.ndarray | None = None,
+                notes: list[str] | None = None) -> CoarseFracture:
+    """Assemble a :class:`CoarseFracture`, deriving the fracture times from the animation.
+
+    ``separation`` is the distance (relative to B's box diagonal) at which
+    the two sides of a fracture location count as separated.
+    """
+    diag = float(np.linalg.norm(np.ptp(BV, axis=0)))
+    virtual = np.zeros(len(F), bool) if virtual is None else np.asarray(virtual, bool)
+    face_time, vertex_time = separation_times(V, F, sides, animation, separation * diag, ~virtual)
+    if fit_residual is None:
+        fit_residual = np.zeros((animation.n_components, animation.n_frames))
+    return CoarseFracture(
+        exterior_V=np.asarray(BV, np.float64), exterior_F=np.asarray(BF, np.int64),
+        exterior_component=np.asarray(exterior_component, np.int64), V=np.asarray(V, np.float64),
+        F=np.asarray(F, np.int64), sides=np.asarray(sides, np.int64), names=list(names), animation=animation,
+        face_fracture_time=face_time, vertex_fracture_time=vertex_time, virtual=virtual,
+        fit_residual=fit_residual, notes=list(notes or []),
+    )

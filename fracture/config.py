@@ -31,8 +31,12 @@ SCHEMA: dict[str, Any] = {
     "name": Param(None, "str", nullable=True, doc="experiment name; null: the config file's name"),
     "seed": Param(0, "int", lo=0, hi=2**32 - 1, doc="seed of every random choice of the run"),
     "input": {
-        "kind": Param("meshes", "str", choices=("meshes", "mesh_sequence"),
-                      doc="meshes: exterior + coarse fracture surface files; mesh_sequence: per-frame piece meshes"),
+        "kind": Param("meshes", "str", choices=("meshes", "mesh_sequence", "scene"),
+                      doc="meshes: exterior + coarse fracture surface files (no motion); mesh_sequence: "
+                          "per-frame piece meshes; scene: a built-in example"),
+        "scene": Param("wall", "str", choices=("bunny", "branch", "wall", "clay", "jello"),
+                       doc="scene: which built-in example"),
+        "frames": Param(40, "int", lo=4, hi=2000, doc="scene: frames of the coarse animation"),
         "exterior": Param(None, "path", nullable=True, doc="mesh file of the exterior surface B (closed)"),
         "fracture": Param(None, "path", nullable=True, doc="mesh file of the coarse fracture surface"),
         "path": Param(None, "dir", nullable=True, doc="mesh_sequence: folder of per-frame OBJ/PLY files"),

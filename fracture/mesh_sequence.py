@@ -159,7 +159,7 @@ def load_coarse_sequence(directory: str | Path, pattern: str = "*.obj", lattice:
         far apart, relative to the object's box diagonal.
     """
     from fracture.animation import CoarseAnimation, fit_lattice, lattice_box
-    from fracture.coarse import CoarseFracture, exterior_patches, separation_times
+    from fracture.coarse import exterior_patches, make_coarse
     from fracture.tiling import shared_surface
     from fracture.tolerances import tol
 
@@ -192,15 +192,11 @@ def load_coarse_sequence(directory: str | Path, pattern: str = "*.obj", lattice:
             nodes[t, p], residual[p, t], rigid[p, t] = fit_lattice(
                 X, frame.V[vids], lo[p], hi[p], lattice, rigid_tolerance=tol.rigid_fit * diag)
     animation = CoarseAnimation(lo, hi, nodes)
-    virtual = np.zeros(len(F), bool)
-    face_time, vertex_time = separation_times(V, F, shared.sides, animation, separation * diag, ~virtual)
     notes = list(shared.notes)
     deforming = np.flatnonzero(rigid.max(axis=1) > tol.rigid_fit * diag)
     if len(deforming):
         notes.append(f"pieces that do not move rigidly, fitted with a {lattice}^3 lattice: "
                      + ", ".join(rest.names[p] for p in deforming))
-    return CoarseFracture(
-        exterior_V=BV, exterior_F=BF, exterior_component=shared.exterior_piece, V=V, F=F, sides=shared.sides,
-        names=list(rest.names), animation=animation, face_fracture_time=face_time,
-        vertex_fracture_time=vertex_time, virtual=virtual, fit_residual=residual, notes=notes,
-    ), {"rigid_residual": rigid, "piece_fracture_area": shared.piece_fracture_area}
+    cf = make_coarse(BV, BF, shared.exterior_piece, V, F, shared.sides, rest.names, animation, separation,
+                     fit_residual=residual, notes=notes)
+    return cf, {"rigid_residual": rigid, "piece_fracture_area": shared.piece_fracture_area}

@@ -31,13 +31,11 @@ from dataclasses import dataclass, field
 import igl
 import numpy as np
 import triangle
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from fracture.errors import InputError
 from fracture.tolerances import tol
-from fracture.topology import directed_edge_face, fan, signed_volume, unique_edges
+from fracture.topology import directed_edge_face, fan, signed_volume, unique_edges, weld
 
 
 @dataclass
@@ -76,19 +74,6 @@ def polygon_normal_area(P: np.ndarray) -> tuple[np.ndarray, float]:
     n = np.cross(P, np.roll(P, -1, axis=0)).sum(axis=0) * 0.5
     area = float(np.linalg.norm(n))
     return (n / area if area > 0 else n), area
-
-
-def _weld(P: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
-    """Cluster points closer than ``radius``; returns cluster means and labels."""
-    pairs = cKDTree(P).query_pairs(radius, output_type="ndarray")
-    n = len(P)
-    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n)) if len(pairs) else \
-        coo_matrix((n, n))
-    _, label = connected_components(graph, directed=False)
-    G = np.zeros((label.max() + 1, 3))
-    np.add.at(G, label, P)
-    G /= np.bincount(label)[:, None]
-    return G, label
 
 
 def _insert_edge_points(loop: np.ndarray, G: np.ndarray, tree: cKDTree, radius: float) -> np.ndarray:
@@ -174,7 +159,7 @@ def shared_surface(V: np.ndarray, polygons: list[list[np.ndarray]], names: list[
         volumes.append(vol)
 
     # 1. weld corners across pieces, insert T-junction points into every edge
-    G, label = _weld(V, tol.weld * diag)
+    G, label = weld(V, tol.weld * diag)
     moved = float(np.linalg.norm(V - G[label], axis=1).max())
     tree = cKDTree(G)
     faces = []  # (piece, loop of welded ids)

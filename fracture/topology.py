@@ -7,6 +7,9 @@ triangle has this directed edge" asks it here.
 from __future__ import annotations
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 
 
 def directed_edges(F: np.ndarray) -> np.ndarray:
@@ -55,3 +58,16 @@ def fan(polygons: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         tris.append(np.stack([np.full(k - 2, f[0]), f[1:-1], f[2:]], 1))
         owner.append(np.full(k - 2, i))
     return np.concatenate(tris).astype(np.int64), np.concatenate(owner)
+
+
+def weld(P: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """Cluster points closer than ``radius`` (transitively); returns cluster means and each point's cluster."""
+    pairs = cKDTree(P).query_pairs(radius, output_type="ndarray")
+    n = len(P)
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n)) if len(pairs) else \
+        coo_matrix((n, n))
+    _, label = connected_components(graph, directed=False)
+    G = np.zeros((label.max() + 1, 3))
+    np.add.at(G, label, P)
+    G /= np.bincount(label)[:, None]
+    return G, label

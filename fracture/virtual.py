@@ -40,6 +40,23 @@ def crack_front(V: np.ndarray, F: np.ndarray, BV: np.ndarray, BF: np.ndarray) ->
     return np.where((directed_edge_face(F, E) >= 0)[:, None], E, E[:, ::-1]).astype(np.int64)
 
 
+def edge_outward(V: np.ndarray, F: np.ndarray, E: np.ndarray) -> np.ndarray:
+    """Unit directions ``(k, 3)`` pointing away from boundary edges ``E``, in the plane of their triangle.
+
+    This is a cut's separation direction at its front (edges as oriented in their triangle).
+    """
+    T = F[directed_edge_face(F, E)]
+    n = np.cross(V[T[:, 1]] - V[T[:, 0]], V[T[:, 2]] - V[T[:, 0]])
+    d = np.cross(V[E[:, 1]] - V[E[:, 0]], n)
+    third = T.sum(axis=1) - E.sum(axis=1)
+    mid = 0.5 * (V[E[:, 0]] + V[E[:, 1]])
+    d *= np.where(np.einsum("ij,ij->i", d, V[third] - mid) > 0, -1.0, 1.0)[:, None]
+    length = np.linalg.norm(d, axis=1, keepdims=True)
+    if np.any(length <= tol.zero):
+        raise InputError("a triangle on the boundary of the fracture surface is degenerate (zero area)")
+    return d / length
+
+
 def _inside(BV, BF, P):
     return igl.fast_winding_number(BV, BF, np.ascontiguousarray(P, np.float64)) > 0.5
 
@@ -88,27 +105,18 @@ def extend_cuts(V: np.ndarray, F: np.ndarray, BV: np.ndarray, BF: np.ndarray, st
     if len(front) == 0:
         return V, F, np.zeros(len(F), bool)
     Vall = np.asarray(V, np.float64)
-    # separation direction of each front edge: in the plane of its triangle, away from it
-    T = F[directed_edge_face(F, front)]
-    n = np.cross(Vall[T[:, 1]] - Vall[T[:, 0]], Vall[T[:, 2]] - Vall[T[:, 0]])
-    e = Vall[front[:, 1]] - Vall[front[:, 0]]
-    d = np.cross(e, n)
-    third = T.sum(axis=1) - front.sum(axis=1)
-    mid = 0.5 * (Vall[front[:, 0]] + Vall[front[:, 1]])
-    d *= np.where(np.einsum("ij,ij->i", d, Vall[third] - mid) > 0, -1.0, 1.0)[:, None]
-    length = np.linalg.norm(d, axis=1, keepdims=True)
-    if np.any(length <= tol.zero):
-        raise InputError("virtual fracture: a crack-front triangle is degenerate (zero area)")
-    d /= length
+    d = edge_outward(Vall, F, front)
     verts = np.unique(front)
     direction = np.zeros((len(verts), 3))
     np.add.at(direction, np.searchsorted(verts, front[:, 0]), d)
     np.add.at(direction, np.searchsorted(verts, front[:, 1]), d)
     direction /= np.linalg.norm(direction, axis=1, keepdims=True)
-    h = float(np.linalg.norm(e, axis=1).mean()) if step is None else step
+    h = float(np.linalg.norm(Vall[front[:, 1]] - Vall[front[:, 0]], axis=1).mean()) if step is None else step
 
     tip = verts.copy()  # current vertex id at the end of each front vertex's track
-    active = np.ones(len(verts), bool)
+    # front vertices already on B (the ends of a front) stay where they are
+    d2, _, _ = igl.point_mesh_squared_distance(Vall[verts], BV, BF)
+    active = np.sqrt(d2) > 10 * tol.on_surface * float(np.linalg.norm(np.ptp(BV, axis=0)))
     edges = np.searchsorted(verts, front)  # front edges as indices into verts
     new_faces = []
     for _ in range(max_steps):

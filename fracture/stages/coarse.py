@@ -4,34 +4,70 @@ from __future__ import annotations
 
 import numpy as np
 
-from fracture.coarse import CoarseFracture
-from fracture.meshio import read_mesh
+from fracture.coarse import CoarseFracture, make_coarse
 from fracture.mesh_sequence import load_coarse_sequence
+from fracture.meshio import read_mesh
 from fracture.plyio import write_ply
 from fracture.runner import RunContext, stage
+
+
+def coarse_from_meshes(inp: dict) -> CoarseFracture:
+    """A still object from an exterior and a coarse fracture surface (``input.kind: meshes``).
+
+    Incomplete cuts are extended (virtual fracture) and the components found
+    by flood fill; the animation is the rest pose alone.
+    """
+    from fracture.components import label_components
+    from fracture.errors import InputError
+    from fracture.scenes.animator import lattice_animation
+    from fracture.virtual import extend_cuts
+
+    missing = [k for k in ("exterior", "fracture") if not inp.get(k)]
+    if missing:
+        raise InputError("coarse: input.kind 'meshes' needs the object's exterior and coarse fracture surface; set "
+                         + " and ".join(f"input.{k}" for k in missing) + " to mesh files (OBJ, PLY, OFF or STL)")
+    BV, BF = read_mesh(inp["exterior"], "input.exterior", closed=True)
+    V, F = read_mesh(inp["fracture"], "input.fracture")
+    V, F, virtual = extend_cuts(V, F, BV, BF)
+    sides, ext, n = label_components(BV, BF, V, F, what=f"input.fracture ({inp['fracture']})")
+    points = [BV[BF[ext == c]].reshape(-1, 3) for c in range(n)]
+    still = lattice_animation(points, lambda c, t, X: X, 1)
+    notes = [f"virtual fracture: {int(virtual.sum())} triangles extend incomplete cuts"] if virtual.any() else []
+    return make_coarse(BV, BF, ext, V, F, sides, [f"piece_{c:03d}" for c in range(n)], still, inp["separation"],
+                       virtual=virtual, notes=notes)
 
 
 @stage("coarse")
 def coarse_stage(ctx: RunContext) -> None:
     inp = ctx.cfg["input"]
-    if inp["kind"] != "mesh_sequence":
-        return  # `meshes`: the fields stage reads the exterior and fracture files itself
-    with ctx.bar(1, "coarse: import") as bar:
-        cf, extra = load_coarse_sequence(inp["path"], inp["glob"], inp["lattice"], inp["separation"])
+    extra = {}
+    with ctx.bar(1, f"coarse: {inp['kind']}") as bar:
+        if inp["kind"] == "mesh_sequence":
+            cf, extra = load_coarse_sequence(inp["path"], inp["glob"], inp["lattice"], inp["separation"])
+        elif inp["kind"] == "scene":
+            from fracture.scenes import build_scene
+
+            cf = build_scene(inp["scene"], ctx.cfg["seed"], inp["frames"], inp["separation"])
+        else:
+            cf = coarse_from_meshes(inp)
         bar.update()
-    if inp["exterior"] is not None:  # a user's high-resolution exterior replaces the pieces' outer faces
+    if inp["kind"] == "mesh_sequence" and inp["exterior"] is not None:
+        # a user's high-resolution exterior replaces the pieces' outer faces
         BV, BF = read_mesh(inp["exterior"], "input.exterior", closed=True)
     else:
         BV, BF = cf.exterior_V, cf.exterior_F
     ctx.products.update(coarse=cf, exterior=(BV, BF), coarse_fracture=(cf.V, cf.F))
     save_coarse(ctx, cf)
-    ctx.counts.update(components=cf.n_components, coarse_fracture_triangles=int(len(cf.F)), frames=cf.n_frames)
+    ctx.counts.update(components=cf.n_components, coarse_fracture_triangles=len(cf.F), frames=cf.n_frames)
+    separated = cf.face_fracture_time < cf.n_frames
     ctx.stats["coarse"] = {
         "fit_residual_max": float(cf.fit_residual.max()),
-        "rigid_fit_residual_max": float(extra["rigid_residual"].max()),
-        "separated_triangles": int((cf.face_fracture_time < cf.n_frames).sum()),
-        "first_separation_frame": int(cf.face_fracture_time.min()) + 1,
+        "separated_triangles": int(separated.sum()),
+        "virtual_triangles": int(cf.virtual.sum()),
+        "first_separation_frame": int(cf.face_fracture_time.min()) + 1 if separated.any() else None,
     }
+    if "rigid_residual" in extra:
+        ctx.stats["coarse"]["rigid_fit_residual_max"] = float(extra["rigid_residual"].max())
     ctx.notes.extend(f"coarse: {n}" for n in cf.notes)
 
 

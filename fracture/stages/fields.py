@@ -6,8 +6,6 @@ import numpy as np
 
 from fields.build import build_fields
 from fields.slices import axis_slice, slice_image
-from fracture.errors import InputError
-from fracture.meshio import read_mesh
 from fracture.runner import RunContext, stage
 
 PREVIEW_FIELDS = ("zeta", "xi", "psi")
@@ -16,31 +14,10 @@ _PREVIEW_WIDTH = 400
 _PREVIEW_GAP = 8
 
 
-def input_meshes(ctx: RunContext) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
-    """The exterior B and the coarse fracture surface.
-
-    From the ``coarse`` stage when it ran, else from the mesh files named by
-    ``input.exterior`` and ``input.fracture`` (hand-edited coarse surfaces).
-    """
-    if "exterior" in ctx.products and "coarse_fracture" in ctx.products:
-        return ctx.products["exterior"], ctx.products["coarse_fracture"]
-    inp = ctx.cfg["input"]
-    missing = [k for k in ("exterior", "fracture") if not inp.get(k)]
-    if missing:
-        raise InputError(
-            "fields: needs the object's exterior and coarse fracture surface; set "
-            + " and ".join(f"input.{k}" for k in missing)
-            + " to mesh files (OBJ, PLY, OFF or STL)"
-        )
-    exterior = read_mesh(inp["exterior"], "input.exterior", closed=True)
-    fracture = read_mesh(inp["fracture"], "input.fracture")
-    return exterior, fracture
-
-
 @stage("fields")
 def fields_stage(ctx: RunContext) -> None:
     cfg = ctx.cfg
-    (BV, BF), (SV, SF) = input_meshes(ctx)
+    (BV, BF), (SV, SF) = ctx.products["exterior"], ctx.products["coarse_fracture"]
     with ctx.bar(3, "fields") as bar:
         fs = build_fields(
             BV, SV, SF,
@@ -56,7 +33,7 @@ def fields_stage(ctx: RunContext) -> None:
             sigma=cfg["pyramid"]["sigma"],
             step=lambda name: (bar.set_postfix_str(name), bar.update()),
         )
-    ctx.products.update(exterior=(BV, BF), coarse_fracture=(SV, SF), fields=fs)
+    ctx.products["fields"] = fs
 
     ctx.save_json("fields/grid.json", fs.grid.to_dict())
     for name in PREVIEW_FIELDS:
@@ -68,7 +45,6 @@ def fields_stage(ctx: RunContext) -> None:
         grid_nodes=fs.grid.size,
         pyramid_levels=fs.pyramid.n_levels,
         exterior_triangles=int(len(BF)),
-        coarse_fracture_triangles=int(len(SF)),
     )
     ctx.stats["fields"] = {
         "grid_shape": list(fs.grid.shape),

@@ -1,0 +1,277 @@
+"""Components of an object cut by a fracture surface: volumetric flood fill (Section 4.1).
+
+The object's inside (winding number of B) is sampled on a voxel grid; voxels
+whose centre lies within ``0.6 h`` of the fracture surface are walls. Two
+6-neighbours both farther than ``h / 2`` from the surface cannot be separated
+by it (a crossing point would be within ``h / 2`` of one of them), so the
+connected regions of the free voxels (scipy.ndimage.label) are exactly the
+components at the grid's resolution. Each fracture triangle then reads the
+component on either side a little away from its plane, and each exterior
+triangle the component just inside it.
+"""
+
+from __future__ import annotations
+
+import igl
+import numpy as np
+from scipy import ndimage
+
+from fracture.errors import InputError
+from fracture.coarse import flood_fill_patches, special_edges
+from fracture.topology import directed_edge_face, directed_edges, unique_edges
+from fracture.virtual import edge_outward
+
+# Voxels with fewer free cells than this are slivers between the surface and
+# B, not components.
+_MIN_VOXELS = 8
+
+
+def _face_frames(V, F):
+    A, B, C = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    n = np.cross(B - A, C - A)
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    centroid = (A + B + C) / 3
+    samples = np.stack([centroid] + [centroid + 0.5 * (X - centroid) for X in (A, B, C)], 1)  # (m, 4, 3)
+    return samples, n
+
+
+class _Lookup:
+    """Labels of the voxel centres around points, on one side of a plane."""
+
+    def __init__(self, labels, origin, h):
+        self.labels, self.origin, self.h = labels, origin, h
+        self.corners = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
+
+    def __call__(self, P, base=None, normal=None):
+        """Labels ``(..., 8)`` of the 8 voxel centres around each point of ``P (..., 3)``.
+
+        With ``base`` and ``normal``, centres not clearly in front of the
+        plane through ``base`` (more than ``h / 4``) read 0.
+        """
+        f = (P - self.origin) / self.h
+        idx = np.floor(f).astype(np.int64)[..., None, :] + self.corners  # (..., 8, 3)
+        shape = np.array(self.labels.shape)
+        ok = ((idx >= 0) & (idx < shape)).all(axis=-1)
+        out = np.zeros(idx.shape[:-1], np.int64)
+        out[ok] = self.labels[tuple(idx[ok].T)]
+        if base is not None:
+            C = self.origin + idx * self.h
+            ahead = np.einsum("...kc,...c->...k", C - base[..., None, :], normal) > 0.25 * self.h
+            out[~ahead] = 0
+        return out
+
+
+def _vote(lookup, samples, n, h, sign, distances=(0.8,), result=None) -> np.ndarray:
+    """Most frequent non-zero label at ``samples + sign * d * n`` for growing ``d``; 0 if none.
+
+    Only rows of ``result`` that are still 0 are looked up.
+    """
+    result = np.zeros(len(samples), np.int64) if result is None else result.copy()
+    todo = result == 0
+    for d in distances:
+        if not todo.any():
+            break
+        nrm = sign * n[todo][:, None, :] * np.ones((1, samples.shape[1], 1))
+        lab = lookup(samples[todo] + d * h * nrm, samples[todo], nrm).reshape(int(todo.sum()), -1)
+        for row, labels in zip(np.flatnonzero(todo), lab):
+            labels = labels[labels > 0]
+            if len(labels):
+                result[row] = np.bincount(labels).argmax()
+        todo = result == 0
+    return result
+
+
+def _with_skirt(BV, BF, V, F, h):
+    """The surface with a strip beyond each boundary edge that lies on B.
+
+    Coarse boundary edges are chords of a curved B, so a thin gap can remain
+    between the cut and B; the strip (outside B, in the plane of the edge's
+    triangle) closes it for the flood fill.
+    """
+    sp = special_edges(F, len(V))
+    E = sp.edges[sp.boundary]
+    if not len(E):
+        return V, F
+    E = np.where((directed_edge_face(F, E) >= 0)[:, None], E, E[:, ::-1])
+    mid = 0.5 * (V[E[:, 0]] + V[E[:, 1]])
+    gap = np.sqrt(igl.point_mesh_squared_distance(mid, BV, BF)[0])
+    d = edge_outward(V, F, E) * (1.2 * gap + 2.0 * h)[:, None]
+    n = len(V)
+    W = np.concatenate([V, V[E[:, 0]] + d, V[E[:, 1]] + d])
+    k = np.arange(len(E))
+    skirt = np.concatenate([np.stack([E[:, 1], E[:, 0], n + k], 1), np.stack([E[:, 1], n + k, n + len(E) + k], 1)])
+    return W, np.concatenate([F, skirt])
+
+
+def _fill_from_neighbours(F: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    """Give triangles without labels (rows with a 0) those of a labelled neighbour.
+
+    Neighbours share an edge in opposite directions and no third triangle
+    uses it, so they lie on the same sheet with the same orientation.
+    """
+    labels = labels.copy()
+    missing = (labels == 0).any(axis=1)
+    if not missing.any():
+        return labels
+    D = directed_edges(F)
+    key = np.minimum(D[:, 0], D[:, 1]).astype(np.int64) * (F.max() + 1) + np.maximum(D[:, 0], D[:, 1])
+    order = np.argsort(key, kind="stable")
+    k = key[order]
+    first = np.r_[True, k[1:] != k[:-1]]
+    group = np.cumsum(first) - 1
+    size = np.bincount(group)
+    pair = size[group] == 2
+    i = np.flatnonzero(pair & first)  # first of the two directed edges of each manifold edge
+    ea, eb = order[i], order[i + 1]
+    opposite = D[ea, 0] == D[eb, 1]
+    a, b = ea[opposite] // 3, eb[opposite] // 3
+    for _ in range(len(F)):
+        ma, mb = (labels[a] == 0).any(axis=1), (labels[b] == 0).any(axis=1)
+        take_a, take_b = ma & ~mb, mb & ~ma
+        if not (take_a.any() or take_b.any()):
+            break
+        labels[a[take_a]] = labels[b[take_a]]
+        labels[b[take_b]] = labels[a[take_b]]
+    return labels
+
+
+def _patch_majority(V: np.ndarray, F: np.ndarray, sides: np.ndarray) -> np.ndarray:
+    """One pair of components per patch between junction and boundary edges (area-weighted vote).
+
+    A patch of a fracture surface separates the same two components
+    everywhere, so isolated misreadings (a vote that reached past a nearby
+    sheet at a sharp junction) are outvoted by the rest of the patch.
+    """
+    edges, count = unique_edges(F)
+    patch = flood_fill_patches(F, edges[count != 2])
+    area = np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+    out = sides.copy()
+    known = (sides > 0).all(axis=1)
+    for p in np.unique(patch[known]):
+        sel = known & (patch == p)
+        pairs, inv = np.unique(sides[sel], axis=0, return_inverse=True)
+        out[patch == p] = pairs[np.argmax(np.bincount(inv.ravel(), weights=area[sel]))]
+    return out
+
+
+def _fill_around_junctions(V: np.ndarray, F: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    """Labels of unlabelled triangle sides from the wedges around their junction edges.
+
+    Around an edge shared by several triangles, the space between two
+    triangles that follow each other in angle is one component: a side of a
+    triangle facing the next triangle around the edge has the component of
+    that triangle's side facing back.
+    """
+    labels = labels.copy()
+    D = directed_edges(F)
+    key = np.minimum(D[:, 0], D[:, 1]).astype(np.int64) * len(V) + np.maximum(D[:, 0], D[:, 1])
+    n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    for f in np.flatnonzero((labels == 0).any(axis=1)):
+        for k in range(3):
+            a, b = F[f, k], F[f, (k + 1) % 3]
+            around = np.flatnonzero(key == key[3 * f + k]) // 3
+            if len(around) < 3:
+                continue
+            axis = V[b] - V[a]
+            axis /= np.linalg.norm(axis)
+
+            def direction(g):
+                d = V[F[g].sum() - a - b] - V[a]  # toward g's third corner
+                d -= (d @ axis) * axis
+                return d / np.linalg.norm(d)
+
+            df = direction(f)
+            turn = np.sign(n[f] @ np.cross(axis, df))  # rotating d_f toward +n_f
+            others = around[around != f]
+            dirs = np.array([direction(g) for g in others])
+            angle = np.mod(turn * np.arctan2(np.cross(axis, df) @ dirs.T, dirs @ df), 2 * np.pi)
+            for side, g in ((1, others[np.argmin(angle)]), (0, others[np.argmax(angle)])):
+                if labels[f, side] == 0:
+                    facing = 1 if n[g] @ df > 0 else 0  # the side of g that faces the wedge
+                    labels[f, side] = labels[g, facing]
+    return labels
+
+
+def label_components(BV: np.ndarray, BF: np.ndarray, V: np.ndarray, F: np.ndarray, resolution: int = 96,
+                     what: str = "fracture surface") -> tuple[np.ndarray, np.ndarray, int]:
+    """Components of the inside of B separated by the fracture surface ``(V, F)``.
+
+    Parameters
+    ----------
+    BV, BF : closed, outward exterior surface.
+    V, F : fracture surface.
+    resolution : int
+        Voxels along the longest side of B's box.
+
+    Returns
+    -------
+    sides : (m, 2) int
+        Component behind and in front of each fracture triangle.
+    exterior_component : (len(BF),) int
+        Component of each exterior triangle.
+    n_components : int
+        Components are numbered by their lowest voxel (x-major order).
+
+    Raises
+    ------
+    InputError
+        When a fracture triangle has the same component on both sides (the
+        surface does not separate the object there) or a side is not found.
+    """
+    BV = np.ascontiguousarray(BV, np.float64)
+    BF = np.ascontiguousarray(BF, np.int64)
+    V = np.ascontiguousarray(V, np.float64)
+    F = np.ascontiguousarray(F, np.int64)
+    lo, hi = BV.min(axis=0), BV.max(axis=0)
+    h = float((hi - lo).max()) / resolution
+    origin = lo - h
+    shape = np.ceil((hi - lo) / h).astype(int) + 3
+    axes = [origin[k] + h * np.arange(shape[k]) for k in range(3)]
+    P = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+    inside = igl.fast_winding_number(BV, BF, P) > 0.5
+    free = inside.copy()
+    WV, WF = _with_skirt(BV, BF, V, F, h)
+    d2, _, _ = igl.point_mesh_squared_distance(P[inside], WV, WF)
+    free[np.flatnonzero(inside)[d2 < (0.6 * h) ** 2]] = False
+    labels, count = ndimage.label(free.reshape(shape))
+    sizes = np.bincount(labels.ravel(), minlength=count + 1)
+    keep = np.flatnonzero(sizes >= _MIN_VOXELS)
+    keep = keep[keep > 0]
+    remap = np.zeros(count + 1, np.int64)
+    remap[keep] = np.arange(1, len(keep) + 1)
+    lookup = _Lookup(remap[labels], origin, h)
+
+    # read each side just off the triangle; where that is a wall (slivers,
+    # junctions), take the label of a neighbour on the same sheet or of the
+    # wedge around a junction edge, and only then look farther away (which
+    # may reach past another sheet)
+    samples, n = _face_frames(V, F)
+    sides = _patch_majority(V, F, np.stack([_vote(lookup, samples, n, h, -1.0), _vote(lookup, samples, n, h, 1.0)], 1))
+    for distances in ((), (1.6,), (2.5,), (4.0,)):
+        for k, sign in enumerate((-1.0, 1.0)):
+            sides[:, k] = _vote(lookup, samples, n, h, sign, distances, sides[:, k])
+        for _ in range(3):
+            sides = _fill_from_neighbours(F, sides)
+            if not (sides == 0).any():
+                break
+            sides = _fill_around_junctions(V, F, sides)
+    behind, front = sides.T
+    bsamples, bn = _face_frames(BV, BF)
+    ext = _vote(lookup, bsamples, bn, h, -1.0, (0.8, 1.6, 2.5, 4.0))
+    ext = _fill_from_neighbours(BF, ext[:, None])[:, 0]
+    for name, lab in (("fracture", np.minimum(behind, front)), ("exterior", ext)):
+        if (lab == 0).any():
+            f = int(np.flatnonzero(lab == 0)[0])
+            raise InputError(f"{what}: cannot tell the component beside {name} triangle {f} "
+                             f"({int((lab == 0).sum())} such triangles); is the object thinner than "
+                             f"{2 * h:.3g} there?")
+    same = behind == front
+    if same.any():
+        f = int(np.flatnonzero(same)[0])
+        raise InputError(f"{what}: triangle {f} has the same component on both sides ({int(same.sum())} such "
+                         f"triangles): the surface does not split the object there (an incomplete cut?)")
+    # voxel regions no triangle reads (pockets cut off by walls) are not components
+    used, inverse = np.unique(np.concatenate([behind, front, ext]), return_inverse=True)
+    m = len(F)
+    return np.stack([inverse[:m], inverse[m:2 * m]], 1), inverse[2 * m:], len(used)
