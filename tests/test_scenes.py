@@ -116,3 +116,39 @@ def test_the_incomplete_cut_alone_does_not_separate_the_branch():
 def test_unknown_scene_is_named():
     with pytest.raises(InputError, match="unknown scene 'cake'"):
         build_scene("cake")
+
+
+def test_until_coarse_writes_the_coarse_stage_of_a_scene(tmp_path):
+    import json
+
+    from conftest import CONFIGS
+    from fracture import runner
+    from fracture.config import load_config
+    from fracture.plyio import read_ply
+
+    cfg = load_config(CONFIGS / "branch.yaml", ["input.frames=12"])
+    out = runner.run(cfg, tmp_path / "run", until="coarse", progress=False)
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert list(manifest["stages"]) == ["coarse"]
+    assert manifest["counts"]["components"] == 2 and manifest["counts"]["frames"] == 12
+    V, F, vdata, fdata = read_ply(out / "coarse/fracture_surface.ply")
+    assert len(F) == manifest["counts"]["coarse_fracture_triangles"]
+    assert (fdata["side0"] != fdata["side1"]).all() and fdata["virtual"].any()
+
+
+def test_meshes_input_extends_an_incomplete_cut(tmp_path):
+    from fracture.primitives import box, sheet, write_obj
+    from fracture.stages.coarse import coarse_from_meshes
+
+    V, F = box([0, 0, 0], [2, 1, 0.5], (8, 4, 2))
+    # a cut at x = 1 through the lower 60 % of the slab only
+    SV, SF = sheet(lambda u, v: np.stack([np.ones_like(u), u, v], 1), (0, 0.6), (0, 0.5), 4, 3)
+    write_obj(tmp_path / "slab.obj", V, F)
+    write_obj(tmp_path / "cut.obj", SV, SF)
+    inp = {"exterior": str(tmp_path / "slab.obj"), "fracture": str(tmp_path / "cut.obj"), "separation": 1e-3}
+    cf = coarse_from_meshes(inp)
+    assert cf.n_components == 2 and cf.virtual.any()
+    assert cf.n_frames == 1 and (cf.face_fracture_time == 1).all()  # a still object never separates
+    left = cf.exterior_component[np.argmin(cf.exterior_V[cf.exterior_F].mean(axis=1)[:, 0])]
+    right = cf.exterior_component[np.argmax(cf.exterior_V[cf.exterior_F].mean(axis=1)[:, 0])]
+    assert left != right
