@@ -1,0 +1,115 @@
+"""The refined fracture surface and its mesh operations (Section 4.4), vectorised.
+
+One shared non-manifold surface: every triangle once, with the components on
+its two sides. The operations here (1-to-3 triangle splits, edge splits that
+split every triangle on the edge) keep each triangle's orientation and side
+ids, and record every new vertex in the barycentric tree: its parent
+vertices and weights at the moment it was made. :meth:`RefineMesh.tree_matrix`
+composes the tree into one sparse map from the coarse vertices to every
+vertex (rows sum to 1), which Section 5 uses to carry the coarse animation's
+deformation to the refined surface.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+from fracture.topology import directed_edges
+
+
+@dataclass
+class RefineMesh:
+    """A fracture surface under refinement.
+
+    Attributes
+    ----------
+    V : (n, 3) float
+    F : (m, 3) int
+    sides : (m, 2) int
+    n_coarse : int
+        The first ``n_coarse`` vertices are the coarse surface's.
+    parents, weights : list of (k, 3) arrays
+        Per batch of new vertices (in creation order), their parents and
+        barycentric weights (an edge split has a zero third weight).
+    created : list of (k, 3) arrays
+        Positions of the new vertices when they were made (for checks).
+    """
+
+    V: np.ndarray
+    F: np.ndarray
+    sides: np.ndarray
+    n_coarse: int = 0
+    parents: list = field(default_factory=list)
+    weights: list = field(default_factory=list)
+    created: list = field(default_factory=list)
+
+    @classmethod
+    def from_coarse(cls, V, F, sides) -> RefineMesh:
+        V = np.array(V, np.float64)
+        return cls(V, np.array(F, np.int64), np.array(sides, np.int64), n_coarse=len(V))
+
+    def _add_vertices(self, parents: np.ndarray, weights: np.ndarray) -> np.ndarray:
+        P = np.einsum("kj,kjc->kc", weights, self.V[parents])
+        ids = np.arange(len(self.V), len(self.V) + len(P))
+        self.V = np.concatenate([self.V, P])
+        self.parents.append(parents.astype(np.int64))
+        self.weights.append(weights.astype(np.float64))
+        self.created.append(P.copy())
+        return ids
+
+    def split_triangles(self, faces: np.ndarray, bary: np.ndarray) -> np.ndarray:
+        """Split each triangle ``faces[i]`` 1-to-3 at barycentric point ``bary[i]``; returns the new vertex ids."""
+        faces = np.asarray(faces, np.int64)
+        T = self.F[faces]
+        p = self._add_vertices(T, np.asarray(bary, np.float64))
+        a, b, c = T.T
+        self.F[faces] = np.stack([a, b, p], 1)
+        self.F = np.concatenate([self.F, np.stack([b, c, p], 1), np.stack([c, a, p], 1)])
+        self.sides = np.concatenate([self.sides, self.sides[faces], self.sides[faces]])
+        return p
+
+    def split_edges(self, edges: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """Split edges ``(a, b)`` at ``(1 - t) a + t b``, and every triangle on them in two.
+
+        A triangle may carry at most one of the split edges. Returns the new
+        vertex ids.
+        """
+        edges = np.asarray(edges, np.int64).reshape(-1, 2)
+        t = np.asarray(t, np.float64)
+        parents = np.column_stack([edges, edges[:, 0]])
+        p = self._add_vertices(parents, np.column_stack([1 - t, t, np.zeros_like(t)]))
+        # every directed triangle edge that is one of the split edges
+        D = directed_edges(self.F)
+        n = len(self.V)
+        key = np.minimum(D[:, 0], D[:, 1]) * n + np.maximum(D[:, 0], D[:, 1])
+        ekey = np.minimum(edges[:, 0], edges[:, 1]) * n + np.maximum(edges[:, 0], edges[:, 1])
+        order = np.argsort(ekey)
+        pos = np.clip(np.searchsorted(ekey[order], key), 0, len(order) - 1)
+        hit = np.flatnonzero(ekey[order][pos] == key)
+        which = order[pos[hit]]
+        face, k = hit // 3, hit % 3
+        if len(np.unique(face)) != len(face):
+            raise ValueError("a triangle carries two of the edges to split")
+        # triangle (u, v, w) with split edge u -> v becomes (u, p, w) and (p, v, w)
+        u = self.F[face, k]
+        v = self.F[face, (k + 1) % 3]
+        w = self.F[face, (k + 2) % 3]
+        mid = p[which]
+        self.F[face] = np.stack([u, mid, w], 1)
+        self.F = np.concatenate([self.F, np.stack([mid, v, w], 1)])
+        self.sides = np.concatenate([self.sides, self.sides[face]])
+        return p
+
+    def tree_matrix(self) -> sp.csr_matrix:
+        """Sparse ``(n, n_coarse)`` map from coarse vertices to every vertex (rows sum to 1)."""
+        W = sp.identity(self.n_coarse, format="csr")
+        for parents, weights in zip(self.parents, self.weights):
+            k = len(parents)
+            P = sp.csr_matrix((weights.ravel(), (np.repeat(np.arange(k), 3), parents.ravel())),
+                              shape=(k, W.shape[0]))
+            W = sp.vstack([W, P @ W], format="csr")
+        W.eliminate_zeros()
+        return W

@@ -1,0 +1,73 @@
+"""Mesh operations of the refinement: splits keep area, orientation, sides and the tree."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fracture.refine.flow import triangle_frames
+from fracture.refine.mesh import RefineMesh
+from fracture.topology import unique_edges
+
+
+def junction():
+    """Three sheets meeting along the edge (0, 1): a non-manifold surface with sides."""
+    V = np.array([[0, 0, 0], [0, 0, 1], [1, 0, 0.5], [-0.5, 0.8, 0.5], [-0.5, -0.8, 0.5]], float)
+    F = np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4]])
+    sides = np.array([[0, 1], [1, 2], [2, 0]])
+    return RefineMesh.from_coarse(V, F, sides)
+
+
+def normals_and_area(m):
+    A, N = triangle_frames(m.V, m.F)
+    return A, N
+
+
+def test_triangle_split_keeps_area_orientation_and_sides():
+    m = junction()
+    A0, N0 = normals_and_area(m)
+    p = m.split_triangles([0, 2], np.array([[0.2, 0.3, 0.5], [1 / 3, 1 / 3, 1 / 3]]))
+    A, N = normals_and_area(m)
+    assert len(m.F) == 7 and A.sum() == pytest.approx(A0.sum())
+    # children point like their parent and separate the same components
+    parent = np.array([0, 1, 2, 0, 2, 0, 2])
+    assert np.allclose(N, N0[parent]) and np.array_equal(m.sides, np.array([[0, 1], [1, 2], [2, 0]])[parent])
+    assert np.allclose(m.V[p[0]], 0.2 * m.V[0] + 0.3 * m.V[1] + 0.5 * m.V[2])
+
+
+def test_edge_split_on_a_junction_splits_every_sheet():
+    m = junction()
+    A0, _ = normals_and_area(m)
+    p = m.split_edges(np.array([[1, 0]]), np.array([0.25]))
+    assert len(m.F) == 6
+    edges, count = unique_edges(m.F)
+    assert count[(edges == np.sort([0, p[0]])).all(axis=1)] == 3  # still a junction, now in two pieces
+    assert not ((edges == [0, 1]).all(axis=1)).any()
+    A, _ = normals_and_area(m)
+    assert A.sum() == pytest.approx(A0.sum())
+    assert np.allclose(m.V[p[0]], 0.75 * m.V[1] + 0.25 * m.V[0])
+    with pytest.raises(ValueError, match="two of the edges"):
+        m.split_edges(np.array([[0, p[0]], [p[0], 2]]), np.array([0.5, 0.5]))
+
+
+def test_tree_reproduces_every_vertex_from_the_coarse_ones():
+    rng = np.random.default_rng(0)
+    m = junction()
+    for _ in range(6):
+        before = m.V.copy()
+        f = rng.choice(len(m.F), size=min(3, len(m.F)), replace=False)
+        p = m.split_triangles(f, rng.dirichlet([2, 2, 2], size=len(f)))
+        # the record reproduces the new vertices from their parents' positions at that moment
+        assert np.allclose(np.einsum("kj,kjc->kc", m.weights[-1], before[m.parents[-1]]), m.V[p])
+        m.V[m.n_coarse:] += 0.01 * rng.standard_normal((len(m.V) - m.n_coarse, 3))  # the flow moves them
+    W = m.tree_matrix()
+    assert W.shape == (len(m.V), m.n_coarse)
+    assert np.allclose(np.asarray(W.sum(axis=1)).ravel(), 1.0)
+    # with no motion, the composed tree gives every vertex from the coarse vertices
+    still = junction()
+    for _ in range(4):
+        f = rng.choice(len(still.F), size=2, replace=False)
+        still.split_triangles(f, rng.dirichlet([1, 1, 1], size=2))
+        e, _ = unique_edges(still.F)
+        still.split_edges(e[:1], np.array([0.3]))
+    assert np.allclose(still.tree_matrix() @ still.V[: still.n_coarse], still.V)
