@@ -40,10 +40,11 @@ def crack_front(V: np.ndarray, F: np.ndarray, BV: np.ndarray, BF: np.ndarray) ->
     return np.where((directed_edge_face(F, E) >= 0)[:, None], E, E[:, ::-1]).astype(np.int64)
 
 
-def edge_outward(V: np.ndarray, F: np.ndarray, E: np.ndarray) -> np.ndarray:
+def edge_outward(V: np.ndarray, F: np.ndarray, E: np.ndarray, strict: bool = True) -> np.ndarray:
     """Unit directions ``(k, 3)`` pointing away from boundary edges ``E``, in the plane of their triangle.
 
     This is a cut's separation direction at its front (edges as oriented in their triangle).
+    Degenerate triangles raise :class:`InputError`, or give zero vectors when not ``strict``.
     """
     T = F[directed_edge_face(F, E)]
     n = np.cross(V[T[:, 1]] - V[T[:, 0]], V[T[:, 2]] - V[T[:, 0]])
@@ -52,9 +53,9 @@ def edge_outward(V: np.ndarray, F: np.ndarray, E: np.ndarray) -> np.ndarray:
     mid = 0.5 * (V[E[:, 0]] + V[E[:, 1]])
     d *= np.where(np.einsum("ij,ij->i", d, V[third] - mid) > 0, -1.0, 1.0)[:, None]
     length = np.linalg.norm(d, axis=1, keepdims=True)
-    if np.any(length <= tol.zero):
+    if strict and np.any(length <= tol.zero):
         raise InputError("a triangle on the boundary of the fracture surface is degenerate (zero area)")
-    return d / length
+    return d / np.maximum(length, tol.zero)
 
 
 def _inside(BV, BF, P):

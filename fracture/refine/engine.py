@@ -4,9 +4,10 @@ One iteration:
 
 1. psi and the level-averaged grad psi at every vertex (one interpolation);
 2. the velocity of Eq. 3 (:mod:`fracture.refine.flow`) and the step: ``dt``
-   moves the fastest vertices (99th percentile of the speed) ``step`` grid
-   cells, and no vertex moves more than ``max_move`` of its shortest edge
-   (explicit steps are stable when no vertex crosses its neighbours);
+   moves a vertex of median speed ``step`` grid cells (speeds below a floor
+   count as rest), and no vertex moves more than ``max_move`` of its shortest
+   edge or one grid cell: explicit steps stay stable because no vertex can
+   overtake its neighbours; boundary vertices move tangentially to B;
 3. boundary vertices are projected back onto the exterior B;
 4. one random sample per triangle (on its boundary or junction edge when it
    has one) is moved by Eq. 3 with the triangle as its neighbourhood; where it
@@ -24,7 +25,8 @@ import numpy as np
 
 from fracture.refine.flow import energy, sample_displacement, triangle_frames, velocity
 from fracture.refine.mesh import RefineMesh
-from fracture.topology import directed_edges, unique_edges
+from fracture.topology import directed_edge_face, directed_edges, unique_edges
+from fracture.virtual import edge_outward
 
 
 @dataclass
@@ -81,7 +83,11 @@ class Refiner:
         # a constant surface tension and leaves grad psi unchanged.
         values = pyramid.levels[0]
         self.offset = params.tension * float(np.ptp(values)) - float(values.min())
-        self.last_d = np.zeros_like(mesh.V)
+        self.free_d = np.zeros_like(mesh.V)
+        self.B_normals = triangle_frames(self.BV, self.BF)[1]
+        # speeds below this (psi changing by 1 % of its range per grid cell)
+        # count as at rest: dt stops growing, the moves shrink, the loop ends
+        self.slow = 0.01 * float(np.ptp(values)) / self.h
 
     def field(self, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         psi, grad = self.pyramid.value_and_gradient(P)
@@ -106,25 +112,41 @@ class Refiner:
         m, p = self.mesh, self.params
         psi, grad = self.field(m.V)
         v = velocity(m.V, m.F, psi, grad)
+        # boundary vertices slide on B: drop the part of their velocity that
+        # points out of the sheet across its boundary (the area term of an
+        # open sheet pulls its boundary inward; at a crease of B this pull is
+        # not normal to B) and the part normal to B (projection undoes it)
+        edges, count = unique_edges(m.F)
+        E = edges[count == 1]
+        if len(E):
+            E = np.where((directed_edge_face(m.F, E) >= 0)[:, None], E, E[:, ::-1])
+            out = edge_outward(m.V, m.F, E, strict=False)
+            conormal = np.zeros_like(m.V)
+            np.add.at(conormal, E[:, 0], out)
+            np.add.at(conormal, E[:, 1], out)
+            b = np.unique(E)
+            c = conormal[b] / np.maximum(np.linalg.norm(conormal[b], axis=1), 1e-300)[:, None]
+            v[b] -= np.einsum("ij,ij->i", v[b], c)[:, None] * c
+            _, tri, _ = igl.point_mesh_squared_distance(m.V[b], self.BV, self.BF)
+            nb = self.B_normals[tri]
+            v[b] -= np.einsum("ij,ij->i", v[b], nb)[:, None] * nb
         speed = np.linalg.norm(v, axis=1)
         used = np.zeros(len(m.V), bool)
         used[m.F.ravel()] = True
-        fast = np.percentile(speed[used], 99) if used.any() else 0.0
-        if fast <= 0:
-            return 0.0
-        self.dt = p.step * self.h / fast
+        typical = max(float(np.median(speed[used])) if used.any() else 0.0, self.slow)
+        self.dt = p.step * self.h / typical
         d = self.dt * v
-        # no vertex moves more than max_move of its shortest edge
+        self.free_d = d.copy()  # the unlimited moves, against which samples are compared
+        # no vertex moves more than max_move of its shortest edge, nor more than a grid cell
         D = directed_edges(m.F)
         length = np.linalg.norm(m.V[D[:, 1]] - m.V[D[:, 0]], axis=1)
         shortest = np.full(len(m.V), np.inf)
         np.minimum.at(shortest, D[:, 0], length)
         np.minimum.at(shortest, D[:, 1], length)
         move = np.linalg.norm(d, axis=1)
-        scale = np.minimum(1.0, p.max_move * shortest / np.maximum(move, 1e-300))
-        d *= scale[:, None]
+        limit = np.minimum(p.max_move * shortest, self.h)
+        d *= np.minimum(1.0, limit / np.maximum(move, 1e-300))[:, None]
         m.V += d
-        self.last_d = d
         self.last_speed = speed
         self.last_psi = psi
         return float(np.linalg.norm(d[used], axis=1).mean() / self.h)
@@ -155,7 +177,7 @@ class Refiner:
         # how far the sample leaves its triangle: its own move minus the move
         # the triangle's corners give it by linear interpolation
         d = sample_displacement(P, T, psi_P, grad_P, psi_T, self.dt)
-        d -= np.einsum("fk,fkc->fc", bary, self.last_d[m.F])
+        d -= np.einsum("fk,fkc->fc", bary, self.free_d[m.F])
         _, N = triangle_frames(m.V, m.F)
         off = np.abs(np.einsum("ij,ij->i", d, N))
         e = T[np.arange(len(m.F)), (k_edge + 1) % 3] - T[np.arange(len(m.F)), k_edge]
