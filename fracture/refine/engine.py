@@ -7,7 +7,10 @@ One iteration:
    moves a vertex of median speed ``step`` grid cells (speeds below a floor
    count as rest), and no vertex moves more than ``max_move`` of its shortest
    edge or one grid cell: explicit steps stay stable because no vertex can
-   overtake its neighbours; boundary vertices move tangentially to B;
+   overtake its neighbours; an iteration that raises the energy halves the
+   following steps (overshoot at the bottom of a valley of psi), and they
+   grow back by 20 % per iteration that lowers it; boundary vertices move
+   tangentially to B;
 3. boundary vertices are projected back onto the exterior B;
 4. one random sample per triangle (on its boundary or junction edge when it
    has one) is moved by Eq. 3 with the triangle as its neighbourhood; where it
@@ -23,6 +26,7 @@ from dataclasses import dataclass, field
 import igl
 import numpy as np
 
+from fracture.refine.flips import flip_edges
 from fracture.refine.flow import energy, sample_displacement, triangle_frames, velocity
 from fracture.refine.mesh import RefineMesh
 from fracture.topology import directed_edge_face, directed_edges, unique_edges
@@ -84,6 +88,7 @@ class Refiner:
         values = pyramid.levels[0]
         self.offset = params.tension * float(np.ptp(values)) - float(values.min())
         self.free_d = np.zeros_like(mesh.V)
+        self.scale = 1.0  # halved when an iteration raises the energy (overshoot), regrown after
         self.B_normals = triangle_frames(self.BV, self.BF)[1]
         # speeds below this (psi changing by 1 % of its range per grid cell)
         # count as at rest: dt stops growing, the moves shrink, the loop ends
@@ -134,7 +139,7 @@ class Refiner:
         used = np.zeros(len(m.V), bool)
         used[m.F.ravel()] = True
         typical = max(float(np.median(speed[used])) if used.any() else 0.0, self.slow)
-        self.dt = p.step * self.h / typical
+        self.dt = self.scale * p.step * self.h / typical
         d = self.dt * v
         self.free_d = d.copy()  # the unlimited moves, against which samples are compared
         # no vertex moves more than max_move of its shortest edge, nor more than a grid cell
@@ -221,9 +226,16 @@ class Refiner:
         for it in range(p.iterations):
             move = self.step()
             err = self.project_to_exterior(self.boundary_vertices())
-            self.remesh() if move > 0 else None
+            if move > 0:
+                self.remesh()
+            flip_edges(self.mesh.V, self.mesh.F, self.mesh.sides)
             psi = self.pyramid.value(self.mesh.V)  # E(S) of the unshifted psi
-            self.log.energy.append(energy(self.mesh.V, self.mesh.F, psi))
+            E = energy(self.mesh.V, self.mesh.F, psi)
+            if self.log.energy and E > self.log.energy[-1]:
+                self.scale *= 0.5
+            else:
+                self.scale = min(1.0, 1.2 * self.scale)
+            self.log.energy.append(E)
             self.log.mean_move.append(move)
             self.log.triangles.append(len(self.mesh.F))
             self.log.boundary_error.append(err)

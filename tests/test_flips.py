@@ -1,0 +1,50 @@
+"""Edge flips: Delaunay on a plane, never across junctions or component changes."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import Delaunay
+
+from fracture.refine.flips import flip_edges
+from fracture.topology import unique_edges
+
+
+def _min_angle(V, F):
+    out = []
+    for k in range(3):
+        a, b, c = V[F[:, k]], V[F[:, (k + 1) % 3]], V[F[:, (k + 2) % 3]]
+        u, v = b - a, c - a
+        out.append(np.arccos(np.clip(np.einsum("ij,ij->i", u, v) / np.linalg.norm(u, axis=1) / np.linalg.norm(v, axis=1), -1, 1)))
+    return np.degrees(np.min(out))
+
+
+def test_flips_make_a_planar_triangulation_delaunay():
+    rng = np.random.default_rng(1)
+    P = rng.random((80, 2))
+    V = np.column_stack([P, np.zeros(len(P))])
+    F = Delaunay(P).simplices.astype(np.int64)
+    F = np.where((np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])[:, 2] < 0)[:, None], F[:, ::-1], F)
+    good = _min_angle(V, F)
+    # spoil it: the Delaunay triangulation of a stretched copy is poor for the points themselves
+    Vs = V.copy()
+    Vs[:, 1] *= 8.0  # in a stretched copy the Delaunay edges differ
+    Fs = F.copy()
+    flip_edges(Vs, Fs, np.zeros((len(F), 2), np.int64))
+    assert _min_angle(V, Fs) < good
+    n = flip_edges(V, Fs, np.zeros((len(F), 2), np.int64))
+    assert n > 0
+    assert abs(_min_angle(V, Fs) - good) < 1e-9  # back to the Delaunay triangulation's smallest angle
+    assert len(unique_edges(Fs)[0]) == len(unique_edges(F)[0])
+
+
+def test_flips_respect_junctions_and_component_changes():
+    # two triangles with different side pairs share an edge: never flipped
+    V = np.array([[0, 0, 0], [1, 0, 0], [0.5, 0.05, 0], [0.5, -0.05, 0]], float)
+    F = np.array([[0, 1, 2], [1, 0, 3]])
+    assert flip_edges(V.copy(), F.copy(), np.array([[0, 1], [0, 1]])) == 1
+    F2 = F.copy()
+    assert flip_edges(V.copy(), F2, np.array([[0, 1], [0, 2]])) == 0 and np.array_equal(F2, F)
+    # a third sheet on the edge makes it a junction: never flipped
+    V3 = np.vstack([V, [0.5, 0, 1]])
+    F3 = np.vstack([F, [0, 1, 4]])
+    assert flip_edges(V3, F3, np.array([[0, 1], [0, 1], [1, 0]])) == 0

@@ -1,0 +1,42 @@
+"""The refinement loop on synthetic fields with known minimisers."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fields.grid import Grid
+from fields.pyramid import StrengthPyramid
+from fracture.primitives import box, sheet
+from fracture.refine.engine import RefineParams, Refiner
+from fracture.refine.mesh import RefineMesh
+
+
+def two_weak_sheets(levels=4):
+    """psi on the unit cube: strong material with weak sheets at x = 0.4 and x = 0.75."""
+    grid = Grid.from_bounds([-0.05] * 3, [1.05] * 3, (56, 56, 56))
+    X = grid.points().reshape(tuple(grid.shape) + (3,))[..., 0]
+    psi = 1.0 - np.exp(-((X - 0.4) ** 2) / (2 * 0.04**2)) - 0.8 * np.exp(-((X - 0.75) ** 2) / (2 * 0.04**2))
+    return StrengthPyramid(grid, psi, levels=levels, sigma=1.5)
+
+
+def flat_cut(x=0.52, n=7):
+    V, F = sheet(lambda u, v: np.stack([np.full_like(u, x), u, v], 1), (0, 1), (0, 1), n, n)
+    return RefineMesh.from_coarse(V, F, np.tile([0, 1], (len(F), 1)))
+
+
+def test_flat_cut_moves_onto_the_nearer_weak_sheet_and_the_energy_decreases():
+    pyramid = two_weak_sheets()
+    BV, BF = box([0, 0, 0], [1, 1, 1], (8, 8, 8))
+    mesh = flat_cut()
+    r = Refiner(mesh, pyramid, BV, BF, RefineParams(iterations=150, tolerance=1e-3), np.random.default_rng(0))
+    log = r.run()
+    x = mesh.V[:, 0]
+    assert abs(np.median(x) - 0.4) < 0.02
+    assert np.abs(x - 0.4).max() < 0.05
+    E = np.array(log.energy)
+    assert E[-1] < E[0]
+    assert (np.diff(E) <= 1e-3 * abs(E[0])).all()  # non-increasing, up to the splits' sampling
+    # the boundary stays on the box
+    on_b = r.boundary_vertices()
+    P = mesh.V[on_b]
+    assert (np.abs(np.minimum(np.abs(P), np.abs(P - 1)).min(axis=1)) < 1e-9).all()
