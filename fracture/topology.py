@@ -22,8 +22,13 @@ def _keys(E: np.ndarray, n: int) -> np.ndarray:
 
 
 def unique_edges(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Undirected edges (sorted vertex pairs) and the number of triangles on each."""
-    return np.unique(np.sort(directed_edges(F), axis=1), axis=0, return_counts=True)
+    """Undirected edges (sorted vertex pairs, in lexicographic order) and the number of triangles on each."""
+    E = np.sort(directed_edges(F), axis=1).astype(np.int64)
+    if not len(E):
+        return np.zeros((0, 2), np.int64), np.zeros(0, np.int64)
+    n = int(E.max()) + 1
+    keys, counts = np.unique(E[:, 0] * n + E[:, 1], return_counts=True)  # 1-D: far faster than axis=0
+    return np.stack([keys // n, keys % n], 1), counts
 
 
 def directed_edge_face(F: np.ndarray, E: np.ndarray) -> np.ndarray:

@@ -90,6 +90,8 @@ class Refiner:
         self.free_d = np.zeros_like(mesh.V)
         self.scale = 1.0  # halved when an iteration raises the energy (overshoot), regrown after
         self.B_normals = triangle_frames(self.BV, self.BF)[1]
+        self.B_tree = igl.AABB()  # built once: every iteration queries it
+        self.B_tree.init(self.BV, self.BF)
         # speeds below this (psi changing by 1 % of its range per grid cell)
         # count as at rest: dt stops growing, the moves shrink, the loop ends
         self.slow = 0.01 * float(np.ptp(values)) / self.h
@@ -107,7 +109,7 @@ class Refiner:
         """Put vertices ``ids`` on B; returns the largest distance they had."""
         if not len(ids):
             return 0.0
-        d2, _, C = igl.point_mesh_squared_distance(self.mesh.V[ids], self.BV, self.BF)
+        d2, _, C = self.B_tree.squared_distance(self.BV, self.BF, np.ascontiguousarray(self.mesh.V[ids]))
         self.mesh.V[ids] = C
         return float(np.sqrt(d2.max()))
 
@@ -132,7 +134,7 @@ class Refiner:
             b = np.unique(E)
             c = conormal[b] / np.maximum(np.linalg.norm(conormal[b], axis=1), 1e-300)[:, None]
             v[b] -= np.einsum("ij,ij->i", v[b], c)[:, None] * c
-            _, tri, _ = igl.point_mesh_squared_distance(m.V[b], self.BV, self.BF)
+            _, tri, _ = self.B_tree.squared_distance(self.BV, self.BF, np.ascontiguousarray(m.V[b]))
             nb = self.B_normals[tri]
             v[b] -= np.einsum("ij,ij->i", v[b], nb)[:, None] * nb
         speed = np.linalg.norm(v, axis=1)
