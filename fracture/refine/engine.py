@@ -230,7 +230,7 @@ class Refiner:
             err = self.project_to_exterior(self.boundary_vertices())
             if move > 0:
                 self.remesh()
-            flip_edges(self.mesh.V, self.mesh.F, self.mesh.sides)
+            flip_edges(self.mesh.V, self.mesh.F, self.mesh.sides, max_passes=3)
             psi = self.pyramid.value(self.mesh.V)  # E(S) of the unshifted psi
             E = energy(self.mesh.V, self.mesh.F, psi)
             if self.log.energy and E > self.log.energy[-1]:

@@ -17,21 +17,28 @@ from fracture.topology import directed_edges
 
 
 @numba.njit(cache=True)
-def _angle(a, b, c):
-    """Angle at ``a`` of triangle (a, b, c)."""
-    u = b - a
-    v = c - a
-    nu = np.sqrt((u * u).sum())
-    nv = np.sqrt((v * v).sum())
+def _angle(V, a, b, c):
+    """Angle at vertex ``a`` of triangle (a, b, c) (scalar code: no temporary arrays)."""
+    ux, uy, uz = V[b, 0] - V[a, 0], V[b, 1] - V[a, 1], V[b, 2] - V[a, 2]
+    vx, vy, vz = V[c, 0] - V[a, 0], V[c, 1] - V[a, 1], V[c, 2] - V[a, 2]
+    nu = np.sqrt(ux * ux + uy * uy + uz * uz)
+    nv = np.sqrt(vx * vx + vy * vy + vz * vz)
     if nu == 0.0 or nv == 0.0:
         return 0.0
-    x = (u * v).sum() / (nu * nv)
+    x = (ux * vx + uy * vy + uz * vz) / (nu * nv)
     return np.arccos(min(1.0, max(-1.0, x)))
 
 
 @numba.njit(cache=True)
-def _normal(a, b, c):
-    return np.cross(b - a, c - a)
+def _normal(V, a, b, c):
+    ux, uy, uz = V[b, 0] - V[a, 0], V[b, 1] - V[a, 1], V[b, 2] - V[a, 2]
+    vx, vy, vz = V[c, 0] - V[a, 0], V[c, 1] - V[a, 1], V[c, 2] - V[a, 2]
+    return uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+
+
+@numba.njit(cache=True)
+def _dot(p, q):
+    return p[0] * q[0] + p[1] * q[1] + p[2] * q[2]
 
 
 @numba.njit(cache=True)
@@ -54,7 +61,7 @@ def _flip_pass(V, F, sides, fa, fb, ka, kb, edge_set_keys, n):
         x = F[g, (kb[i] + 2) % 3]
         if w == x:
             continue
-        if _angle(V[w], V[u], V[v]) + _angle(V[x], V[v], V[u]) <= np.pi + 1e-12:
+        if _angle(V, w, u, v) + _angle(V, x, v, u) <= np.pi + 1e-12:
             continue
         lo = min(w, x)
         hi = max(w, x)
@@ -64,10 +71,10 @@ def _flip_pass(V, F, sides, fa, fb, ka, kb, edge_set_keys, n):
             continue
         if key in new_keys:
             continue
-        n_old = _normal(V[u], V[v], V[w]) + _normal(V[v], V[u], V[x])
-        n1 = _normal(V[w], V[x], V[v])
-        n2 = _normal(V[x], V[w], V[u])
-        if (n1 * n_old).sum() <= 0.0 or (n2 * n_old).sum() <= 0.0:
+        a = _normal(V, u, v, w)
+        b = _normal(V, v, u, x)
+        n_old = (a[0] + b[0], a[1] + b[1], a[2] + b[2])
+        if _dot(_normal(V, w, x, v), n_old) <= 0.0 or _dot(_normal(V, x, w, u), n_old) <= 0.0:
             continue
         F[f, 0], F[f, 1], F[f, 2] = w, x, v
         F[g, 0], F[g, 1], F[g, 2] = x, w, u
