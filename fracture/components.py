@@ -17,22 +17,20 @@ import numpy as np
 from scipy import ndimage
 
 from fracture.errors import InputError
-from fracture.coarse import flood_fill_patches, special_edges
-from fracture.topology import directed_edge_face, directed_edges, unique_edges
-from fracture.virtual import edge_outward
+from fracture.coarse import flood_fill_patches
+from fracture.topology import boundary_edges, directed_edges, edge_keys, edge_outward, face_frames, unique_edges
 
 # Voxels with fewer free cells than this are slivers between the surface and
 # B, not components.
 _MIN_VOXELS = 8
 
 
-def _face_frames(V, F):
-    A, B, C = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
-    n = np.cross(B - A, C - A)
-    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
-    centroid = (A + B + C) / 3
-    samples = np.stack([centroid] + [centroid + 0.5 * (X - centroid) for X in (A, B, C)], 1)  # (m, 4, 3)
-    return samples, n
+def _face_samples(V, F):
+    """Four points per triangle (centroid and halfway to each corner), ``(m, 4, 3)``, and unit normals."""
+    T = V[F]
+    centroid = T.mean(axis=1)
+    samples = np.concatenate([centroid[:, None], centroid[:, None] + 0.5 * (T - centroid[:, None])], axis=1)
+    return samples, face_frames(V, F)[1]
 
 
 class _Lookup:
@@ -88,14 +86,12 @@ def _with_skirt(BV, BF, V, F, h):
     between the cut and B; the strip (outside B, in the plane of the edge's
     triangle) closes it for the flood fill.
     """
-    sp = special_edges(F, len(V))
-    E = sp.edges[sp.boundary]
+    E = boundary_edges(F)
     if not len(E):
         return V, F
-    E = np.where((directed_edge_face(F, E) >= 0)[:, None], E, E[:, ::-1])
     mid = 0.5 * (V[E[:, 0]] + V[E[:, 1]])
     gap = np.sqrt(igl.point_mesh_squared_distance(mid, BV, BF)[0])
-    d = edge_outward(V, F, E) * (1.2 * gap + 2.0 * h)[:, None]
+    d = edge_outward(V, F, E, strict=False) * (1.2 * gap + 2.0 * h)[:, None]
     n = len(V)
     W = np.concatenate([V, V[E[:, 0]] + d, V[E[:, 1]] + d])
     k = np.arange(len(E))
@@ -114,7 +110,7 @@ def _fill_from_neighbours(F: np.ndarray, labels: np.ndarray) -> np.ndarray:
     if not missing.any():
         return labels
     D = directed_edges(F)
-    key = np.minimum(D[:, 0], D[:, 1]).astype(np.int64) * (F.max() + 1) + np.maximum(D[:, 0], D[:, 1])
+    key = edge_keys(D, int(F.max()) + 1)
     order = np.argsort(key, kind="stable")
     k = key[order]
     first = np.r_[True, k[1:] != k[:-1]]
@@ -144,13 +140,22 @@ def _patch_majority(V: np.ndarray, F: np.ndarray, sides: np.ndarray) -> np.ndarr
     """
     edges, count = unique_edges(F)
     patch = flood_fill_patches(F, edges[count != 2])
-    area = np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
-    out = sides.copy()
+    area = face_frames(V, F)[0]
     known = (sides > 0).all(axis=1)
-    for p in np.unique(patch[known]):
-        sel = known & (patch == p)
-        pairs, inv = np.unique(sides[sel], axis=0, return_inverse=True)
-        out[patch == p] = pairs[np.argmax(np.bincount(inv.ravel(), weights=area[sel]))]
+    if not known.any():
+        return sides.copy()
+    C = int(sides.max()) + 1
+    # area per (patch, side pair), then the heaviest pair of every patch
+    group, inv = np.unique(patch[known] * C * C + sides[known, 0] * C + sides[known, 1], return_inverse=True)
+    weight = np.bincount(inv, area[known])
+    gpatch = group // (C * C)
+    order = np.lexsort((-weight, gpatch))
+    first = order[np.r_[True, gpatch[order][1:] != gpatch[order][:-1]]]
+    best = np.full(int(patch.max()) + 1, -1, np.int64)
+    best[gpatch[first]] = group[first] % (C * C)
+    out = sides.copy()
+    has = best[patch] >= 0
+    out[has] = np.stack([best[patch[has]] // C, best[patch[has]] % C], 1)
     return out
 
 
@@ -163,10 +168,8 @@ def _fill_around_junctions(V: np.ndarray, F: np.ndarray, labels: np.ndarray) -> 
     that triangle's side facing back.
     """
     labels = labels.copy()
-    D = directed_edges(F)
-    key = np.minimum(D[:, 0], D[:, 1]).astype(np.int64) * len(V) + np.maximum(D[:, 0], D[:, 1])
-    n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    key = edge_keys(directed_edges(F), len(V))
+    n = face_frames(V, F)[1]
     for f in np.flatnonzero((labels == 0).any(axis=1)):
         for k in range(3):
             a, b = F[f, k], F[f, (k + 1) % 3]
@@ -246,7 +249,7 @@ def label_components(BV: np.ndarray, BF: np.ndarray, V: np.ndarray, F: np.ndarra
     # junctions), take the label of a neighbour on the same sheet or of the
     # wedge around a junction edge, and only then look farther away (which
     # may reach past another sheet)
-    samples, n = _face_frames(V, F)
+    samples, n = _face_samples(V, F)
     sides = _patch_majority(V, F, np.stack([_vote(lookup, samples, n, h, -1.0), _vote(lookup, samples, n, h, 1.0)], 1))
     for distances in ((), (1.6,), (2.5,), (4.0,)):
         for k, sign in enumerate((-1.0, 1.0)):
@@ -257,7 +260,7 @@ def label_components(BV: np.ndarray, BF: np.ndarray, V: np.ndarray, F: np.ndarra
                 break
             sides = _fill_around_junctions(V, F, sides)
     behind, front = sides.T
-    bsamples, bn = _face_frames(BV, BF)
+    bsamples, bn = _face_samples(BV, BF)
     ext = _vote(lookup, bsamples, bn, h, -1.0, (0.8, 1.6, 2.5, 4.0))
     ext = _fill_from_neighbours(BF, ext[:, None])[:, 0]
     for name, lab in (("fracture", np.minimum(behind, front)), ("exterior", ext)):

@@ -35,7 +35,7 @@ from scipy.spatial import cKDTree
 
 from fracture.errors import InputError
 from fracture.tolerances import tol
-from fracture.topology import directed_edge_face, fan, signed_volume, unique_edges, weld
+from fracture.topology import directed_edge_face, fan, plane_basis, signed_volume, unique_edges, weld
 
 
 @dataclass
@@ -99,10 +99,7 @@ def _triangulate_polygon(loop: np.ndarray, G: np.ndarray, where: str) -> np.ndar
     """Constrained Delaunay triangulation of a (nearly planar) polygon, oriented like it."""
     P = G[loop]
     n, _ = polygon_normal_area(P)
-    a = np.eye(3)[int(np.argmin(np.abs(n)))]
-    u = np.cross(n, a)
-    u /= np.linalg.norm(u)
-    v = np.cross(n, u)
+    u, v = plane_basis(n)
     XY = np.stack([(P - P[0]) @ u, (P - P[0]) @ v], 1)
     k = len(loop)
     if k == 3:

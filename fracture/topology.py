@@ -1,7 +1,7 @@
-"""Edge bookkeeping of triangle meshes, vectorised.
+"""Edge bookkeeping and per-triangle geometry of triangle meshes, vectorised.
 
 Every module that asks "which edges, how many triangles on each, which
-triangle has this directed edge" asks it here.
+triangle has this directed edge, which way does a triangle face" asks it here.
 """
 
 from __future__ import annotations
@@ -19,6 +19,19 @@ def directed_edges(F: np.ndarray) -> np.ndarray:
 
 def _keys(E: np.ndarray, n: int) -> np.ndarray:
     return E[:, 0].astype(np.int64) * n + E[:, 1]
+
+
+def edge_keys(E: np.ndarray, n: int) -> np.ndarray:
+    """One integer per undirected edge ``(a, b)`` of a mesh with ``n`` vertices (same for ``(b, a)``)."""
+    E = np.asarray(E, np.int64)
+    return np.minimum(E[:, 0], E[:, 1]) * n + np.maximum(E[:, 0], E[:, 1])
+
+
+def edge_table(F: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """For every directed triangle edge (row ``3 f + k``): its undirected key and the number of triangles on it."""
+    key = edge_keys(directed_edges(F), n)
+    _, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
+    return key, counts[inverse]
 
 
 def unique_edges(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -45,6 +58,61 @@ def directed_edge_face(F: np.ndarray, E: np.ndarray) -> np.ndarray:
     pos = np.minimum(np.searchsorted(keys[order], q), len(order) - 1)
     found = keys[order][pos] == q
     return np.where(found, order[pos] // 3, -1)
+
+
+def boundary_edges(F: np.ndarray) -> np.ndarray:
+    """Edges with one triangle, ``(k, 2)``, oriented as in that triangle."""
+    edges, count = unique_edges(F)
+    E = edges[count == 1]
+    return np.where((directed_edge_face(F, E) >= 0)[:, None], E, E[:, ::-1])
+
+
+def scatter_add(index: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
+    """Sum rows of ``values (k, d)`` into ``n`` bins (one bincount per column: much faster than ``np.add.at``)."""
+    return np.stack([np.bincount(index, values[:, c], minlength=n) for c in range(values.shape[1])], 1)
+
+
+def edge_outward(V: np.ndarray, F: np.ndarray, E: np.ndarray, strict: bool = True) -> np.ndarray:
+    """Unit directions ``(k, 3)`` pointing away from boundary edges ``E``, in the plane of their triangle.
+
+    Edges are oriented as in their triangle (:func:`boundary_edges`). This is
+    a cut's separation direction at its front. Degenerate triangles raise
+    ``ValueError``, or give zero vectors when not ``strict``.
+    """
+    T = F[directed_edge_face(F, E)]
+    n = np.cross(V[T[:, 1]] - V[T[:, 0]], V[T[:, 2]] - V[T[:, 0]])
+    d = np.cross(V[E[:, 1]] - V[E[:, 0]], n)
+    third = T.sum(axis=1) - E.sum(axis=1)
+    mid = 0.5 * (V[E[:, 0]] + V[E[:, 1]])
+    d *= np.where(np.einsum("ij,ij->i", d, V[third] - mid) > 0, -1.0, 1.0)[:, None]
+    length = np.linalg.norm(d, axis=1, keepdims=True)
+    if strict and np.any(length <= 1e-300):
+        raise ValueError("a triangle on the boundary is degenerate (zero area)")
+    return d / np.maximum(length, 1e-300)
+
+
+def boundary_conormals(V: np.ndarray, F: np.ndarray, E: np.ndarray, strict: bool = True
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices of boundary edges ``E`` and the unit outward direction at each (mean of their edges')."""
+    d = edge_outward(V, F, E, strict)
+    verts = np.unique(E)
+    out = scatter_add(np.searchsorted(verts, E.T.ravel()), np.concatenate([d, d]), len(verts))
+    return verts, out / np.maximum(np.linalg.norm(out, axis=1), 1e-300)[:, None]
+
+
+def face_frames(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Areas ``(m,)`` and unit normals ``(m, 3)`` of triangles (zero normals for degenerate ones)."""
+    n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    twice = np.linalg.norm(n, axis=1)
+    return 0.5 * twice, n / np.maximum(twice, 1e-300)[:, None]
+
+
+def plane_basis(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors ``u, v`` with ``(u, v, n)`` a right-handed orthonormal frame."""
+    n = np.asarray(n, np.float64) / np.linalg.norm(n)
+    u = np.cross(n, np.eye(3)[int(np.argmin(np.abs(n)))])
+    u /= np.linalg.norm(u)
+    return u, np.cross(n, u)
 
 
 def signed_volume(V: np.ndarray, F: np.ndarray) -> float:

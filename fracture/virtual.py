@@ -15,10 +15,21 @@ from __future__ import annotations
 import igl
 import numpy as np
 
-from fracture.coarse import special_edges
 from fracture.errors import InputError
 from fracture.tolerances import tol
-from fracture.topology import directed_edge_face
+from fracture.topology import boundary_conormals, boundary_edges
+
+
+def _crack_front(V, F, BV, BF) -> tuple[np.ndarray, np.ndarray]:
+    """Front edges (oriented as in their triangle) and, per front vertex, whether it is off B."""
+    E = boundary_edges(F)
+    if not len(E):
+        return np.zeros((0, 2), np.int64), np.zeros(0, bool)
+    diag = float(np.linalg.norm(np.ptp(BV, axis=0)))
+    d2, _, _ = igl.point_mesh_squared_distance(V[E.ravel()], BV, np.ascontiguousarray(BF, np.int64))
+    off = (np.sqrt(d2) > 10 * tol.on_surface * diag).reshape(-1, 2)
+    front = off.any(axis=1)
+    return E[front].astype(np.int64), off[front]
 
 
 def crack_front(V: np.ndarray, F: np.ndarray, BV: np.ndarray, BF: np.ndarray) -> np.ndarray:
@@ -28,34 +39,7 @@ def crack_front(V: np.ndarray, F: np.ndarray, BV: np.ndarray, BF: np.ndarray) ->
     be: on a curved B the coarse boundary edges are chords). Edges are
     returned in the orientation they have in their triangle.
     """
-    sp = special_edges(F, len(V))
-    if not sp.boundary.any():
-        return np.zeros((0, 2), np.int64)
-    diag = float(np.linalg.norm(np.ptp(BV, axis=0)))
-    E = sp.edges[sp.boundary]
-    d2, _, _ = igl.point_mesh_squared_distance(V[E.ravel()], BV, np.ascontiguousarray(BF, np.int64))
-    off = (np.sqrt(d2) > 10 * tol.on_surface * diag).reshape(-1, 2)
-    E = E[off.any(axis=1)]
-    # orient as in the owning triangle
-    return np.where((directed_edge_face(F, E) >= 0)[:, None], E, E[:, ::-1]).astype(np.int64)
-
-
-def edge_outward(V: np.ndarray, F: np.ndarray, E: np.ndarray, strict: bool = True) -> np.ndarray:
-    """Unit directions ``(k, 3)`` pointing away from boundary edges ``E``, in the plane of their triangle.
-
-    This is a cut's separation direction at its front (edges as oriented in their triangle).
-    Degenerate triangles raise :class:`InputError`, or give zero vectors when not ``strict``.
-    """
-    T = F[directed_edge_face(F, E)]
-    n = np.cross(V[T[:, 1]] - V[T[:, 0]], V[T[:, 2]] - V[T[:, 0]])
-    d = np.cross(V[E[:, 1]] - V[E[:, 0]], n)
-    third = T.sum(axis=1) - E.sum(axis=1)
-    mid = 0.5 * (V[E[:, 0]] + V[E[:, 1]])
-    d *= np.where(np.einsum("ij,ij->i", d, V[third] - mid) > 0, -1.0, 1.0)[:, None]
-    length = np.linalg.norm(d, axis=1, keepdims=True)
-    if strict and np.any(length <= tol.zero):
-        raise InputError("a triangle on the boundary of the fracture surface is degenerate (zero area)")
-    return d / np.maximum(length, tol.zero)
+    return _crack_front(V, F, BV, BF)[0]
 
 
 def _inside(BV, BF, P):
@@ -102,22 +86,20 @@ def extend_cuts(V: np.ndarray, F: np.ndarray, BV: np.ndarray, BF: np.ndarray, st
     """
     BF = np.ascontiguousarray(BF, np.int64)
     BV = np.ascontiguousarray(BV, np.float64)
-    front = crack_front(V, F, BV, BF)
+    front, off = _crack_front(V, F, BV, BF)
     if len(front) == 0:
         return V, F, np.zeros(len(F), bool)
     Vall = np.asarray(V, np.float64)
-    d = edge_outward(Vall, F, front)
-    verts = np.unique(front)
-    direction = np.zeros((len(verts), 3))
-    np.add.at(direction, np.searchsorted(verts, front[:, 0]), d)
-    np.add.at(direction, np.searchsorted(verts, front[:, 1]), d)
-    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    try:
+        verts, direction = boundary_conormals(Vall, F, front)
+    except ValueError:
+        raise InputError("virtual fracture: a crack-front triangle is degenerate (zero area)") from None
     h = float(np.linalg.norm(Vall[front[:, 1]] - Vall[front[:, 0]], axis=1).mean()) if step is None else step
 
     tip = verts.copy()  # current vertex id at the end of each front vertex's track
     # front vertices already on B (the ends of a front) stay where they are
-    d2, _, _ = igl.point_mesh_squared_distance(Vall[verts], BV, BF)
-    active = np.sqrt(d2) > 10 * tol.on_surface * float(np.linalg.norm(np.ptp(BV, axis=0)))
+    active = np.zeros(len(verts), bool)
+    active[np.searchsorted(verts, front[off])] = True
     edges = np.searchsorted(verts, front)  # front edges as indices into verts
     new_faces = []
     for _ in range(max_steps):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fracture.refine.flow import triangle_frames
+from fracture.topology import face_frames
 from fracture.refine.mesh import RefineMesh
 from fracture.topology import unique_edges
 
@@ -19,7 +19,7 @@ def junction():
 
 
 def normals_and_area(m):
-    A, N = triangle_frames(m.V, m.F)
+    A, N = face_frames(m.V, m.F)
     return A, N
 
 

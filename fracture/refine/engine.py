@@ -27,10 +27,9 @@ import igl
 import numpy as np
 
 from fracture.refine.flips import flip_edges
-from fracture.refine.flow import energy, sample_displacement, triangle_frames, velocity
+from fracture.refine.flow import energy, sample_displacement, velocity
 from fracture.refine.mesh import RefineMesh
-from fracture.topology import directed_edge_face, directed_edges, unique_edges
-from fracture.virtual import edge_outward
+from fracture.topology import boundary_conormals, directed_edges, edge_table, face_frames
 
 
 @dataclass
@@ -51,14 +50,6 @@ class IterationLog:
     mean_move: list = field(default_factory=list)
     triangles: list = field(default_factory=list)
     boundary_error: list = field(default_factory=list)
-
-
-def _edge_table(F: np.ndarray, n: int):
-    """Per directed triangle edge: its undirected key, and the number of triangles on it."""
-    D = directed_edges(F)
-    key = np.minimum(D[:, 0], D[:, 1]).astype(np.int64) * n + np.maximum(D[:, 0], D[:, 1])
-    _, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
-    return D, key, counts[inverse]
 
 
 def _first_per_group(key: np.ndarray, rank: np.ndarray) -> np.ndarray:
@@ -89,7 +80,7 @@ class Refiner:
         self.offset = params.tension * float(np.ptp(values)) - float(values.min())
         self.free_d = np.zeros_like(mesh.V)
         self.scale = 1.0  # halved when an iteration raises the energy (overshoot), regrown after
-        self.B_normals = triangle_frames(self.BV, self.BF)[1]
+        self.B_normals = face_frames(self.BV, self.BF)[1]
         self.B_tree = igl.AABB()  # built once: every iteration queries it
         self.B_tree.init(self.BV, self.BF)
         # speeds below this (psi changing by 1 % of its range per grid cell)
@@ -100,10 +91,22 @@ class Refiner:
         psi, grad = self.pyramid.value_and_gradient(P)
         return psi + self.offset, grad
 
-    # -- constraints -----------------------------------------------------------------------
+    # -- topology ---------------------------------------------------------------------------
+    def edges(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Directed triangle edges (row ``3 f + k``), their undirected keys and triangle counts.
+
+        Computed once per change of the triangles and shared by the step, the
+        boundary constraint and the splits of an iteration.
+        """
+        D = directed_edges(self.mesh.F)
+        key, count = edge_table(self.mesh.F, len(self.mesh.V))
+        return D, key, count
+
     def boundary_vertices(self) -> np.ndarray:
-        edges, count = unique_edges(self.mesh.F)
-        return np.unique(edges[count == 1])
+        D, _, count = self.edges()
+        return np.unique(D[count == 1])
+
+    # -- constraints -----------------------------------------------------------------------
 
     def project_to_exterior(self, ids: np.ndarray) -> float:
         """Put vertices ``ids`` on B; returns the largest distance they had."""
@@ -117,22 +120,18 @@ class Refiner:
     def step(self) -> float:
         """Move the vertices by Eq. 3; returns the mean move in grid cells."""
         m, p = self.mesh, self.params
+        self.topology = D, _, count = self.edges()
         psi, grad = self.field(m.V)
         v = velocity(m.V, m.F, psi, grad)
         # boundary vertices slide on B: drop the part of their velocity that
         # points out of the sheet across its boundary (the area term of an
         # open sheet pulls its boundary inward; at a crease of B this pull is
         # not normal to B) and the part normal to B (projection undoes it)
-        edges, count = unique_edges(m.F)
-        E = edges[count == 1]
+        E = D[count == 1]  # boundary edges, as oriented in their triangle
+        self.boundary = np.zeros(0, np.int64)
         if len(E):
-            E = np.where((directed_edge_face(m.F, E) >= 0)[:, None], E, E[:, ::-1])
-            out = edge_outward(m.V, m.F, E, strict=False)
-            conormal = np.zeros_like(m.V)
-            np.add.at(conormal, E[:, 0], out)
-            np.add.at(conormal, E[:, 1], out)
-            b = np.unique(E)
-            c = conormal[b] / np.maximum(np.linalg.norm(conormal[b], axis=1), 1e-300)[:, None]
+            b, c = boundary_conormals(m.V, m.F, E, strict=False)
+            self.boundary = b
             v[b] -= np.einsum("ij,ij->i", v[b], c)[:, None] * c
             _, tri, _ = self.B_tree.squared_distance(self.BV, self.BF, np.ascontiguousarray(m.V[b]))
             nb = self.B_normals[tri]
@@ -145,7 +144,6 @@ class Refiner:
         d = self.dt * v
         self.free_d = d.copy()  # the unlimited moves, against which samples are compared
         # no vertex moves more than max_move of its shortest edge, nor more than a grid cell
-        D = directed_edges(m.F)
         length = np.linalg.norm(m.V[D[:, 1]] - m.V[D[:, 0]], axis=1)
         shortest = np.full(len(m.V), np.inf)
         np.minimum.at(shortest, D[:, 0], length)
@@ -154,8 +152,6 @@ class Refiner:
         limit = np.minimum(p.max_move * shortest, self.h)
         d *= np.minimum(1.0, limit / np.maximum(move, 1e-300))[:, None]
         m.V += d
-        self.last_speed = speed
-        self.last_psi = psi
         return float(np.linalg.norm(d[used], axis=1).mean() / self.h)
 
     def remesh(self) -> int:
@@ -163,8 +159,7 @@ class Refiner:
         m, p = self.mesh, self.params
         if len(m.F) >= p.max_triangles:
             return 0
-        n = len(m.V)
-        D, key, count = _edge_table(m.F, n)
+        _, key, count = self.topology  # the step did not change the triangles
         special = (count != 2).reshape(-1, 3)  # boundary or junction edges of every triangle
         has_edge = special.any(axis=1)
         k_edge = np.argmax(special, axis=1)
@@ -185,7 +180,7 @@ class Refiner:
         # the triangle's corners give it by linear interpolation
         d = sample_displacement(P, T, psi_P, grad_P, psi_T, self.dt)
         d -= np.einsum("fk,fkc->fc", bary, self.free_d[m.F])
-        _, N = triangle_frames(m.V, m.F)
+        _, N = face_frames(m.V, m.F)
         off = np.abs(np.einsum("ij,ij->i", d, N))
         e = T[np.arange(len(m.F)), (k_edge + 1) % 3] - T[np.arange(len(m.F)), k_edge]
         e /= np.maximum(np.linalg.norm(e, axis=1), 1e-300)[:, None]
@@ -227,7 +222,7 @@ class Refiner:
         p = self.params
         for it in range(p.iterations):
             move = self.step()
-            err = self.project_to_exterior(self.boundary_vertices())
+            err = self.project_to_exterior(self.boundary)
             if move > 0:
                 self.remesh()
             flip_edges(self.mesh.V, self.mesh.F, self.mesh.sides, max_passes=3)

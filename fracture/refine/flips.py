@@ -13,7 +13,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from fracture.topology import directed_edges
+from fracture.topology import directed_edges, edge_keys
 
 
 @numba.njit(cache=True)
@@ -42,7 +42,7 @@ def _dot(p, q):
 
 
 @numba.njit(cache=True)
-def _flip_pass(V, F, sides, fa, fb, ka, kb, edge_set_keys, n):
+def _flip_pass(V, F, fa, fb, ka, kb, edge_set_keys, n):
     """One pass over candidate edges (triangles fa, fb; the edge is fa's edge ka, fb's edge kb)."""
     busy = np.zeros(F.shape[0], np.bool_)
     flipped = 0
@@ -90,8 +90,7 @@ def flip_edges(V: np.ndarray, F: np.ndarray, sides: np.ndarray, max_passes: int 
     total = 0
     n = len(V)
     for _ in range(max_passes):
-        D = directed_edges(F)
-        key = np.minimum(D[:, 0], D[:, 1]).astype(np.int64) * n + np.maximum(D[:, 0], D[:, 1])
+        key = edge_keys(directed_edges(F), n)
         order = np.argsort(key, kind="stable")
         k = key[order]
         start = np.r_[True, k[1:] != k[:-1]]
@@ -103,7 +102,7 @@ def flip_edges(V: np.ndarray, F: np.ndarray, sides: np.ndarray, max_passes: int 
         same = (np.sort(sides[fa], axis=1) == np.sort(sides[fb], axis=1)).all(axis=1) & (
             sides[fa, 0] == sides[fb, 0])
         fa, fb, ka, kb = fa[same], fb[same], ea[same] % 3, eb[same] % 3
-        flipped = _flip_pass(V, F, sides, fa, fb, ka, kb, np.unique(key), n)
+        flipped = _flip_pass(V, F, fa, fb, ka, kb, k[start], n)  # k[start]: the sorted unique keys
         total += flipped
         if flipped == 0:
             break

@@ -23,21 +23,11 @@ from __future__ import annotations
 
 import numpy as np
 
-
-def triangle_frames(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Areas ``(m,)`` and unit normals ``(m, 3)`` of triangles."""
-    n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    twice = np.linalg.norm(n, axis=1)
-    return 0.5 * twice, n / np.maximum(twice, 1e-300)[:, None]
-
-
-def _scatter(index: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
-    """Sum rows of ``values (k, d)`` into ``n`` bins (bincount per column: faster than add.at)."""
-    return np.stack([np.bincount(index, values[:, c], minlength=n) for c in range(values.shape[1])], 1)
+from fracture.topology import face_frames, scatter_add
 
 
 def energy_gradient(V: np.ndarray, F: np.ndarray, psi: np.ndarray, grad: np.ndarray
-                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                    ) -> tuple[np.ndarray, np.ndarray]:
     """dE/dx_i and the barycentric vertex areas.
 
     Parameters
@@ -53,29 +43,28 @@ def energy_gradient(V: np.ndarray, F: np.ndarray, psi: np.ndarray, grad: np.ndar
     dE : (n, 3) float
     area : (n,) float
         Barycentric area of every vertex (0 for unused vertices).
-    face_area : (m,) float
     """
     n = len(V)
-    A, N = triangle_frames(V, F)
+    A, N = face_frames(V, F)
     psibar = psi[F].mean(axis=1)
     area = np.bincount(F.ravel(), np.repeat(A / 3.0, 3), minlength=n)
     terms = []
     for k in range(3):
         e = V[F[:, (k + 2) % 3]] - V[F[:, (k + 1) % 3]]
         terms.append(0.5 * psibar[:, None] * np.cross(N, e))
-    dA = _scatter(F.T.ravel(), np.concatenate(terms), n)
-    return area[:, None] * grad + dA, area, A
+    dA = scatter_add(F.T.ravel(), np.concatenate(terms), n)
+    return area[:, None] * grad + dA, area
 
 
 def velocity(V: np.ndarray, F: np.ndarray, psi: np.ndarray, grad: np.ndarray) -> np.ndarray:
     """Eq. 3: the velocity ``-dE/dx_i / A_i`` of every vertex, ``(n, 3)``."""
-    dE, area, _ = energy_gradient(V, F, psi, grad)
+    dE, area = energy_gradient(V, F, psi, grad)
     return -dE / np.maximum(area, 1e-300)[:, None]
 
 
 def energy(V: np.ndarray, F: np.ndarray, psi: np.ndarray) -> float:
     """E(S): psi integrated over the surface (linear in each triangle)."""
-    A, _ = triangle_frames(V, F)
+    A, _ = face_frames(V, F)
     return float((A * psi[F].mean(axis=1)).sum())
 
 

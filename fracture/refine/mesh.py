@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from fracture.topology import directed_edges
+from fracture.topology import directed_edges, edge_keys
 
 
 @dataclass
@@ -82,10 +82,8 @@ class RefineMesh:
         parents = np.column_stack([edges, edges[:, 0]])
         p = self._add_vertices(parents, np.column_stack([1 - t, t, np.zeros_like(t)]))
         # every directed triangle edge that is one of the split edges
-        D = directed_edges(self.F)
-        n = len(self.V)
-        key = np.minimum(D[:, 0], D[:, 1]) * n + np.maximum(D[:, 0], D[:, 1])
-        ekey = np.minimum(edges[:, 0], edges[:, 1]) * n + np.maximum(edges[:, 0], edges[:, 1])
+        key = edge_keys(directed_edges(self.F), len(self.V))
+        ekey = edge_keys(edges, len(self.V))
         order = np.argsort(ekey)
         pos = np.clip(np.searchsorted(ekey[order], key), 0, len(order) - 1)
         hit = np.flatnonzero(ekey[order][pos] == key)

@@ -23,7 +23,7 @@ import triangle
 from scipy.spatial import HalfspaceIntersection, cKDTree
 
 from fracture.errors import InputError
-from fracture.topology import directed_edge_face, signed_volume, unique_edges, weld
+from fracture.topology import directed_edge_face, plane_basis, signed_volume, unique_edges, weld
 
 # Points closer than this (relative to the box diagonal) are one point; the
 # booleans compute shared points exactly, so only rounding separates them.
@@ -56,13 +56,6 @@ class VoronoiFracture:
     def component_of(self, X: np.ndarray) -> np.ndarray:
         """The piece containing each point: its nearest seed."""
         return cKDTree(self.seeds).query(X)[1]
-
-
-def _plane_basis(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    a = np.eye(3)[int(np.argmin(np.abs(n)))]
-    u = np.cross(n, a)
-    u /= np.linalg.norm(u)
-    return u, np.cross(n, u)
 
 
 def _halfspaces(seeds: np.ndarray, i: int, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -103,7 +96,7 @@ def voronoi_cells(seeds: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> list[tup
             if len(on) < 3:
                 continue
             n = Hi[k, :3] / norms[k]
-            u, v = _plane_basis(n)
+            u, v = plane_basis(n)
             P = X[on] - X[on].mean(axis=0)
             loop = ids[on][np.argsort(np.arctan2(P @ v, P @ u))]  # counter-clockwise around the outward normal
             loop = np.roll(loop, -int(np.argmin(loop)))
@@ -176,7 +169,7 @@ def _triangulate_region(P: np.ndarray, segments: np.ndarray, n: np.ndarray, h: f
     outside the segments (even-odd rule) are dropped. Returns the points
     (``P`` first) and triangles oriented like ``n``.
     """
-    u, v = _plane_basis(n)
+    u, v = plane_basis(n)
     origin = P.mean(axis=0)
     XY = np.stack([(P - origin) @ u, (P - origin) @ v], 1)
     area = np.sqrt(3) / 4 * h * h
