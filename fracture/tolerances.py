@@ -44,7 +44,8 @@ tol = SimpleNamespace(
 # as rigid; files round to 6 decimals.
 tol.rigid_fit = 1e-5
 
-# Virtual fracture: a boundary edge of the fracture surface whose midpoint is
-# farther than this from B (relative to the diagonal) is a crack front inside
-# the object; bisection stops within this of the exterior.
-tol.on_surface = 1e-6
+# Virtual fracture: a vertex of a boundary edge of the fracture surface
+# farther than this from B (relative to the diagonal) is inside the object, and
+# the edge is on a crack front; the bisection locating where an extended cut
+# crosses B stops when its bracket is shorter than this (then projects onto B).
+tol.on_surface = 1e-5

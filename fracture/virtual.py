@@ -12,22 +12,21 @@ components but never open in the animation.
 
 from __future__ import annotations
 
-import igl
 import numpy as np
 
 from fracture.errors import InputError
+from fracture.exterior import Exterior
 from fracture.tolerances import tol
 from fracture.topology import boundary_conormals, boundary_edges
 
 
-def _crack_front(V, F, BV, BF) -> tuple[np.ndarray, np.ndarray]:
+def _crack_front(V, F, B: Exterior) -> tuple[np.ndarray, np.ndarray]:
     """Front edges (oriented as in their triangle) and, per front vertex, whether it is off B."""
     E = boundary_edges(F)
     if not len(E):
-        return np.zeros((0, 2), np.int64), np.zeros(0, bool)
-    diag = float(np.linalg.norm(np.ptp(BV, axis=0)))
-    d2, _, _ = igl.point_mesh_squared_distance(V[E.ravel()], BV, np.ascontiguousarray(BF, np.int64))
-    off = (np.sqrt(d2) > 10 * tol.on_surface * diag).reshape(-1, 2)
+        return np.zeros((0, 2), np.int64), np.zeros((0, 2), bool)
+    diag = float(np.linalg.norm(np.ptp(B.V, axis=0)))
+    off = (B.distance(V[E.ravel()]) > tol.on_surface * diag).reshape(-1, 2)
     front = off.any(axis=1)
     return E[front].astype(np.int64), off[front]
 
@@ -39,22 +38,17 @@ def crack_front(V: np.ndarray, F: np.ndarray, BV: np.ndarray, BF: np.ndarray) ->
     be: on a curved B the coarse boundary edges are chords). Edges are
     returned in the orientation they have in their triangle.
     """
-    return _crack_front(V, F, BV, BF)[0]
+    return _crack_front(V, F, Exterior(BV, BF))[0]
 
 
-def _inside(BV, BF, P):
-    return igl.fast_winding_number(BV, BF, np.ascontiguousarray(P, np.float64)) > 0.5
-
-
-def _crossing(BV, BF, inside_pts, outside_pts, iterations=40):
-    """Points where segments from inside to outside B cross B (bisection, then projection)."""
+def _crossing(B: Exterior, inside_pts: np.ndarray, outside_pts: np.ndarray, tolerance: float) -> np.ndarray:
+    """Points where segments from inside to outside B cross B (bisection to ``tolerance``, then projection)."""
     a, b = inside_pts.copy(), outside_pts.copy()
-    for _ in range(iterations):
+    while np.linalg.norm(b - a, axis=1).max() > tolerance:
         m = 0.5 * (a + b)
-        ins = _inside(BV, BF, m)
+        ins = B.inside(m)
         a[ins], b[~ins] = m[ins], m[~ins]
-    _, _, C = igl.point_mesh_squared_distance(0.5 * (a + b), BV, BF)
-    return C
+    return B.closest(0.5 * (a + b))[2]
 
 
 def extend_cuts(V: np.ndarray, F: np.ndarray, BV: np.ndarray, BF: np.ndarray, step: float | None = None,
@@ -84,9 +78,9 @@ def extend_cuts(V: np.ndarray, F: np.ndarray, BV: np.ndarray, BF: np.ndarray, st
     InputError
         When a front does not reach B within ``max_steps`` strips.
     """
-    BF = np.ascontiguousarray(BF, np.int64)
-    BV = np.ascontiguousarray(BV, np.float64)
-    front, off = _crack_front(V, F, BV, BF)
+    B = Exterior(BV, BF)  # many winding-number and distance queries: build the trees once
+    reach = tol.on_surface * float(np.linalg.norm(np.ptp(B.V, axis=0)))
+    front, off = _crack_front(V, F, B)
     if len(front) == 0:
         return V, F, np.zeros(len(F), bool)
     Vall = np.asarray(V, np.float64)
@@ -107,9 +101,9 @@ def extend_cuts(V: np.ndarray, F: np.ndarray, BV: np.ndarray, BF: np.ndarray, st
             break
         cur = Vall[tip[active]]
         nxt = cur + h * direction[active]
-        ins = _inside(BV, BF, nxt)
+        ins = B.inside(nxt)
         if (~ins).any():
-            nxt[~ins] = _crossing(BV, BF, cur[~ins], nxt[~ins])
+            nxt[~ins] = _crossing(B, cur[~ins], nxt[~ins], reach)
         new_ids = np.arange(len(Vall), len(Vall) + len(nxt))
         Vall = np.concatenate([Vall, nxt])
         new_tip = tip.copy()

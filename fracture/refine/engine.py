@@ -23,9 +23,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import igl
 import numpy as np
 
+from fracture.exterior import Exterior
 from fracture.refine.flips import flip_edges
 from fracture.refine.flow import energy, sample_displacement, velocity
 from fracture.refine.mesh import RefineMesh
@@ -81,8 +81,7 @@ class Refiner:
         self.free_d = np.zeros_like(mesh.V)
         self.scale = 1.0  # halved when an iteration raises the energy (overshoot), regrown after
         self.B_normals = face_frames(self.BV, self.BF)[1]
-        self.B_tree = igl.AABB()  # built once: every iteration queries it
-        self.B_tree.init(self.BV, self.BF)
+        self.B = Exterior(self.BV, self.BF)  # trees built once: every iteration queries them
         # speeds below this (psi changing by 1 % of its range per grid cell)
         # count as at rest: dt stops growing, the moves shrink, the loop ends
         self.slow = 0.01 * float(np.ptp(values)) / self.h
@@ -112,7 +111,7 @@ class Refiner:
         """Put vertices ``ids`` on B; returns the largest distance they had."""
         if not len(ids):
             return 0.0
-        d2, _, C = self.B_tree.squared_distance(self.BV, self.BF, np.ascontiguousarray(self.mesh.V[ids]))
+        d2, _, C = self.B.closest(self.mesh.V[ids])
         self.mesh.V[ids] = C
         return float(np.sqrt(d2.max()))
 
@@ -133,7 +132,7 @@ class Refiner:
             b, c = boundary_conormals(m.V, m.F, E, strict=False)
             self.boundary = b
             v[b] -= np.einsum("ij,ij->i", v[b], c)[:, None] * c
-            _, tri, _ = self.B_tree.squared_distance(self.BV, self.BF, np.ascontiguousarray(m.V[b]))
+            _, tri, _ = self.B.closest(m.V[b])
             nb = self.B_normals[tri]
             v[b] -= np.einsum("ij,ij->i", v[b], nb)[:, None] * nb
         speed = np.linalg.norm(v, axis=1)

@@ -23,6 +23,7 @@ import triangle
 from scipy.spatial import HalfspaceIntersection, cKDTree
 
 from fracture.errors import InputError
+from fracture.exterior import Exterior
 from fracture.topology import directed_edge_face, plane_basis, signed_volume, unique_edges, weld
 
 # Points closer than this (relative to the box diagonal) are one point; the
@@ -310,19 +311,19 @@ def voronoi_fracture(BV: np.ndarray, BF: np.ndarray, seeds: np.ndarray, edge_len
 
 
 def seeds_inside(BV: np.ndarray, BF: np.ndarray, count: int, rng: np.random.Generator,
-                 min_distance: float = 0.0, lo=None, hi=None, max_tries: int = 100000) -> np.ndarray:
+                 min_distance: float = 0.0, max_tries: int = 100000) -> np.ndarray:
     """``count`` random points inside a closed mesh, at least ``min_distance`` apart.
 
-    Points are drawn uniformly in the box ``[lo, hi]`` (default: the mesh's
-    box) and kept when inside (winding number) and far enough from the others.
+    Points are drawn uniformly in the mesh's box and kept when inside
+    (winding number) and far enough from the others.
     """
-    lo = BV.min(axis=0) if lo is None else np.asarray(lo, np.float64)
-    hi = BV.max(axis=0) if hi is None else np.asarray(hi, np.float64)
+    lo, hi = BV.min(axis=0), BV.max(axis=0)
+    B = Exterior(BV, BF)
     out: list[np.ndarray] = []
     batch = 256
     for _ in range(max_tries // batch):
         P = lo + (hi - lo) * rng.random((batch, 3))
-        P = P[igl.fast_winding_number(BV, BF, P) > 0.5]
+        P = P[B.inside(P)]
         for p in P:
             if all(np.linalg.norm(p - q) >= min_distance for q in out):
                 out.append(p)

@@ -1,0 +1,34 @@
+"""Queries against the exterior surface B with libigl's trees built once.
+
+``igl.fast_winding_number`` and ``igl.point_mesh_squared_distance`` rebuild
+their hierarchy over B on every call; code that asks many times (bisection,
+per-iteration projections, seed sampling) holds an :class:`Exterior` instead.
+"""
+
+from __future__ import annotations
+
+import igl
+import numpy as np
+
+
+class Exterior:
+    """A closed triangle mesh with a winding-number hierarchy and an AABB tree."""
+
+    def __init__(self, V: np.ndarray, F: np.ndarray):
+        self.V = np.ascontiguousarray(V, np.float64)
+        self.F = np.ascontiguousarray(F, np.int64)
+        self._wn = igl.FastWindingNumberBVH()
+        self._wn.init(self.V, self.F)
+        self._tree = igl.AABB()
+        self._tree.init(self.V, self.F)
+
+    def inside(self, P: np.ndarray) -> np.ndarray:
+        """Whether points are inside (winding number above one half)."""
+        return self._wn.winding_number(np.ascontiguousarray(P, np.float64).reshape(-1, 3)) > 0.5
+
+    def closest(self, P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Squared distances, triangle ids and closest points on B of points ``(k, 3)``."""
+        return self._tree.squared_distance(self.V, self.F, np.ascontiguousarray(P, np.float64).reshape(-1, 3))
+
+    def distance(self, P: np.ndarray) -> np.ndarray:
+        return np.sqrt(self.closest(P)[0])
