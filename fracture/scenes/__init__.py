@@ -24,10 +24,10 @@ import igl
 import numpy as np
 import triangle
 
-from fracture.coarse import CoarseFracture, make_coarse
+from fracture.coarse import CoarseFracture, make_coarse, special_edges
 from fracture.errors import InputError
 from fracture.primitives import box, cylinder
-from fracture.scenes.animator import lattice_animation, rigid_bodies, rigid_motion, rotation
+from fracture.scenes.animator import exterior_points, lattice_animation, rigid_bodies, rigid_motion, rotation
 from fracture.scenes.voronoi import VoronoiFracture, seeds_inside, voronoi_fracture
 
 #: Coarse fracture triangles of the paper's examples (Section 6).
@@ -58,8 +58,13 @@ def _decimate(V, F, faces):
     return m.vertex_matrix().astype(np.float64), m.face_matrix().astype(np.int64)
 
 
-def _voronoi(BV, BF, coarse, count, spacing, edge_length, rng, what, plane=None) -> VoronoiFracture:
-    """Voronoi pieces of ``coarse`` with seeds redrawn until every piece is connected."""
+def _voronoi(BV, BF, coarse, count, spacing, edge_length, rng, what, plane=None
+             ) -> tuple[VoronoiFracture, np.ndarray, list[np.ndarray]]:
+    """Voronoi pieces of ``coarse`` with seeds redrawn until every piece is connected.
+
+    Returns the pieces, the component of every triangle of B, and per piece
+    its coarse corners with its exterior points (ground contacts, lattice extent).
+    """
     last = None
     for _ in range(_SEED_TRIES):
         seeds = seeds_inside(*coarse, count, rng, spacing)
@@ -73,33 +78,23 @@ def _voronoi(BV, BF, coarse, count, spacing, edge_length, rng, what, plane=None)
     else:
         raise InputError(f"{what}: no seed set gave connected pieces in {_SEED_TRIES} tries ({last})")
     # the coarse cut meets the coarse object; put its boundary on the detailed exterior B
-    from fracture.coarse import special_edges
-
     b = special_edges(vf.F, len(vf.V)).boundary_vertices
     _, _, C = igl.point_mesh_squared_distance(vf.V[b], BV, BF)
     vf.V[b] = C
-    return vf
-
-
-def _finish(name, BV, BF, vf: VoronoiFracture, animation, separation) -> CoarseFracture:
     ext = vf.component_of(BV[BF].mean(axis=1))
+    outside = exterior_points(BV, BF, ext, len(vf.seeds))
+    return vf, ext, [np.concatenate([P, X]) for (P, _), X in zip(vf.pieces, outside)]
+
+
+def _finish(name, BV, BF, ext, vf: VoronoiFracture, animation, separation) -> CoarseFracture:
     names = [f"{name}_{c:03d}" for c in range(len(vf.seeds))]
     return make_coarse(BV, BF, ext, vf.V, vf.F, vf.sides, names, animation, separation)
-
-
-def _piece_points(vf: VoronoiFracture, BV: np.ndarray, BF: np.ndarray) -> list[np.ndarray]:
-    """Corners of each coarse piece and the vertices of its exterior triangles.
-
-    Used as ground contacts and for the extent of a piece's lattice.
-    """
-    ext = vf.component_of(BV[BF].mean(axis=1))
-    return [np.concatenate([P, BV[BF[ext == c]].reshape(-1, 3)]) for c, (P, _) in enumerate(vf.pieces)]
 
 
 def bunny(rng: np.random.Generator, frames: int, separation: float) -> CoarseFracture:
     """The marble bunny dropped onto the ground; it shatters on impact."""
     BV, BF = bunny_mesh()
-    vf = _voronoi(BV, BF, _decimate(BV, BF, 700), 7, 0.15, 0.075, rng, "bunny")
+    vf, ext, points = _voronoi(BV, BF, _decimate(BV, BF, 700), 7, 0.15, 0.075, rng, "bunny")
     up, drop, fps = 1, 0.25, 30.0
     ground = BV[:, up].min() - drop
     impact = int(np.ceil(np.sqrt(2 * drop / 9.81) * fps))
@@ -120,16 +115,16 @@ def bunny(rng: np.random.Generator, frames: int, separation: float) -> CoarseFra
         v[up] = 1.2
         return v, rng.normal(0.0, 4.0, 3)
 
-    poses = rigid_bodies(_piece_points(vf, BV, BF), frames, np.full(len(vf.seeds), impact), kick, carrier, up, ground, fps)
-    anim = lattice_animation(_piece_points(vf, BV, BF), rigid_motion(poses), frames)
-    return _finish("bunny", BV, BF, vf, anim, separation)
+    poses = rigid_bodies(points, frames, np.full(len(vf.seeds), impact), kick, carrier, up, ground, fps)
+    anim = lattice_animation(points, rigid_motion(poses), frames)
+    return _finish("bunny", BV, BF, ext, vf, anim, separation)
 
 
 def wall(rng: np.random.Generator, frames: int, separation: float) -> CoarseFracture:
     """A brick wall punched by a wrecking ball: the hit pieces fly off and fall."""
     lo, hi = np.array([0.0, 0.0, 0.0]), np.array([3.0, 1.0, 0.2])
     BV, BF = box(lo, hi, (150, 50, 10))
-    vf = _voronoi(BV, BF, box(lo, hi), 12, 0.45, 0.15, rng, "wall", plane=(2, 0.1))
+    vf, ext, points = _voronoi(BV, BF, box(lo, hi), 12, 0.45, 0.15, rng, "wall", plane=(2, 0.1))
     hit, radius, when, up = np.array([1.5, 0.55, 0.2]), 0.8, 8, 1
     release = np.full(len(vf.seeds), frames)
     kicks = {}
@@ -140,9 +135,9 @@ def wall(rng: np.random.Generator, frames: int, separation: float) -> CoarseFrac
             falloff = np.exp(-(d / radius) ** 2 * 2)
             out = np.r_[(s - hit)[:2], 0.0]
             kicks[c] = (np.array([0.0, 0.0, -3.5 * falloff]) + 0.8 * out, rng.normal(0.0, 3.0, 3))
-    poses = rigid_bodies(_piece_points(vf, BV, BF), frames, release, lambda c: kicks[c], None, up, 0.0)
-    anim = lattice_animation(_piece_points(vf, BV, BF), rigid_motion(poses), frames)
-    return _finish("wall", BV, BF, vf, anim, separation)
+    poses = rigid_bodies(points, frames, release, lambda c: kicks[c], None, up, 0.0)
+    anim = lattice_animation(points, rigid_motion(poses), frames)
+    return _finish("wall", BV, BF, ext, vf, anim, separation)
 
 
 def _smoothstep(x):
@@ -154,7 +149,7 @@ def clay(rng: np.random.Generator, frames: int, separation: float) -> CoarseFrac
     """A bar of plastic clay twisted about its long axis; it tears and keeps its shape."""
     lo, hi = np.array([-0.5, -1.0, -1.0]), np.array([0.5, 1.0, 1.0])
     BV, BF = box(lo, hi, (32, 64, 64))
-    vf = _voronoi(BV, BF, box(lo, hi), 14, 0.4, 0.27, rng, "clay")
+    vf, ext, points = _voronoi(BV, BF, box(lo, hi), 14, 0.4, 0.27, rng, "clay")
     total = np.radians(150.0)
     breaks = max(1, int(0.35 * frames))
 
@@ -176,15 +171,15 @@ def clay(rng: np.random.Generator, frames: int, separation: float) -> CoarseFrac
         R = rotation([0, 0, 1], angle(com[c, 2], t) - angle(com[c, 2], breaks))
         out = np.r_[com[c, :2], 0.0]
         return Y @ R.T + 0.15 * (t - breaks) / frames * out
-    anim = lattice_animation(_piece_points(vf, BV, BF), motion, frames, n=7, shared=True)
-    return _finish("clay", BV, BF, vf, anim, separation)
+    anim = lattice_animation(points, motion, frames, n=7, shared=True)
+    return _finish("clay", BV, BF, ext, vf, anim, separation)
 
 
 def jello(rng: np.random.Generator, frames: int, separation: float) -> CoarseFracture:
     """A block of Jell-O on a plate: a jolt sets it wobbling, pieces slump off one by one."""
     lo, hi = np.array([-1.0, -1.0, 0.0]), np.array([1.0, 1.0, 1.0])
     BV, BF = box(lo, hi, (64, 64, 32))
-    vf = _voronoi(BV, BF, box(lo, hi), 14, 0.4, 0.28, rng, "jello")
+    vf, ext, points = _voronoi(BV, BF, box(lo, hi), 14, 0.4, 0.28, rng, "jello")
     com = np.array([PV.mean(axis=0) for PV, _ in vf.pieces])
     radial = np.linalg.norm(com[:, :2], axis=1)
     order = np.argsort(-radial)  # outer pieces let go first
@@ -209,8 +204,8 @@ def jello(rng: np.random.Generator, frames: int, separation: float) -> CoarseFra
             Y[:, :2] += 0.3 * k * com[c, :2]
             Y[:, 2] *= 1.0 - 0.15 * k
         return Y
-    anim = lattice_animation(_piece_points(vf, BV, BF), motion, frames, n=7, shared=True)
-    return _finish("jello", BV, BF, vf, anim, separation)
+    anim = lattice_animation(points, motion, frames, n=7, shared=True)
+    return _finish("jello", BV, BF, ext, vf, anim, separation)
 
 
 def _half_disk(radius: float, h: float) -> tuple[np.ndarray, np.ndarray]:
@@ -249,7 +244,8 @@ def branch(rng: np.random.Generator, frames: int, separation: float) -> CoarseFr
     V[arc] = C
     V, F, virtual = extend_cuts(V, F, BV, BF)
     sides, ext, n = label_components(BV, BF, V, F, what="branch")
-    com = np.array([BV[BF[ext == c]].reshape(-1, 3).mean(axis=0) for c in range(n)])
+    points = exterior_points(BV, BF, ext, n)
+    com = np.array([P.mean(axis=0) for P in points])
     top = int(np.argmax(com[:, 2]))
     start = max(1, int(0.25 * frames))
     bend = np.radians(rng.uniform(22.0, 28.0))
@@ -259,7 +255,6 @@ def branch(rng: np.random.Generator, frames: int, separation: float) -> CoarseFr
             return X
         R = rotation([1.0, 0.0, 0.0], bend * _smoothstep((t - start) / (frames - 1 - start)))
         return X @ R.T  # about the crack front, the x axis through the origin
-    points = [BV[BF[ext == c]].reshape(-1, 3) for c in range(n)]
     anim = lattice_animation(points, motion, frames)
     names = [f"branch_{c:03d}" for c in range(n)]
     return make_coarse(BV, BF, ext, V, F, sides, names, anim, separation, virtual=virtual)

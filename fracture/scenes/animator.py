@@ -19,7 +19,8 @@ from typing import Callable
 import numpy as np
 from scipy.spatial import ConvexHull
 
-from fracture.animation import CoarseAnimation, lattice_box
+from fields.grid import Grid
+from fracture.animation import CoarseAnimation, lattice_box, rigid_fit
 
 GRAVITY = 9.81
 
@@ -30,6 +31,11 @@ def rotation(axis: np.ndarray, angle: float) -> np.ndarray:
     k = axis / max(np.linalg.norm(axis), 1e-300)
     K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
     return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
+
+
+def exterior_points(BV: np.ndarray, BF: np.ndarray, component: np.ndarray, n: int) -> list[np.ndarray]:
+    """Corners of each component's exterior triangles (with repeats), one array per component."""
+    return [BV[BF[component == c]].reshape(-1, 3) for c in range(n)]
 
 
 def lattice_animation(points: list[np.ndarray], motion: Callable[[int, int, np.ndarray], np.ndarray],
@@ -46,8 +52,7 @@ def lattice_animation(points: list[np.ndarray], motion: Callable[[int, int, np.n
     everything = lattice_box(np.concatenate(points))
     for c, X in enumerate(points):
         lo[c], hi[c] = everything if shared else lattice_box(X)
-        anim = CoarseAnimation(lo[c:c + 1], hi[c:c + 1], np.zeros((1, 1, n, n, n, 3)))
-        rest = anim.grid(0).points()
+        rest = Grid.from_bounds(lo[c], hi[c], (n, n, n)).points()
         for t in range(frames):
             nodes[t, c] = motion(c, t, rest).reshape(n, n, n, 3)
     return CoarseAnimation(lo, hi, nodes)
@@ -90,7 +95,7 @@ def rigid_bodies(hulls: list[np.ndarray], frames: int, release: np.ndarray, kick
         R, x, v, w = np.eye(3), com.copy(), np.zeros(3), np.zeros(3)
         for t in range(frames):
             if t <= release[c]:
-                # follow the carrier: fit its rigid motion from three frames of the hull
+                # follow the carrier (a rigid motion, recovered from the hull's points)
                 P = carrier(t, H)
                 R, x = _rigid_from_points(H, P, com)
                 if t == release[c]:
@@ -119,8 +124,6 @@ def rigid_bodies(hulls: list[np.ndarray], frames: int, release: np.ndarray, kick
 
 
 def _rigid_from_points(X: np.ndarray, Y: np.ndarray, com: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    from fracture.animation import rigid_fit
-
     R, t = rigid_fit(X, Y)
     return R, R @ com + t
 

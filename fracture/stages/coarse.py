@@ -19,7 +19,7 @@ def coarse_from_meshes(inp: dict) -> CoarseFracture:
     """
     from fracture.components import label_components
     from fracture.errors import InputError
-    from fracture.scenes.animator import lattice_animation
+    from fracture.scenes.animator import exterior_points, lattice_animation
     from fracture.virtual import extend_cuts
 
     missing = [k for k in ("exterior", "fracture") if not inp.get(k)]
@@ -30,8 +30,7 @@ def coarse_from_meshes(inp: dict) -> CoarseFracture:
     V, F = read_mesh(inp["fracture"], "input.fracture")
     V, F, virtual = extend_cuts(V, F, BV, BF)
     sides, ext, n = label_components(BV, BF, V, F, what=f"input.fracture ({inp['fracture']})")
-    points = [BV[BF[ext == c]].reshape(-1, 3) for c in range(n)]
-    still = lattice_animation(points, lambda c, t, X: X, 1)
+    still = lattice_animation(exterior_points(BV, BF, ext, n), lambda c, t, X: X, 1)
     notes = [f"virtual fracture: {int(virtual.sum())} triangles extend incomplete cuts"] if virtual.any() else []
     return make_coarse(BV, BF, ext, V, F, sides, [f"piece_{c:03d}" for c in range(n)], still, inp["separation"],
                        virtual=virtual, notes=notes)
