@@ -35,7 +35,7 @@ from scipy.spatial import cKDTree
 
 from fracture.errors import InputError
 from fracture.tolerances import tol
-from fracture.topology import directed_edge_face, fan, plane_basis, signed_volume, unique_edges, weld
+from fracture.topology import directed_edge_face, fan, plane_basis, scatter_add, signed_volume, unique_edges, weld
 
 
 @dataclass
@@ -76,34 +76,58 @@ def polygon_normal_area(P: np.ndarray) -> tuple[np.ndarray, float]:
     return (n / area if area > 0 else n), area
 
 
-def _insert_edge_points(loop: np.ndarray, G: np.ndarray, tree: cKDTree, radius: float) -> np.ndarray:
-    """The polygon ``loop`` with every point of ``G`` that lies on one of its edges inserted."""
-    out = []
-    for a, b in zip(loop, np.roll(loop, -1)):
-        if a == b:
-            continue
-        out.append(a)
-        A, B = G[a], G[b]
-        length = float(np.linalg.norm(B - A))
-        cand = np.array(tree.query_ball_point((A + B) / 2, length / 2 + radius), np.int64)
-        cand = cand[(cand != a) & (cand != b)]
-        if len(cand):
-            t = (G[cand] - A) @ (B - A) / length**2
-            dist = np.linalg.norm(G[cand] - (A + t[:, None] * (B - A)), axis=1)
-            on = (dist <= radius) & (t > 0) & (t < 1)
-            out.extend(cand[on][np.argsort(t[on])])
-    return np.array(out, np.int64)
+def _insert_edge_points(polygons: list[np.ndarray], G: np.ndarray, tree: cKDTree, radius: float
+                        ) -> list[np.ndarray]:
+    """Every polygon with the points of ``G`` that lie on its edges inserted (in order along each edge).
+
+    Zero-length edges (corners welded together) are dropped. One batched
+    neighbour query for all edges of all polygons.
+    """
+    sizes = np.array([len(f) for f in polygons])
+    a = np.concatenate(polygons).astype(np.int64)
+    nxt = np.arange(len(a)) + 1
+    ends = np.cumsum(sizes)
+    nxt[ends - 1] = ends - sizes  # the last edge closes the polygon
+    b = a[nxt]
+    poly = np.repeat(np.arange(len(polygons)), sizes)
+    edge = np.flatnonzero(a != b)
+    A, B = G[a[edge]], G[b[edge]]
+    length = np.linalg.norm(B - A, axis=1)
+    cands = tree.query_ball_point((A + B) / 2, length / 2 + radius)
+    counts = np.array([len(c) for c in cands])
+    which = np.repeat(np.arange(len(edge)), counts)  # index into `edge`
+    cand = np.concatenate([np.asarray(c, np.int64) for c in cands]) if len(which) else np.zeros(0, np.int64)
+    AB = B[which] - A[which]
+    t = np.einsum("ij,ij->i", G[cand] - A[which], AB) / length[which] ** 2
+    dist = np.linalg.norm(G[cand] - (A[which] + t[:, None] * AB), axis=1)
+    on = (dist <= radius) & (t > 0) & (t < 1) & (cand != a[edge][which]) & (cand != b[edge][which])
+    # each polygon: per edge its start corner (t = -1) then its inserted points by t
+    item_edge = np.concatenate([edge, edge[which[on]]])
+    item_t = np.concatenate([np.full(len(edge), -1.0), t[on]])
+    item_id = np.concatenate([a[edge], cand[on]])
+    order = np.lexsort((item_t, item_edge))
+    ids = item_id[order]
+    per_poly = np.bincount(poly[item_edge], minlength=len(polygons))
+    return np.split(ids, np.cumsum(per_poly)[:-1])
+
+
+def _area_vectors(V: np.ndarray, polygons: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Area vectors of polygons (Newell: the sum over a fan), with the fan triangles and their polygon."""
+    tris, owner = fan(polygons)
+    A = V[tris[:, 0]]
+    vec = scatter_add(owner, 0.5 * np.cross(V[tris[:, 1]] - A, V[tris[:, 2]] - A), len(polygons))
+    return vec, tris, owner
 
 
 def _triangulate_polygon(loop: np.ndarray, G: np.ndarray, where: str) -> np.ndarray:
     """Constrained Delaunay triangulation of a (nearly planar) polygon, oriented like it."""
+    if len(loop) == 3:
+        return loop[None, :]
     P = G[loop]
     n, _ = polygon_normal_area(P)
     u, v = plane_basis(n)
     XY = np.stack([(P - P[0]) @ u, (P - P[0]) @ v], 1)
     k = len(loop)
-    if k == 3:
-        return loop[None, :]
     segments = np.stack([np.arange(k), (np.arange(k) + 1) % k], 1)
     tri = triangle.triangulate({"vertices": XY, "segments": segments}, "pQ")
     if "triangles" not in tri or len(tri["vertices"]) != k:
@@ -140,35 +164,36 @@ def shared_surface(V: np.ndarray, polygons: list[list[np.ndarray]], names: list[
     diag = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
     n_pieces = len(polygons)
 
-    volumes = []
-    for p, polys in enumerate(polygons):
-        total, vector = 0.0, np.zeros(3)
-        for f in polys:
-            nrm, area = polygon_normal_area(V[f])
-            total += area
-            vector += nrm * area
-        if total <= tol.area * diag**2 or np.linalg.norm(vector) > tol.closure * 10 * total:
+    # every piece closed (its area vectors cancel) and outward (positive volume)
+    poly_piece = np.repeat(np.arange(n_pieces), [len(polys) for polys in polygons])
+    vec, tris, owner = _area_vectors(V, [f for polys in polygons for f in polys])
+    total = np.bincount(poly_piece, np.linalg.norm(vec, axis=1), minlength=n_pieces)
+    hole = np.linalg.norm(scatter_add(poly_piece, vec, n_pieces), axis=1)
+    A, B, C = V[tris[:, 0]], V[tris[:, 1]], V[tris[:, 2]]
+    volumes = np.bincount(poly_piece[owner], np.einsum("ij,ij->i", A, np.cross(B, C)) / 6.0, minlength=n_pieces)
+    for p in range(n_pieces):
+        if total[p] <= tol.area * diag**2 or hole[p] > tol.closure * 10 * total[p]:
             raise InputError(f"{where}piece {names[p]!r} is not a closed surface (its faces leave a hole of "
-                             f"about {np.linalg.norm(vector):.3g} square units)")
-        vol = signed_volume(V, fan(polys)[0])
-        if vol <= 0:
-            raise InputError(f"{where}piece {names[p]!r} is inside out or flat (volume {vol:.3g})")
-        volumes.append(vol)
+                             f"about {hole[p]:.3g} square units)")
+        if volumes[p] <= 0:
+            raise InputError(f"{where}piece {names[p]!r} is inside out or flat (volume {volumes[p]:.3g})")
 
     # 1. weld corners across pieces, insert T-junction points into every edge
     G, label = weld(V, tol.weld * diag)
     moved = float(np.linalg.norm(V - G[label], axis=1).max())
     tree = cKDTree(G)
-    faces = []  # (piece, loop of welded ids)
-    for p, polys in enumerate(polygons):
-        for f in polys:
-            loop = _insert_edge_points(label[f], G, tree, tol.on_edge * diag)
-            if len(loop) >= 3 and polygon_normal_area(G[loop])[1] > tol.area * diag**2:
-                faces.append((p, loop))
+    loops = _insert_edge_points([label[f] for polys in polygons for f in polys], G, tree, tol.on_edge * diag)
+    keep = np.array([len(loop) >= 3 for loop in loops], bool)
+    vec = np.zeros((len(loops), 3))
+    vec[keep] = _area_vectors(G, [loop for loop, k in zip(loops, keep) if k])[0]
+    face_area = np.linalg.norm(vec, axis=1)
+    keep &= face_area > tol.area * diag**2
+    faces = [(p, loop) for p, loop, k in zip(poly_piece, loops, keep) if k]  # (piece, loop of welded ids)
+    face_piece, face_area = poly_piece[keep], face_area[keep]
 
     # 2. which piece (if any) each face is shared with
     tris, tri_face = fan([loop for _, loop in faces])
-    tri_piece = np.array([faces[i][0] for i in tri_face])
+    tri_piece = face_piece[tri_face]
     A, B, C = G[tris[:, 0]], G[tris[:, 1]], G[tris[:, 2]]
     tri_n = np.cross(B - A, C - A)
     tri_area = 0.5 * np.linalg.norm(tri_n, axis=1)
@@ -189,20 +214,28 @@ def shared_surface(V: np.ndarray, polygons: list[list[np.ndarray]], names: list[
         hit_tri = np.flatnonzero(other)[hit]
         facing = np.einsum("ij,ij->i", tri_n[sample_tri[mine]], tri_n[hit_tri]) < -tol.facing
         d = np.sqrt(d2)
-        for fi in np.unique(tri_face[sample_tri[mine]]):
-            sel = tri_face[sample_tri[mine]] == fi
-            close = facing[sel] & (d[sel] <= tol.gap_repair * diag)
-            if close.mean() >= 0.5:
-                owners = tri_piece[hit_tri[sel][close]]
-                partner[fi] = np.bincount(owners).argmax()
-                gap[fi] = d[sel][close].max()
-            else:
-                near = facing[sel] & (d[sel] < tol.gap_detect * diag)
-                if near.mean() >= 0.5:
-                    q = tri_piece[hit_tri[sel][near]][0]
-                    raise InputError(f"{where}gap of {d[sel][near].min():.3g} between pieces {names[p]!r} and "
-                                     f"{names[q]!r} (more than the {tol.gap_repair * diag:.3g} that is repaired); "
-                                     f"the pieces must tile the object in the rest pose")
+        face = tri_face[sample_tri[mine]]
+        hit_piece = tri_piece[hit_tri]
+        close = facing & (d <= tol.gap_repair * diag)
+        near = facing & (d < tol.gap_detect * diag)
+        # per face: shared when most samples are close to a facing face of another piece
+        count = np.bincount(face, minlength=len(faces))
+        shared = (np.bincount(face, close, minlength=len(faces)) >= 0.5 * count) & (count > 0)
+        gapped = ~shared & (np.bincount(face, near, minlength=len(faces)) >= 0.5 * count) & (count > 0)
+        if gapped.any():
+            fi = int(np.flatnonzero(gapped)[0])
+            sel = (face == fi) & near
+            raise InputError(f"{where}gap of {d[sel].min():.3g} between pieces {names[p]!r} and "
+                             f"{names[hit_piece[sel][0]]!r} (more than the {tol.gap_repair * diag:.3g} that is "
+                             f"repaired); the pieces must tile the object in the rest pose")
+        # its partner: the piece most of its close samples hit; its gap: the farthest of them
+        c = close & shared[face]
+        if c.any():
+            votes, n_votes = np.unique(face[c] * n_pieces + hit_piece[c], return_counts=True)
+            order = np.lexsort((-n_votes, votes // n_pieces))
+            first = order[np.r_[True, np.diff(votes[order] // n_pieces) != 0]]
+            partner[votes[first] // n_pieces] = votes[first] % n_pieces
+            np.maximum.at(gap, face[c], d[c])
     if moved > tol.rigid_fit * diag:
         notes.append(f"welded corners of neighbouring pieces that were up to {2 * moved:.2g} apart")
     big_gap = gap > tol.weld * diag
@@ -212,13 +245,11 @@ def shared_surface(V: np.ndarray, polygons: list[list[np.ndarray]], names: list[
 
     # 3. triangulate: exterior faces, and the shared faces of the lower-numbered piece of each pair
     fracture, sides, exterior, owner = [], [], [], []
-    piece_fracture_area = np.zeros(n_pieces)
+    piece_fracture_area = np.bincount(face_piece[partner >= 0], face_area[partner >= 0], minlength=n_pieces)
     for fi, (p, loop) in enumerate(faces):
         q = partner[fi]
-        if q >= 0:
-            piece_fracture_area[p] += polygon_normal_area(G[loop])[1]
-            if p > q:
-                continue
+        if q >= 0 and p > q:
+            continue
         T = _triangulate_polygon(loop, G, where)
         if q >= 0:
             fracture.append(T)

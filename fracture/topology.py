@@ -122,15 +122,22 @@ def signed_volume(V: np.ndarray, F: np.ndarray) -> float:
 
 
 def fan(polygons: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """Fan triangles of polygons ``(t, 3)`` and the polygon each came from ``(t,)``."""
+    """Fan triangles of polygons ``(t, 3)`` and the polygon each came from ``(t,)``.
+
+    Triangles come polygon by polygon, in order. Polygons of one size are
+    fanned together (no loop over polygons).
+    """
     if not polygons:
         return np.zeros((0, 3), np.int64), np.zeros(0, np.int64)
-    tris, owner = [], []
-    for i, f in enumerate(polygons):
-        k = len(f)
-        tris.append(np.stack([np.full(k - 2, f[0]), f[1:-1], f[2:]], 1))
-        owner.append(np.full(k - 2, i))
-    return np.concatenate(tris).astype(np.int64), np.concatenate(owner)
+    sizes = np.array([len(f) for f in polygons])
+    flat = np.concatenate(polygons).astype(np.int64)
+    start = np.r_[0, np.cumsum(sizes)[:-1]]
+    n_tri = sizes - 2
+    owner = np.repeat(np.arange(len(polygons)), n_tri)
+    j = np.arange(len(owner)) - np.repeat(np.cumsum(n_tri) - n_tri, n_tri)  # triangle index within its polygon
+    first = start[owner]
+    tris = np.stack([flat[first], flat[first + j + 1], flat[first + j + 2]], 1)
+    return tris, owner
 
 
 def weld(P: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
