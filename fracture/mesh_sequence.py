@@ -159,7 +159,7 @@ def load_coarse_sequence(directory: str | Path, pattern: str = "*.obj", lattice:
         far apart, relative to the object's box diagonal.
     """
     from fracture.animation import CoarseAnimation, fit_lattice, lattice_box
-    from fracture.coarse import exterior_patches, make_coarse
+    from fracture.coarse import flood_fill_patches, make_coarse, special_edges
     from fracture.tiling import shared_surface
     from fracture.tolerances import tol
 
@@ -167,11 +167,12 @@ def load_coarse_sequence(directory: str | Path, pattern: str = "*.obj", lattice:
     rest = frames[0]
     diag = float(np.linalg.norm(rest.V.max(axis=0) - rest.V.min(axis=0)))
     shared = shared_surface(rest.V, rest.polygons, rest.names, source=str(rest.path))
+    # each exterior patch cut out by the fracture boundary belongs to one piece
+    # (on the shared vertex ids, before the two surfaces are compacted apart)
+    sp = special_edges(shared.fracture_F, len(shared.V))
+    patches = flood_fill_patches(shared.exterior_F, sp.edges[sp.boundary])
     V, F = _compact(shared.V, shared.fracture_F)
     BV, BF = _compact(shared.V, shared.exterior_F)
-
-    # each exterior patch cut out by the fracture boundary belongs to one piece
-    patches = exterior_patches(V, F, BV, BF)
     for patch in np.unique(patches):
         owners = np.unique(shared.exterior_piece[patches == patch])
         if len(owners) > 1:
