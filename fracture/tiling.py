@@ -172,7 +172,7 @@ def shared_surface(V: np.ndarray, polygons: list[list[np.ndarray]], names: list[
     A, B, C = V[tris[:, 0]], V[tris[:, 1]], V[tris[:, 2]]
     volumes = np.bincount(poly_piece[owner], np.einsum("ij,ij->i", A, np.cross(B, C)) / 6.0, minlength=n_pieces)
     for p in range(n_pieces):
-        if total[p] <= tol.area * diag**2 or hole[p] > tol.closure * 10 * total[p]:
+        if total[p] <= tol.area * diag**2 or hole[p] > tol.closure * total[p]:
             raise InputError(f"{where}piece {names[p]!r} is not a closed surface (its faces leave a hole of "
                              f"about {hole[p]:.3g} square units)")
         if volumes[p] <= 0:
@@ -236,7 +236,7 @@ def shared_surface(V: np.ndarray, polygons: list[list[np.ndarray]], names: list[
             first = order[np.r_[True, np.diff(votes[order] // n_pieces) != 0]]
             partner[votes[first] // n_pieces] = votes[first] % n_pieces
             np.maximum.at(gap, face[c], d[c])
-    if moved > tol.rigid_fit * diag:
+    if moved > tol.report * diag:
         notes.append(f"welded corners of neighbouring pieces that were up to {2 * moved:.2g} apart")
     big_gap = gap > tol.weld * diag
     if big_gap.any():

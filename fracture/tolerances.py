@@ -35,7 +35,7 @@ tol = SimpleNamespace(
     # Areas below this (relative to diagonal^2) are empty.
     area=1e-9,
     # |sum of area vectors| / total area above this: the piece is not closed.
-    closure=1e-6,
+    closure=1e-5,
     # Pieces whose volumes add up to more than the object's by this fraction overlap.
     volume=1e-4,
 )
@@ -43,6 +43,10 @@ tol = SimpleNamespace(
 # Imported motion: a rigid fit this close (relative to the diagonal) is taken
 # as rigid; files round to 6 decimals.
 tol.rigid_fit = 1e-5
+
+# Repairs that move points by less than this (relative to the diagonal: the
+# files' rounding) are not worth a note in the manifest.
+tol.report = 1e-5
 
 # Virtual fracture: a vertex of a boundary edge of the fracture surface
 # farther than this from B (relative to the diagonal) is inside the object, and
