@@ -83,10 +83,11 @@ def read_frame(path: str | Path) -> MeshFrame:
     if len(frame.V) == 0 or not frame.names:
         raise InputError(f"{path}: no pieces (expected objects with vertices and faces)")
     for p, polys in enumerate(frame.polygons):
-        for face in polys:
-            if face.min() < 0 or face.max() >= len(frame.V):
-                raise InputError(f"{path}: piece {frame.names[p]!r}: a face refers to vertex {int(face.max()) + 1}, "
-                                 f"but the file has {len(frame.V)} vertices")
+        ids = np.concatenate(polys)
+        if ids.min() < 0 or ids.max() >= len(frame.V):
+            bad = int(ids.max()) if ids.max() >= len(frame.V) else int(ids.min())
+            raise InputError(f"{path}: piece {frame.names[p]!r}: a face refers to vertex {bad + 1}, "
+                             f"but the file has {len(frame.V)} vertices")
     bad = ~np.isfinite(frame.V).all(axis=1)
     if bad.any():
         v = int(np.flatnonzero(bad)[0])
@@ -130,7 +131,8 @@ def read_sequence(directory: str | Path, pattern: str = "*.obj") -> list[MeshFra
             raise InputError(f"{where}: {len(frame.V)} vertices, but the rest pose ({rest.path.name}) has {len(rest.V)}")
         for p, name in enumerate(rest.names):
             a, b = rest.polygons[p], frame.polygons[p]
-            if len(a) != len(b) or any(len(x) != len(y) or np.any(x != y) for x, y in zip(a, b)):
+            if (len(a) != len(b) or not np.array_equal([len(x) for x in a], [len(y) for y in b])
+                    or not np.array_equal(np.concatenate(a), np.concatenate(b))):
                 raise InputError(f"{where}: piece {name!r} has different faces than in the rest pose ({rest.path.name})")
         frames.append(frame)
     return frames
