@@ -20,6 +20,7 @@ test: install
 
 bench: install
 	$(BIN)/python benchmarks/bench_fields.py
+	$(BIN)/python benchmarks/bench_coarse.py
 
 install: system-deps $(STAMP)
 
