@@ -13,7 +13,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from fracture.topology import directed_edges, edge_keys
+from fracture.refine.collide import faces_intersecting
+from fracture.refine.kernels import _edge_table, _find_edge
 
 
 @numba.njit(cache=True)
@@ -42,34 +43,32 @@ def _dot(p, q):
 
 
 @numba.njit(cache=True)
-def _flip_pass(V, F, fa, fb, ka, kb, edge_set_keys, n):
-    """One pass over candidate edges (triangles fa, fb; the edge is fa's edge ka, fb's edge kb)."""
+def _flip_pass(V, F, sides, eid, count, first, second, start, hi, row, pairs, done):
+    """One pass: flip a set of edges that share no triangle (the table is the one before the pass)."""
     busy = np.zeros(F.shape[0], np.bool_)
     flipped = 0
-    new_keys = {np.int64(0)}
-    new_keys.clear()
-    for i in range(fa.shape[0]):
-        f, g = fa[i], fb[i]
-        if busy[f] or busy[g]:
+    new_edges = {(np.int64(0), np.int64(0))}
+    new_edges.clear()
+    for e in range(count.shape[0]):
+        if count[e] != 2:
+            continue
+        f, g = first[e] // 3, second[e] // 3
+        ka, kb = first[e] % 3, second[e] % 3
+        if busy[f] or busy[g] or sides[f, 0] != sides[g, 0] or sides[f, 1] != sides[g, 1]:
             continue
         # f = (u, v, w) with edge u->v; g = (v, u, x) with edge v->u
-        u = F[f, ka[i]]
-        v = F[f, (ka[i] + 1) % 3]
-        w = F[f, (ka[i] + 2) % 3]
-        if F[g, kb[i]] != v or F[g, (kb[i] + 1) % 3] != u:
+        u = F[f, ka]
+        v = F[f, (ka + 1) % 3]
+        w = F[f, (ka + 2) % 3]
+        if F[g, kb] != v or F[g, (kb + 1) % 3] != u:
             continue  # not consistently oriented
-        x = F[g, (kb[i] + 2) % 3]
+        x = F[g, (kb + 2) % 3]
         if w == x:
             continue
         if _angle(V, w, u, v) + _angle(V, x, v, u) <= np.pi + 1e-12:
             continue
-        lo = min(w, x)
-        hi = max(w, x)
-        key = lo * n + hi
-        idx = np.searchsorted(edge_set_keys, key)
-        if idx < edge_set_keys.shape[0] and edge_set_keys[idx] == key:
-            continue
-        if key in new_keys:
+        pair = (min(w, x), max(w, x))
+        if _find_edge(start, hi, row, eid, w, x) >= 0 or pair in new_edges:
             continue
         a = _normal(V, u, v, w)
         b = _normal(V, v, u, x)
@@ -80,30 +79,53 @@ def _flip_pass(V, F, fa, fb, ka, kb, edge_set_keys, n):
         F[g, 0], F[g, 1], F[g, 2] = x, w, u
         busy[f] = True
         busy[g] = True
-        new_keys.add(key)
+        new_edges.add(pair)
+        pairs[done + flipped, 0], pairs[done + flipped, 1] = f, g
         flipped += 1
     return flipped
 
 
-def flip_edges(V: np.ndarray, F: np.ndarray, sides: np.ndarray, max_passes: int = 8) -> int:
-    """Flip non-Delaunay edges in place (see the module notes); returns the number of flips."""
+@numba.njit(cache=True)
+def _flip(V, F, sides, max_passes, pairs):
     total = 0
-    n = len(V)
     for _ in range(max_passes):
-        key = edge_keys(directed_edges(F), n)
-        order = np.argsort(key, kind="stable")
-        k = key[order]
-        start = np.r_[True, k[1:] != k[:-1]]
-        group = np.cumsum(start) - 1
-        size = np.bincount(group)
-        first = np.flatnonzero(start & (size[group] == 2))
-        ea, eb = order[first], order[first + 1]
-        fa, fb = ea // 3, eb // 3
-        same = (np.sort(sides[fa], axis=1) == np.sort(sides[fb], axis=1)).all(axis=1) & (
-            sides[fa, 0] == sides[fb, 0])
-        fa, fb, ka, kb = fa[same], fb[same], ea[same] % 3, eb[same] % 3
-        flipped = _flip_pass(V, F, fa, fb, ka, kb, k[start], n)  # k[start]: the sorted unique keys
+        eid, count, first, second, start, hi, row = _edge_table(F, V.shape[0])
+        if total + count.shape[0] > pairs.shape[0]:
+            break
+        flipped = _flip_pass(V, F, sides, eid, count, first, second, start, hi, row, pairs, total)
         total += flipped
         if flipped == 0:
             break
+    return total
+
+
+def flip_edges(V: np.ndarray, F: np.ndarray, sides: np.ndarray, max_passes: int = 8,
+               safe: bool = False) -> int:
+    """Flip non-Delaunay edges of ``F`` in place (see the module notes); returns the number of flips.
+
+    ``F`` must be a C-contiguous int64 array (it is edited in place). A flip
+    replaces the two triangles of a non-planar quad by the other two: with
+    ``safe``, flips whose new triangles meet the rest of the surface are
+    undone (a static test of the flipped triangles only).
+    """
+    if F.dtype != np.int64 or not F.flags.c_contiguous:
+        raise TypeError("F must be a C-contiguous int64 array")
+    V = np.ascontiguousarray(V, np.float64)
+    sides = np.ascontiguousarray(sides, np.int64)
+    if not safe:
+        return int(_flip(V, F, sides, int(max_passes), np.empty((max_passes * len(F), 2), np.int64)))
+    total = 0
+    pairs = np.empty((len(F), 2), np.int64)
+    for _ in range(max_passes):  # one pass at a time: a triangle takes part in one flip per pass
+        before = F.copy()
+        flipped = int(_flip(V, F, sides, 1, pairs))
+        if not flipped:
+            break
+        done = pairs[:flipped]
+        faces = np.unique(done)
+        bad = faces[faces_intersecting(V, F, faces)]
+        undo = np.isin(done, bad).any(axis=1)
+        back = done[undo].ravel()
+        F[back] = before[back]
+        total += flipped - int(undo.sum())
     return total

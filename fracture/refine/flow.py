@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fracture.topology import face_frames, scatter_add
+from fracture.refine import kernels
 
 
 def energy_gradient(V: np.ndarray, F: np.ndarray, psi: np.ndarray, grad: np.ndarray
@@ -44,16 +44,8 @@ def energy_gradient(V: np.ndarray, F: np.ndarray, psi: np.ndarray, grad: np.ndar
     area : (n,) float
         Barycentric area of every vertex (0 for unused vertices).
     """
-    n = len(V)
-    A, N = face_frames(V, F)
-    psibar = psi[F].mean(axis=1)
-    area = np.bincount(F.ravel(), np.repeat(A / 3.0, 3), minlength=n)
-    terms = []
-    for k in range(3):
-        e = V[F[:, (k + 2) % 3]] - V[F[:, (k + 1) % 3]]
-        terms.append(0.5 * psibar[:, None] * np.cross(N, e))
-    dA = scatter_add(F.T.ravel(), np.concatenate(terms), n)
-    return area[:, None] * grad + dA, area
+    return kernels.energy_gradient(*_prepare(V, F), np.ascontiguousarray(psi, np.float64),
+                                   np.ascontiguousarray(grad, np.float64))
 
 
 def velocity(V: np.ndarray, F: np.ndarray, psi: np.ndarray, grad: np.ndarray) -> np.ndarray:
@@ -64,8 +56,7 @@ def velocity(V: np.ndarray, F: np.ndarray, psi: np.ndarray, grad: np.ndarray) ->
 
 def energy(V: np.ndarray, F: np.ndarray, psi: np.ndarray) -> float:
     """E(S): psi integrated over the surface (linear in each triangle)."""
-    A, _ = face_frames(V, F)
-    return float((A * psi[F].mean(axis=1)).sum())
+    return float(kernels.energy(*_prepare(V, F), np.ascontiguousarray(psi, np.float64)))
 
 
 def sample_displacement(P: np.ndarray, T: np.ndarray, psi_p: np.ndarray, grad_p: np.ndarray,
@@ -81,15 +72,11 @@ def sample_displacement(P: np.ndarray, T: np.ndarray, psi_p: np.ndarray, grad_p:
     psi_p, grad_p : psi and grad psi at the samples.
     psi_T : (k, 3) psi at the corners.
     """
-    A = T[:, 0]
-    nrm = np.cross(T[:, 1] - A, T[:, 2] - A)
-    N = nrm / np.maximum(np.linalg.norm(nrm, axis=1), 1e-300)[:, None]
-    dE = np.zeros_like(P)
-    area = np.zeros(len(P))
-    for k in range(3):  # sub-triangle with p in place of corner k; its edge opposite p is T's edge opposite k
-        b, c = T[:, (k + 1) % 3], T[:, (k + 2) % 3]
-        sub = 0.5 * np.linalg.norm(np.cross(b - P, c - P), axis=1)
-        psibar = (psi_p + psi_T[:, (k + 1) % 3] + psi_T[:, (k + 2) % 3]) / 3.0
-        dE += sub[:, None] / 3.0 * grad_p + 0.5 * psibar[:, None] * np.cross(N, c - b)
-        area += sub / 3.0
-    return -dt * dE / np.maximum(area, 1e-300)[:, None]
+    f64 = np.float64
+    return kernels.sample_displacement(
+        np.ascontiguousarray(P, f64), np.ascontiguousarray(T, f64), np.ascontiguousarray(psi_p, f64),
+        np.ascontiguousarray(grad_p, f64), np.ascontiguousarray(psi_T, f64), float(dt))
+
+
+def _prepare(V, F):
+    return np.ascontiguousarray(V, np.float64), np.ascontiguousarray(F, np.int64)

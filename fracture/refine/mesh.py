@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from fracture.topology import directed_edges, edge_keys
+from fracture.refine.kernels import edge_table
 
 
 @dataclass
@@ -71,24 +71,30 @@ class RefineMesh:
         self.sides = np.concatenate([self.sides, self.sides[faces], self.sides[faces]])
         return p
 
-    def split_edges(self, edges: np.ndarray, t: np.ndarray) -> np.ndarray:
+    def split_edges(self, edges: np.ndarray, t: np.ndarray, rows: np.ndarray | None = None,
+                    which: np.ndarray | None = None) -> np.ndarray:
         """Split edges ``(a, b)`` at ``(1 - t) a + t b``, and every triangle on them in two.
 
-        A triangle may carry at most one of the split edges. Returns the new
-        vertex ids.
+        A triangle may carry at most one of the split edges. ``rows`` (directed
+        triangle edges ``3 f + k`` on the split edges) and ``which`` (the split
+        edge of each) may be given when the caller has an edge table already.
+        Returns the new vertex ids.
         """
         edges = np.asarray(edges, np.int64).reshape(-1, 2)
         t = np.asarray(t, np.float64)
+        if rows is None:
+            table = edge_table(self.F, len(self.V))
+            ids = table.find(edges)
+            if (ids < 0).any():
+                raise ValueError(f"edge {edges[np.argmax(ids < 0)].tolist()} is not an edge of the surface")
+            slot = np.full(len(table.count), -1)
+            slot[ids] = np.arange(len(edges))
+            which = slot[table.eid]
+            rows = np.flatnonzero(which >= 0)
+            which = which[rows]
         parents = np.column_stack([edges, edges[:, 0]])
         p = self._add_vertices(parents, np.column_stack([1 - t, t, np.zeros_like(t)]))
-        # every directed triangle edge that is one of the split edges
-        key = edge_keys(directed_edges(self.F), len(self.V))
-        ekey = edge_keys(edges, len(self.V))
-        order = np.argsort(ekey)
-        pos = np.clip(np.searchsorted(ekey[order], key), 0, len(order) - 1)
-        hit = np.flatnonzero(ekey[order][pos] == key)
-        which = order[pos[hit]]
-        face, k = hit // 3, hit % 3
+        face, k = rows // 3, rows % 3
         if len(np.unique(face)) != len(face):
             raise ValueError("a triangle carries two of the edges to split")
         # triangle (u, v, w) with split edge u -> v becomes (u, p, w) and (p, v, w)

@@ -1,0 +1,235 @@
+"""Compiled per-iteration kernels of the refinement (numba, cached on disk).
+
+Each iteration touches every vertex, triangle and edge of a surface that
+grows to 10^5 triangles. NumPy versions of these steps build several
+temporaries of the full size and sort 3m edge keys several times; here each
+is one pass:
+
+* :func:`edge_table` buckets directed edges by their lower vertex (a counting
+  sort, O(m)) instead of sorting keys, and gives every undirected edge an id,
+  its triangle count and its first two directed edges;
+* :func:`energy_gradient` is dE/dx of Eq. 3 and the vertex areas in one loop
+  over triangles (the scatter-add NumPy needs bincounts for);
+* :func:`limit_moves` caps each move by its shortest incident edge;
+* :func:`sample_deviation` moves one sample per triangle by Eq. 3 with the
+  triangle as its neighbourhood and measures how far it leaves the triangle.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+
+@numba.njit(cache=True)
+def _edge_table(F, n):
+    m = F.shape[0]
+    start = np.zeros(n + 1, np.int64)
+    for f in range(m):
+        for k in range(3):
+            a, b = F[f, k], F[f, (k + 1) % 3]
+            start[min(a, b) + 1] += 1
+    for v in range(n):
+        start[v + 1] += start[v]
+    fill = start[:-1].copy()
+    hi = np.empty(3 * m, np.int64)
+    row = np.empty(3 * m, np.int64)
+    for f in range(m):
+        for k in range(3):
+            a, b = F[f, k], F[f, (k + 1) % 3]
+            lo = min(a, b)
+            p = fill[lo]
+            fill[lo] += 1
+            hi[p] = max(a, b)
+            row[p] = 3 * f + k
+    eid = np.full(3 * m, -1, np.int64)
+    ne = 0
+    for v in range(n):
+        for p in range(start[v], start[v + 1]):
+            if eid[row[p]] >= 0:
+                continue
+            eid[row[p]] = ne
+            for q in range(p + 1, start[v + 1]):
+                if hi[q] == hi[p]:
+                    eid[row[q]] = ne
+            ne += 1
+    count = np.zeros(ne, np.int64)
+    first = np.full(ne, -1, np.int64)
+    second = np.full(ne, -1, np.int64)
+    for d in range(3 * m):
+        e = eid[d]
+        if count[e] == 0:
+            first[e] = d
+        elif count[e] == 1:
+            second[e] = d
+        count[e] += 1
+    return eid, count, first, second, start, hi, row
+
+
+@numba.njit(cache=True)
+def _find_edge(start, hi, row, eid, a, b):
+    lo, up = min(a, b), max(a, b)
+    if lo + 1 >= start.shape[0]:
+        return -1
+    for p in range(start[lo], start[lo + 1]):
+        if hi[p] == up:
+            return eid[row[p]]
+    return -1
+
+
+@numba.njit(cache=True)
+def _find_edges(start, hi, row, eid, E):
+    out = np.empty(E.shape[0], np.int64)
+    for i in range(E.shape[0]):
+        out[i] = _find_edge(start, hi, row, eid, E[i, 0], E[i, 1])
+    return out
+
+
+@dataclass
+class EdgeTable:
+    """The undirected edges of a triangle list.
+
+    Attributes
+    ----------
+    eid : (3m,) int
+        Edge id of directed triangle edge ``3 f + k`` (``F[f, k] -> F[f, k+1]``).
+    count : (ne,) int
+        Number of triangles on each edge.
+    first, second : (ne,) int
+        The first two directed edges (rows ``3 f + k``) of each edge; -1 if none.
+    """
+
+    eid: np.ndarray
+    count: np.ndarray
+    first: np.ndarray
+    second: np.ndarray
+    _start: np.ndarray
+    _hi: np.ndarray
+    _row: np.ndarray
+
+    @property
+    def row_count(self) -> np.ndarray:
+        """Triangle count of the edge of every directed triangle edge, ``(3m,)``."""
+        return self.count[self.eid]
+
+    def find(self, E: np.ndarray) -> np.ndarray:
+        """Edge ids of vertex pairs ``E (k, 2)`` (-1 where there is no such edge)."""
+        E = np.ascontiguousarray(E, np.int64).reshape(-1, 2)
+        return _find_edges(self._start, self._hi, self._row, self.eid, E)
+
+
+def edge_table(F: np.ndarray, n: int) -> EdgeTable:
+    """Build the :class:`EdgeTable` of triangles ``F`` over ``n`` vertices, in O(m)."""
+    return EdgeTable(*_edge_table(np.ascontiguousarray(F, np.int64), int(n)))
+
+
+@numba.njit(cache=True, fastmath=True)
+def face_geometry(V, F):
+    """Areas ``(m,)`` and unit normals ``(m, 3)`` (zero for degenerate triangles)."""
+    m = F.shape[0]
+    A = np.empty(m)
+    N = np.zeros((m, 3))
+    for f in range(m):
+        a, b, c = F[f, 0], F[f, 1], F[f, 2]
+        ux, uy, uz = V[b, 0] - V[a, 0], V[b, 1] - V[a, 1], V[b, 2] - V[a, 2]
+        vx, vy, vz = V[c, 0] - V[a, 0], V[c, 1] - V[a, 1], V[c, 2] - V[a, 2]
+        nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+        t = np.sqrt(nx * nx + ny * ny + nz * nz)
+        A[f] = 0.5 * t
+        if t > 0.0:
+            N[f, 0], N[f, 1], N[f, 2] = nx / t, ny / t, nz / t
+    return A, N
+
+
+@numba.njit(cache=True, fastmath=True)
+def energy_gradient(V, F, psi, grad):
+    """dE/dx_i of E = sum_j A_j mean(psi_j) (grad psi at x_i) and barycentric areas; see :mod:`.flow`."""
+    n = V.shape[0]
+    dE = np.zeros((n, 3))
+    area = np.zeros(n)
+    A, N = face_geometry(V, F)
+    for f in range(F.shape[0]):
+        pb = 0.5 * (psi[F[f, 0]] + psi[F[f, 1]] + psi[F[f, 2]]) / 3.0
+        nx, ny, nz = N[f, 0], N[f, 1], N[f, 2]
+        for k in range(3):
+            i, j, l = F[f, k], F[f, (k + 1) % 3], F[f, (k + 2) % 3]
+            ex, ey, ez = V[l, 0] - V[j, 0], V[l, 1] - V[j, 1], V[l, 2] - V[j, 2]
+            dE[i, 0] += pb * (ny * ez - nz * ey)
+            dE[i, 1] += pb * (nz * ex - nx * ez)
+            dE[i, 2] += pb * (nx * ey - ny * ex)
+            area[i] += A[f] / 3.0
+    for i in range(n):
+        for c in range(3):
+            dE[i, c] += area[i] * grad[i, c]
+    return dE, area
+
+
+@numba.njit(cache=True, fastmath=True)
+def energy(V, F, psi):
+    """E(S) = sum_j A_j mean(psi at its corners)."""
+    A, _ = face_geometry(V, F)
+    total = 0.0
+    for f in range(F.shape[0]):
+        total += A[f] * (psi[F[f, 0]] + psi[F[f, 1]] + psi[F[f, 2]]) / 3.0
+    return total
+
+
+@numba.njit(cache=True, fastmath=True)
+def limit_moves(V, F, d, max_move, cap):
+    """Scale each move ``d[i]`` in place to at most ``min(max_move * shortest incident edge, cap)``."""
+    n = V.shape[0]
+    shortest = np.full(n, np.inf)
+    for f in range(F.shape[0]):
+        for k in range(3):
+            a, b = F[f, k], F[f, (k + 1) % 3]
+            x, y, z = V[b, 0] - V[a, 0], V[b, 1] - V[a, 1], V[b, 2] - V[a, 2]
+            length = np.sqrt(x * x + y * y + z * z)
+            shortest[a] = min(shortest[a], length)
+            shortest[b] = min(shortest[b], length)
+    for i in range(n):
+        move = np.sqrt(d[i, 0] ** 2 + d[i, 1] ** 2 + d[i, 2] ** 2)
+        limit = min(max_move * shortest[i], cap)
+        if move > limit:
+            s = limit / move
+            d[i, 0] *= s
+            d[i, 1] *= s
+            d[i, 2] *= s
+
+
+@numba.njit(cache=True, fastmath=True)
+def sample_displacement(P, T, psi_p, grad_p, psi_T, dt):
+    """Displacement in one step of points ``P`` inside triangles ``T``, each with its triangle as neighbourhood.
+
+    The point ``p`` splits its triangle ``(a, b, c)`` into ``(p, b, c)``,
+    ``(a, p, c)``, ``(a, b, p)``; this is Eq. 3 at ``p`` over these three
+    (Section 4.4). ``T`` is ``(k, 3, 3)``, ``psi_T`` ``(k, 3)``.
+    """
+    k = P.shape[0]
+    out = np.zeros((k, 3))
+    for s in range(k):
+        ux, uy, uz = T[s, 1, 0] - T[s, 0, 0], T[s, 1, 1] - T[s, 0, 1], T[s, 1, 2] - T[s, 0, 2]
+        vx, vy, vz = T[s, 2, 0] - T[s, 0, 0], T[s, 2, 1] - T[s, 0, 1], T[s, 2, 2] - T[s, 0, 2]
+        nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+        t = np.sqrt(nx * nx + ny * ny + nz * nz)
+        if t == 0.0:
+            continue
+        nx, ny, nz = nx / t, ny / t, nz / t
+        gx = gy = gz = 0.0
+        area = 0.0
+        for c in range(3):  # sub-triangle with p in place of corner c; its edge opposite p is T's edge opposite c
+            b, e = (c + 1) % 3, (c + 2) % 3
+            bx, by, bz = T[s, b, 0] - P[s, 0], T[s, b, 1] - P[s, 1], T[s, b, 2] - P[s, 2]
+            cx, cy, cz = T[s, e, 0] - P[s, 0], T[s, e, 1] - P[s, 1], T[s, e, 2] - P[s, 2]
+            wx, wy, wz = by * cz - bz * cy, bz * cx - bx * cz, bx * cy - by * cx
+            sub = 0.5 * np.sqrt(wx * wx + wy * wy + wz * wz)
+            pb = (psi_p[s] + psi_T[s, b] + psi_T[s, e]) / 3.0
+            ex, ey, ez = cx - bx, cy - by, cz - bz
+            gx += sub / 3.0 * grad_p[s, 0] + 0.5 * pb * (ny * ez - nz * ey)
+            gy += sub / 3.0 * grad_p[s, 1] + 0.5 * pb * (nz * ex - nx * ez)
+            gz += sub / 3.0 * grad_p[s, 2] + 0.5 * pb * (nx * ey - ny * ex)
+            area += sub / 3.0
+        if area > 0.0:
+            out[s, 0], out[s, 1], out[s, 2] = -dt * gx / area, -dt * gy / area, -dt * gz / area
+    return out
