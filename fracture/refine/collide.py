@@ -290,6 +290,34 @@ def _relative_move(p0, p1, q0, q1):
 
 
 @numba.njit(cache=True)
+def _inside_at(p, a, b, c, eps):
+    """The projection of p onto the plane of abc lies in the triangle (barycentric tolerance eps)."""
+    e1, e2, x = _sub(b, a), _sub(c, a), _sub(p, a)
+    d00, d01, d11 = _dot(e1, e1), _dot(e1, e2), _dot(e2, e2)
+    d20, d21 = _dot(x, e1), _dot(x, e2)
+    den = d00 * d11 - d01 * d01
+    if den <= 1e-30 * d00 * d11:
+        return False  # degenerate triangle: the edge-edge tests see it
+    v = (d11 * d20 - d01 * d21) / den
+    w = (d00 * d21 - d01 * d20) / den
+    return v >= -eps and w >= -eps and v + w <= 1.0 + eps
+
+
+@numba.njit(cache=True)
+def _segments_cross_at(p, q, r, s, eps):
+    """Coplanar segments pq and rs cross (line parameters within [-eps, 1 + eps])."""
+    d1, d2, w = _sub(q, p), _sub(s, r), _sub(p, r)
+    a, b, c = _dot(d1, d1), _dot(d1, d2), _dot(d2, d2)
+    d, e = _dot(d1, w), _dot(d2, w)
+    den = a * c - b * b
+    if den <= 1e-24 * a * c:
+        return False  # parallel: the vertex-triangle tests see these
+    u = (b * e - c * d) / den
+    v = (a * e - b * d) / den
+    return -eps <= u <= 1.0 + eps and -eps <= v <= 1.0 + eps
+
+
+@numba.njit(cache=True)
 def _vertex_triangle_hit(p0, p1, a0, a1, b0, b1, c0, c1, eta2, times):
     start = _point_triangle_distance2(p0, a0, b0, c0)
     # the distance shrinks by at most the largest move of p relative to a corner
@@ -301,8 +329,9 @@ def _vertex_triangle_hit(p0, p1, a0, a1, b0, b1, c0, c1, eta2, times):
     n = _coplanar_times(p0, p1, a0, a1, b0, b1, c0, c1, times)
     for i in range(n):
         t = times[i]
-        if _point_triangle_distance2(_lerp(p0, p1, t), _lerp(a0, a1, t), _lerp(b0, b1, t),
-                                     _lerp(c0, c1, t)) <= eta2:
+        # coplanar at t: a hit if p is in the triangle then (a test of
+        # position in the plane, well conditioned however the root is)
+        if _inside_at(_lerp(p0, p1, t), _lerp(a0, a1, t), _lerp(b0, b1, t), _lerp(c0, c1, t), 1e-9):
             return True
     # contact at the end of the step that is closer than at its start (pairs
     # resting in contact, e.g. sheets meeting on B, may stay so)
@@ -320,8 +349,7 @@ def _edge_edge_hit(p0, p1, q0, q1, r0, r1, s0, s1, eta2, times):
     n = _coplanar_times(p0, p1, q0, q1, r0, r1, s0, s1, times)
     for i in range(n):
         t = times[i]
-        if _segment_segment_distance2(_lerp(p0, p1, t), _lerp(q0, q1, t), _lerp(r0, r1, t),
-                                      _lerp(s0, s1, t)) <= eta2:
+        if _segments_cross_at(_lerp(p0, p1, t), _lerp(q0, q1, t), _lerp(r0, r1, t), _lerp(s0, s1, t), 1e-9):
             return True
     end = _segment_segment_distance2(p1, q1, r1, s1)
     return end <= eta2 and end < start

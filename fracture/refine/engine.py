@@ -56,6 +56,7 @@ class RefineParams:
     min_edge: float = 0.1  # samples closer than this to a corner are skipped
     max_triangles: int = 200_000
     thickness: float = 1e-6  # closer than this counts as a collision
+    hold: int = 3  # iterations a vertex stopped by a collision stays stopped
 
 
 @dataclass
@@ -107,6 +108,7 @@ class Refiner:
         self.slow = 0.01 * float(np.ptp(values)) / self.h
         self.dt = 0.0
         self.velocity = np.zeros_like(mesh.V)  # of the last step, per vertex (for snapshots)
+        self.hold = np.zeros(len(mesh.V), np.int64)  # iterations a stopped vertex stays stopped
 
     def field(self, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         psi, grad = self.pyramid.value_and_gradient(P)
@@ -203,14 +205,18 @@ class Refiner:
         # the triangle's corners give it by linear interpolation
         d = sample_displacement(P, T, psi_P, grad_P, psi_T, dt)
         d -= np.einsum("fk,fkc->fc", bary, dt * v[m.F])
-        _, N = face_geometry(m.V, m.F)
+        A, N = face_geometry(m.V, m.F)
         off = np.abs(np.einsum("ij,ij->i", d, N))
+        # needles are not split inside (their children would be needles too):
+        # the flips improve them first (quality 1 for an equilateral triangle)
+        quality = 4.0 * np.sqrt(3.0) * A / np.maximum(np.einsum("fkc,fkc->f", T - np.roll(T, 1, axis=1),
+                                                                T - np.roll(T, 1, axis=1)), 1e-300)
         ar = np.arange(len(m.F))
         e = T[ar, (k_edge + 1) % 3] - T[ar, k_edge]
         e /= np.maximum(np.linalg.norm(e, axis=1), 1e-300)[:, None]
         across = np.linalg.norm(d - np.einsum("ij,ij->i", d, e)[:, None] * e, axis=1)
         far = np.where(has_edge, across, off) > p.split_distance * p.step * self.h
-        want = far & ~near
+        want = far & ~near & (has_edge | (quality > 0.2))
         budget = max(0, (p.max_triangles - len(m.F)) // 2)
         # edge splits: one per edge (a random one of its triangles' samples) ...
         ef = np.flatnonzero(want & has_edge)
@@ -257,12 +263,19 @@ class Refiner:
             clock = log.tick("flow", clock)
         self.velocity = v
         d = dt * v
+        # vertices stopped by a collision stay stopped for a few iterations:
+        # the flow that pushed them into contact still pushes, and a pair at
+        # rest costs the collision test nothing
+        self.hold = np.concatenate([self.hold, np.zeros(len(m.V) - len(self.hold), np.int64)])
+        d[self.hold > 0] = 0.0
+        self.hold = np.maximum(self.hold - 1, 0)
         limit_moves(m.V, m.F, d, p.max_move, self.h)
         X1 = m.V + d
         boundary = self.boundary_vertices(table)
         self.project_to_exterior(boundary, X1)
         clock = log.tick("boundary", clock)
         stopped, _ = stop_collisions(m.V, X1, m.F, self.unique_edges(table), p.thickness * self.h)
+        self.hold[stopped] = p.hold
         clock = log.tick("collisions", clock)
         moved = np.linalg.norm(X1 - m.V, axis=1)
         m.V = X1

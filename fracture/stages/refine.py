@@ -1,0 +1,135 @@
+"""The ``refine`` stage: evolve and refine the coarse fracture surface (Sections 4.3, 4.4).
+
+Outputs (material space):
+
+* ``refined/fracture_surface.ply``: the refined surface, with the two
+  components each triangle separates (face properties ``side0``, ``side1``);
+* ``refined/tree.npz``: the barycentric tree (``parents``, ``weights``,
+  ``created`` per new vertex in creation order) and its composed sparse map
+  from the coarse vertices (CSR ``data``, ``indices``, ``indptr``, ``shape``);
+* snapshots for the viewer: per iteration the
+  positions, psi and speed per vertex and the triangles, concatenated into
+  four ``.npy`` arrays with ``refined/iterations.json`` giving the offsets
+  (plain ``.npy``: no archive timestamps, the bytes depend on the data only).
+"""
+
+from __future__ import annotations
+
+import io
+
+import numpy as np
+
+from fracture.plyio import write_ply
+from fracture.refine.collide import self_intersections
+from fracture.refine.engine import RefineParams, Refiner
+from fracture.refine.mesh import RefineMesh
+from fracture.runner import RunContext, stage
+
+
+def refine_params(cfg: dict) -> RefineParams:
+    keys = RefineParams.__dataclass_fields__
+    return RefineParams(**{k: v for k, v in cfg["refine"].items() if k in keys})
+
+
+@stage("refine")
+def refine_stage(ctx: RunContext) -> None:
+    cf = ctx.products["coarse"]
+    fs = ctx.products["fields"]
+    params = refine_params(ctx.cfg)
+    mesh = RefineMesh.from_coarse(cf.V, cf.F, cf.sides)
+    refiner = Refiner(mesh, fs.pyramid, cf.exterior_V, cf.exterior_F, params,
+                      np.random.default_rng(ctx.cfg["seed"]))
+    snaps = Snapshots() if ctx.cfg["refine"]["snapshots"] else None
+    if snaps is not None:
+        snaps.add(refiner)
+    with ctx.bar(params.iterations, "refine") as bar:
+        def progress(it, r):
+            if snaps is not None:
+                snaps.add(r)
+            bar.set_postfix_str(f"{len(r.mesh.F)} triangles")
+            bar.update()
+        log = refiner.run(progress)
+    ctx.products["refined"] = mesh
+
+    write_ply(ctx.path("refined/fracture_surface.ply"), mesh.V, mesh.F,
+              face_data={"side0": mesh.sides[:, 0].astype(np.int32), "side1": mesh.sides[:, 1].astype(np.int32)})
+    W = mesh.tree_matrix()
+    empty = np.zeros((0, 3))
+    tree = dict(
+        n_coarse=np.int64(mesh.n_coarse),
+        parents=np.concatenate(mesh.parents) if mesh.parents else empty.astype(np.int64),
+        weights=np.concatenate(mesh.weights) if mesh.weights else empty,
+        created=np.concatenate(mesh.created) if mesh.created else empty,
+        map_data=W.data, map_indices=W.indices.astype(np.int64), map_indptr=W.indptr.astype(np.int64),
+        map_shape=np.array(W.shape, np.int64),
+    )
+    _save_npz(ctx, "refined/tree.npz", tree)
+    if snaps is not None:
+        snaps.save(ctx, "refined/iterations")
+
+    crossings = self_intersections(mesh.V, mesh.F)
+    ctx.counts.update(refined_fracture_triangles=int(len(mesh.F)), refined_fracture_vertices=int(len(mesh.V)),
+                      iterations=len(log.energy))
+    ctx.stats["refine"] = {
+        "energy": [float(e) for e in log.energy],
+        "mean_move_cells": [float(m) for m in log.mean_move],
+        "triangles": [int(t) for t in log.triangles],
+        "stopped_by_collisions": [int(s) for s in log.stopped],
+        "max_boundary_distance": float(refiner.boundary_error()),
+        "self_intersecting_pairs": int(crossings),
+        "phase_seconds": {k: round(v, 4) for k, v in log.seconds.items()},
+    }
+    if crossings:
+        ctx.notes.append(f"refine: {crossings} pairs of refined triangles intersect")
+
+
+def _save_npz(ctx: RunContext, rel: str, arrays: dict) -> None:
+    """An uncompressed ``.npz`` with fixed member timestamps (same bytes for the same data)."""
+    import zipfile
+
+    with zipfile.ZipFile(ctx.path(rel), "w", zipfile.ZIP_STORED) as z:
+        for name, a in arrays.items():
+            buf = io.BytesIO()
+            np.save(buf, np.ascontiguousarray(a), allow_pickle=False)
+            info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
+            z.writestr(info, buf.getvalue())
+
+
+class Snapshots:
+    """Per-iteration positions, triangles, psi and speed, kept compact (float32, int32)."""
+
+    def __init__(self):
+        self.V, self.F, self.psi, self.speed = [], [], [], []
+        self.energy = []
+
+    def add(self, r: Refiner) -> None:
+        m = r.mesh
+        self.V.append(m.V.astype(np.float32))
+        self.F.append(m.F.astype(np.int32))
+        self.psi.append(r.pyramid.value(m.V).astype(np.float32))
+        speed = np.linalg.norm(r.velocity, axis=1) if len(r.velocity) == len(m.V) else np.zeros(len(m.V))
+        self.speed.append(speed.astype(np.float32))
+
+    def save(self, ctx: RunContext, stem: str) -> None:
+        nv = np.cumsum([0] + [len(v) for v in self.V])
+        nf = np.cumsum([0] + [len(f) for f in self.F])
+        ctx.save_array(f"{stem}_positions.npy", np.concatenate(self.V))
+        ctx.save_array(f"{stem}_faces.npy", np.concatenate(self.F))
+        ctx.save_array(f"{stem}_psi.npy", np.concatenate(self.psi))
+        ctx.save_array(f"{stem}_speed.npy", np.concatenate(self.speed))
+        ctx.save_json(f"{stem}.json", {"vertex_offsets": nv.tolist(), "face_offsets": nf.tolist(),
+                                       "snapshots": len(self.V)})
+
+
+def load_snapshots(run_dir, stem: str = "refined/iterations") -> list[dict]:
+    """The snapshots of a run: per iteration a dict of positions, faces, psi, speed."""
+    import json
+    from pathlib import Path
+
+    base = Path(run_dir) / stem
+    meta = json.loads(base.with_suffix(".json").read_text())
+    arrays = {k: np.load(f"{base}_{k}.npy") for k in ("positions", "faces", "psi", "speed")}
+    nv, nf = meta["vertex_offsets"], meta["face_offsets"]
+    return [{"positions": arrays["positions"][nv[i]:nv[i + 1]], "faces": arrays["faces"][nf[i]:nf[i + 1]],
+             "psi": arrays["psi"][nv[i]:nv[i + 1]], "speed": arrays["speed"][nv[i]:nv[i + 1]]}
+            for i in range(meta["snapshots"])]

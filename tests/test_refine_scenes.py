@@ -1,0 +1,83 @@
+"""Refinement on the five built-in scenes and the Blender sample (the refine stage end to end)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from conftest import CONFIGS
+
+from fields.build import build_fields
+from fracture import runner
+from fracture.components import label_components
+from fracture.config import load_config
+from fracture.plyio import read_ply
+from fracture.refine.collide import self_intersections
+from fracture.refine.engine import RefineParams, Refiner
+from fracture.refine.mesh import RefineMesh
+from fracture.scenes import build_scene
+from fracture.stages.refine import load_snapshots
+
+SHARED = CONFIGS.parents[1] / "shared" / "data" / "blender_cellfracture_cube8"
+CASES = ["bunny", "branch", "wall",
+         pytest.param("clay", marks=pytest.mark.xfail(strict=True, reason="known defect: after refinement a volumetric "
+                                                                          "flood fill finds clay components joined")),
+         "jello",
+         pytest.param("blender_cube8", marks=pytest.mark.xfail(strict=True, reason="known defect: boundary vertices "
+                                                                                  "held by collisions end off B"))]
+
+
+@pytest.mark.parametrize("name", CASES)
+def test_refined_surface_is_clean_on_b_and_separates_the_components(name, tmp_path):
+    if name == "blender_cube8" and not SHARED.is_dir():
+        pytest.skip("the Blender sample is not beside the repository")
+    over = ["refine.max_triangles=6000", "refine.iterations=8"]
+    if name != "blender_cube8":
+        over.append("input.frames=8")
+    cfg = load_config(CONFIGS / f"{name}.yaml", over)
+    out = runner.run(cfg, tmp_path / "run", until="refine", progress=False)
+    manifest = json.loads((out / "manifest.json").read_text())
+    stats, counts = manifest["stats"]["refine"], manifest["counts"]
+    assert counts["refined_fracture_triangles"] > counts["coarse_fracture_triangles"]
+    assert 1 <= counts["iterations"] <= 8 and len(stats["energy"]) == counts["iterations"]
+    assert stats["self_intersecting_pairs"] == 0
+    assert stats["max_boundary_distance"] < 1e-6
+    assert "seconds" in manifest["stages"]["refine"]
+
+    V, F, _, face = read_ply(out / "refined" / "fracture_surface.ply")
+    assert self_intersections(V, F) == 0  # recounted from the file
+    sides = np.column_stack([face["side0"], face["side1"]])
+    assert (sides[:, 0] != sides[:, 1]).all()
+    # every component still separated from its neighbours: a volumetric flood
+    # fill of B cut by the refined surface finds the same components
+    BV, BF = read_ply(out / "coarse" / "exterior.ply")[:2]
+    _, _, n = label_components(BV, BF, V, F, resolution=160)
+    assert n == counts["components"]
+
+    snaps = load_snapshots(out)
+    assert len(snaps) == counts["iterations"] + 1
+    assert len(snaps[-1]["faces"]) == len(F) and snaps[0]["faces"].max() < len(snaps[0]["positions"])
+
+
+@pytest.mark.parametrize("name", ["wall", "branch"])
+def test_the_tree_reproduces_every_vertex_when_nothing_moves(name):
+    cf = build_scene(name, 0, 8)
+    cfg = load_config(CONFIGS / f"{name}.yaml", ["input.frames=8"])
+    fs = build_fields(cf.exterior_V, cf.V, cf.F, resolution=cfg["grid"]["resolution"],
+                      padding=cfg["grid"]["padding"], layers=cfg["strength"]["layers"], seed=0, normalize=True,
+                      stress_length=cfg["stress"]["length"], strength_weight=cfg["psi"]["strength_weight"],
+                      stress_weight=cfg["psi"]["stress_weight"], levels=cfg["pyramid"]["levels"],
+                      sigma=cfg["pyramid"]["sigma"])
+    mesh = RefineMesh.from_coarse(cf.V, cf.F, cf.sides)
+    r = Refiner(mesh, fs.pyramid, cf.exterior_V, cf.exterior_F, RefineParams(max_triangles=8000),
+                np.random.default_rng(0))
+    for _ in range(4):  # splits only: the flow's moves are left out
+        table = r.edges()
+        v, _ = r._velocity(table)
+        r.remesh(table, v, r._step_size(v))
+    assert len(mesh.F) > 4 * len(cf.F)
+    W = mesh.tree_matrix()
+    assert np.allclose(np.asarray(W.sum(axis=1)).ravel(), 1.0) and W.min() >= 0
+    assert np.allclose(W @ mesh.V[: mesh.n_coarse], mesh.V)
+    assert np.allclose(np.concatenate(mesh.created), mesh.V[mesh.n_coarse:])
