@@ -48,3 +48,17 @@ def test_flips_respect_junctions_and_component_changes():
     V3 = np.vstack([V, [0.5, 0, 1]])
     F3 = np.vstack([F, [0, 1, 4]])
     assert flip_edges(V3, F3, np.array([[0, 1], [0, 1], [1, 0]])) == 0
+
+
+def test_safe_flips_flip_like_plain_ones_when_nothing_intersects():
+    rng = np.random.default_rng(2)
+    P = rng.random((60, 2))
+    V = np.column_stack([P, 0.01 * np.sin(5 * P[:, 0])])
+    F = Delaunay(P * [1.0, 8.0]).simplices.astype(np.int64)  # poor for the points themselves
+    F = np.where((np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])[:, 2] < 0)[:, None], F[:, ::-1], F)
+    sides = np.zeros((len(F), 2), np.int64)
+    plain, safe = F.copy(), F.copy()
+    n = flip_edges(V, plain, sides, max_passes=3)
+    assert n > 0
+    assert flip_edges(V, safe, sides, max_passes=3, safe=True) == n
+    assert np.array_equal(plain, safe)

@@ -20,12 +20,7 @@ from fracture.scenes import build_scene
 from fracture.stages.refine import load_snapshots
 
 SHARED = CONFIGS.parents[1] / "shared" / "data" / "blender_cellfracture_cube8"
-CASES = ["bunny", "branch", "wall",
-         pytest.param("clay", marks=pytest.mark.xfail(strict=True, reason="known defect: after refinement a volumetric "
-                                                                          "flood fill finds clay components joined")),
-         "jello",
-         pytest.param("blender_cube8", marks=pytest.mark.xfail(strict=True, reason="known defect: boundary vertices "
-                                                                                  "held by collisions end off B"))]
+CASES = ["bunny", "branch", "wall", "clay", "jello", "blender_cube8"]
 
 
 @pytest.mark.parametrize("name", CASES)

@@ -87,16 +87,20 @@ def _flip_pass(V, F, sides, eid, count, first, second, start, hi, row, pairs, do
 
 @numba.njit(cache=True)
 def _flip(V, F, sides, max_passes, pairs):
+    """Up to ``max_passes`` passes; the flipped triangle pairs go to ``pairs`` (room for m // 2 + 1 per pass)."""
     total = 0
     for _ in range(max_passes):
         eid, count, first, second, start, hi, row = _edge_table(F, V.shape[0])
-        if total + count.shape[0] > pairs.shape[0]:
-            break
         flipped = _flip_pass(V, F, sides, eid, count, first, second, start, hi, row, pairs, total)
         total += flipped
         if flipped == 0:
             break
     return total
+
+
+def _pair_buffer(m: int, passes: int) -> np.ndarray:
+    # a pass flips triangles that share none: at most m // 2 pairs
+    return np.empty((passes * (m // 2 + 1), 2), np.int64)
 
 
 def flip_edges(V: np.ndarray, F: np.ndarray, sides: np.ndarray, max_passes: int = 8,
@@ -113,9 +117,9 @@ def flip_edges(V: np.ndarray, F: np.ndarray, sides: np.ndarray, max_passes: int 
     V = np.ascontiguousarray(V, np.float64)
     sides = np.ascontiguousarray(sides, np.int64)
     if not safe:
-        return int(_flip(V, F, sides, int(max_passes), np.empty((max_passes * len(F), 2), np.int64)))
+        return int(_flip(V, F, sides, int(max_passes), _pair_buffer(len(F), max_passes)))
     total = 0
-    pairs = np.empty((len(F), 2), np.int64)
+    pairs = _pair_buffer(len(F), 1)
     for _ in range(max_passes):  # one pass at a time: a triangle takes part in one flip per pass
         before = F.copy()
         flipped = int(_flip(V, F, sides, 1, pairs))
