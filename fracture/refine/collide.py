@@ -15,8 +15,8 @@ no Python loop). Every triangle and edge goes into the cells its swept box
 covers; a pair is tested once, in the cell holding the lower corner of the
 intersection of the two boxes. libigl and pymeshlab answer static questions
 only (``pymeshlab`` selects self-intersecting faces of one mesh state), so
-the moving test is written here; the static count :func:`self_intersections`
-is cross-checked against pymeshlab in the tests.
+the moving test is written here, and the static count :func:`self_intersections`
+shares its grid (the tests check it against an all-pairs search).
 """
 
 from __future__ import annotations
@@ -378,42 +378,34 @@ def _table_size(k):
 
 
 @numba.njit(cache=True)
-def _vertex_triangle_pairs(X0, X1, F, qv, vlo, vhi, tlo, thi, grid, inv, mask, eta2, stop):
-    """Query vertices ``qv`` against the triangle grid; marks colliding pairs in ``stop``."""
-    times = np.empty(4)
-    buf = np.empty(256, np.int64)
-    hits = 0
-    for v in qv:
-        buf, k = _gather(vlo[v], vhi[v], 0, grid, tlo, thi, inv, mask, buf)
-        for i in range(k):
-            f = buf[i]
-            a, b, c = F[f, 0], F[f, 1], F[f, 2]
-            if v == a or v == b or v == c:
-                continue
-            if _vertex_triangle_hit(_pt(X0, v), _pt(X1, v), _pt(X0, a), _pt(X1, a),
-                                    _pt(X0, b), _pt(X1, b), _pt(X0, c), _pt(X1, c), eta2, times):
-                hits += 1
-                stop[v] = stop[a] = stop[b] = stop[c] = True
-    return hits
+def _vertex_triangle_pair(X0, X1, F, v, f, eta2, times, stop):
+    """Test vertex v against triangle f (not one of its corners); marks a colliding pair in ``stop``."""
+    a, b, c = F[f, 0], F[f, 1], F[f, 2]
+    if v == a or v == b or v == c:
+        return 0
+    if not _vertex_triangle_hit(_pt(X0, v), _pt(X1, v), _pt(X0, a), _pt(X1, a),
+                                _pt(X0, b), _pt(X1, b), _pt(X0, c), _pt(X1, c), eta2, times):
+        return 0
+    stop[v] = stop[a] = stop[b] = stop[c] = True
+    return 1
 
 
 @numba.njit(cache=True)
-def _triangle_vertex_pairs(X0, X1, F, qt, vlo, vhi, tlo, thi, grid, inv, mask, eta2, stop):
-    """Query triangles ``qt`` against the vertex grid."""
+def _vertex_triangle_pairs(X0, X1, F, query, by_vertex, vlo, vhi, tlo, thi, grid, inv, mask, eta2, stop):
+    """Vertex-triangle pairs of the elements ``query``: vertices against the triangle grid
+    (``by_vertex``), or triangles against the vertex grid; marks colliding pairs in ``stop``."""
     times = np.empty(4)
     buf = np.empty(256, np.int64)
     hits = 0
-    for f in qt:
-        a, b, c = F[f, 0], F[f, 1], F[f, 2]
-        buf, k = _gather(tlo[f], thi[f], 0, grid, vlo, vhi, inv, mask, buf)
-        for i in range(k):
-            v = buf[i]
-            if v == a or v == b or v == c:
-                continue
-            if _vertex_triangle_hit(_pt(X0, v), _pt(X1, v), _pt(X0, a), _pt(X1, a),
-                                    _pt(X0, b), _pt(X1, b), _pt(X0, c), _pt(X1, c), eta2, times):
-                hits += 1
-                stop[v] = stop[a] = stop[b] = stop[c] = True
+    for q in query:
+        if by_vertex:
+            buf, k = _gather(vlo[q], vhi[q], 0, grid, tlo, thi, inv, mask, buf)
+            for i in range(k):
+                hits += _vertex_triangle_pair(X0, X1, F, q, buf[i], eta2, times, stop)
+        else:
+            buf, k = _gather(tlo[q], thi[q], 0, grid, vlo, vhi, inv, mask, buf)
+            for i in range(k):
+                hits += _vertex_triangle_pair(X0, X1, F, buf[i], q, eta2, times, stop)
     return hits
 
 
@@ -499,10 +491,10 @@ def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, E: np.ndarray
     first = None
     for _ in range(max_rounds):
         stop = np.zeros(n, bool)
-        pairs = _vertex_triangle_pairs(X0, X1, F, qv, vlo, vhi, tlo, thi, tgrid, inv, mask, eta2, stop)
+        pairs = _vertex_triangle_pairs(X0, X1, F, qv, True, vlo, vhi, tlo, thi, tgrid, inv, mask, eta2, stop)
         if len(qt):
             vgrid = _grid(vlo, vhi, inv, mask) if vgrid is None else vgrid
-            pairs += _triangle_vertex_pairs(X0, X1, F, qt, vlo, vhi, tlo, thi, vgrid, inv, mask, eta2, stop)
+            pairs += _vertex_triangle_pairs(X0, X1, F, qt, False, vlo, vhi, tlo, thi, vgrid, inv, mask, eta2, stop)
         pairs += _edge_edge_pairs(X0, X1, E, qe, elo, ehi, egrid, inv, mask, eta2, first is None, stop)
         first = pairs if first is None else first
         stop &= ~stopped  # pairs of stopped vertices only are at rest: contact they had at X0
@@ -517,34 +509,6 @@ def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, E: np.ndarray
     X1[:] = X0
     stopped[:] = True
     return stopped, first
-
-
-@numba.njit(cache=True)
-def _faces_intersecting(X, F, query, grid, lo, hi, inv, mask, eps):
-    """Mask over ``query`` of the triangles that meet another triangle (static)."""
-    out = np.zeros(query.shape[0], np.bool_)
-    buf = np.empty(256, np.int64)
-    for i in range(query.shape[0]):
-        f = query[i]
-        buf, k = _gather(lo[f], hi[f], 0, grid, lo, hi, inv, mask, buf)
-        for j in range(k):
-            if buf[j] != f and _triangles_intersect(X, F, f, buf[j], eps):
-                out[i] = True
-                break
-    return out
-
-
-def faces_intersecting(V: np.ndarray, F: np.ndarray, query: np.ndarray) -> np.ndarray:
-    """Which of the triangles ``query`` meet another triangle of ``F`` (other than at shared vertices or edges)."""
-    V = np.ascontiguousarray(V, np.float64)
-    F = np.ascontiguousarray(F, np.int64)
-    query = np.ascontiguousarray(query, np.int64)
-    if not len(query):
-        return np.zeros(0, bool)
-    inv = 1.0 / _cell_size(V, F[:, :2])
-    mask = _table_size(len(F)) - 1
-    lo, hi = _swept_boxes(V, V, F, 0.0)
-    return _faces_intersecting(V, F, query, _grid(lo, hi, inv, mask), lo, hi, inv, mask, _EPS)
 
 
 # -- static self-intersections ---------------------------------------------------------------
@@ -611,25 +575,45 @@ def _triangles_intersect(X, F, f, g, eps):
 
 
 @numba.njit(cache=True)
-def _count_intersections(X, F, cell, mask, eps, first):
-    """Number of intersecting pairs; the first ``len(first)`` of them are written to ``first``."""
-    inv = 1.0 / cell
+def _intersections(X, F, query, all_pairs, inv, mask, eps, first):
+    """Static triangle-triangle intersections of the triangles ``query`` with all others.
+
+    With ``all_pairs`` (``query`` is every triangle) each pair is counted once
+    (a triangle looks at its own level and coarser ones; of two on one level
+    the lower index asks). Returns the pair count and a mask over ``query`` of
+    the triangles that meet another; the first ``len(first)`` pairs are written
+    to ``first``.
+    """
     lo, hi = _swept_boxes(X, X, F, 0.0)
     grid = _grid(lo, hi, inv, mask)
     level = grid[2]
     buf = np.empty(256, np.int64)
     count = 0
-    for f in range(F.shape[0]):
-        buf, k = _gather(lo[f], hi[f], level[f], grid, lo, hi, inv, mask, buf)
+    hit = np.zeros(query.shape[0], np.bool_)
+    for i in range(query.shape[0]):
+        f = query[i]
+        buf, k = _gather(lo[f], hi[f], level[f] if all_pairs else 0, grid, lo, hi, inv, mask, buf)
         for j in range(k):
             g = buf[j]
-            if g == f or (level[g] == level[f] and g < f):
+            if g == f or (all_pairs and level[g] == level[f] and g < f):
                 continue
             if _triangles_intersect(X, F, f, g, eps):
                 if count < first.shape[0]:
                     first[count, 0], first[count, 1] = f, g
                 count += 1
-    return count
+                hit[i] = True
+    return count, hit
+
+
+def _static(V, F, query, all_pairs, report=0):
+    V = np.ascontiguousarray(V, np.float64)
+    F = np.ascontiguousarray(F, np.int64)
+    first = np.zeros((report, 2), np.int64)
+    if len(F) < 2 or not len(query):
+        return 0, np.zeros(len(query), bool), first[:0]
+    count, hit = _intersections(V, F, np.ascontiguousarray(query, np.int64), all_pairs,
+                                1.0 / _cell_size(V, F[:, :2]), _table_size(len(F)) - 1, _EPS, first)
+    return int(count), hit, first[:min(count, report)]
 
 
 def self_intersections(V: np.ndarray, F: np.ndarray, report: int = 0) -> int | tuple[int, np.ndarray]:
@@ -637,8 +621,10 @@ def self_intersections(V: np.ndarray, F: np.ndarray, report: int = 0) -> int | t
 
     With ``report > 0`` also returns up to that many of the pairs, ``(k, 2)``.
     """
-    V = np.ascontiguousarray(V, np.float64)
-    F = np.ascontiguousarray(F, np.int64)
-    first = np.zeros((report, 2), np.int64)
-    count = int(_count_intersections(V, F, _cell_size(V, F[:, :2]), _table_size(len(F)) - 1, _EPS, first)) if len(F) > 1 else 0
-    return (count, first[:min(count, report)]) if report else count
+    count, _, pairs = _static(V, F, np.arange(len(F)), True, report)
+    return (count, pairs) if report else count
+
+
+def faces_intersecting(V: np.ndarray, F: np.ndarray, query: np.ndarray) -> np.ndarray:
+    """Which of the triangles ``query`` meet another triangle of ``F`` (other than at shared vertices or edges)."""
+    return _static(V, F, query, False)[1]
