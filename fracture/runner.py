@@ -85,6 +85,17 @@ class RunContext:
         with open(self.path(rel), "wb") as f:
             np.save(f, np.ascontiguousarray(array), allow_pickle=False)
 
+    def save_npz(self, rel: str, arrays: dict[str, np.ndarray]) -> None:
+        """An uncompressed ``.npz`` with fixed member timestamps (byte-identical for identical arrays)."""
+        import io
+        import zipfile
+
+        with zipfile.ZipFile(self.path(rel), "w", zipfile.ZIP_STORED) as z:
+            for name, a in arrays.items():
+                buf = io.BytesIO()
+                np.save(buf, np.ascontiguousarray(a), allow_pickle=False)
+                z.writestr(zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0)), buf.getvalue())
+
     def save_json(self, rel: str, data: Any) -> None:
         self.path(rel).write_text(json.dumps(data, indent=2, sort_keys=True) + "\n", encoding="utf-8")
 

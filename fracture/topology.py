@@ -27,13 +27,6 @@ def edge_keys(E: np.ndarray, n: int) -> np.ndarray:
     return np.minimum(E[:, 0], E[:, 1]) * n + np.maximum(E[:, 0], E[:, 1])
 
 
-def edge_table(F: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """For every directed triangle edge (row ``3 f + k``): its undirected key and the number of triangles on it."""
-    key = edge_keys(directed_edges(F), n)
-    _, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
-    return key, counts[inverse]
-
-
 def unique_edges(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Undirected edges (sorted vertex pairs, in lexicographic order) and the number of triangles on each."""
     E = np.sort(directed_edges(F), axis=1).astype(np.int64)
@@ -72,14 +65,15 @@ def scatter_add(index: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
     return np.stack([np.bincount(index, values[:, c], minlength=n) for c in range(values.shape[1])], 1)
 
 
-def edge_outward(V: np.ndarray, F: np.ndarray, E: np.ndarray, strict: bool = True) -> np.ndarray:
+def edge_outward(V: np.ndarray, F: np.ndarray, E: np.ndarray, strict: bool = True,
+                 face: np.ndarray | None = None) -> np.ndarray:
     """Unit directions ``(k, 3)`` pointing away from boundary edges ``E``, in the plane of their triangle.
 
     Edges are oriented as in their triangle (:func:`boundary_edges`). This is
     a cut's separation direction at its front. Degenerate triangles raise
     ``ValueError``, or give zero vectors when not ``strict``.
     """
-    T = F[directed_edge_face(F, E)]
+    T = F[directed_edge_face(F, E) if face is None else face]
     n = np.cross(V[T[:, 1]] - V[T[:, 0]], V[T[:, 2]] - V[T[:, 0]])
     d = np.cross(V[E[:, 1]] - V[E[:, 0]], n)
     third = T.sum(axis=1) - E.sum(axis=1)
@@ -91,10 +85,17 @@ def edge_outward(V: np.ndarray, F: np.ndarray, E: np.ndarray, strict: bool = Tru
     return d / np.maximum(length, 1e-300)
 
 
-def boundary_conormals(V: np.ndarray, F: np.ndarray, E: np.ndarray, strict: bool = True
-                       ) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices of boundary edges ``E`` and the unit outward direction at each (mean of their edges')."""
-    d = edge_outward(V, F, E, strict)
+def boundary_conormals(V: np.ndarray, F: np.ndarray, E: np.ndarray, strict: bool = True,
+                       face: np.ndarray | None = None, by_length: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices of boundary edges ``E`` and the unit outward direction at each (mean of their edges').
+
+    ``face`` (the triangle of each edge) saves the lookup when the caller knows
+    it. ``by_length`` weights each edge by its length: the direction of the
+    area gradient at a boundary vertex (a short sliver edge counts little).
+    """
+    d = edge_outward(V, F, E, strict, face)
+    if by_length:
+        d *= np.linalg.norm(V[E[:, 1]] - V[E[:, 0]], axis=1)[:, None]
     verts = np.unique(E)
     out = scatter_add(np.searchsorted(verts, E.T.ravel()), np.concatenate([d, d]), len(verts))
     return verts, out / np.maximum(np.linalg.norm(out, axis=1), 1e-300)[:, None]

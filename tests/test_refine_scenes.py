@@ -69,8 +69,8 @@ def test_the_tree_reproduces_every_vertex_when_nothing_moves(name):
                 np.random.default_rng(0))
     for _ in range(4):  # splits only: the flow's moves are left out
         table = r.edges()
-        v, _ = r._velocity(table)
-        r.remesh(table, v, r._step_size(v))
+        v, psi, _ = r._velocity(table)
+        r.remesh(table, v, psi, r._step_size(v, np.ones(len(mesh.V), bool)))
     assert len(mesh.F) > 4 * len(cf.F)
     W = mesh.tree_matrix()
     assert np.allclose(np.asarray(W.sum(axis=1)).ravel(), 1.0) and W.min() >= 0

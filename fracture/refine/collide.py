@@ -10,10 +10,12 @@ every colliding pair are stopped (``X1 = X0``) and the test repeats until no
 pair collides: a surface that does not intersect itself at ``X0`` does not
 at ``X1``.
 
-Broad phase: a uniform grid hashed into a table of buckets (a counting sort,
-no Python loop). Every triangle and edge goes into the cells its swept box
-covers; a pair is tested once, in the cell holding the lower corner of the
-intersection of the two boxes. libigl and pymeshlab answer static questions
+Broad phase: a hierarchical grid hashed into a table of buckets (a counting
+sort, no Python loop). Every triangle and edge goes into the cells its swept
+box covers, on the level where that is at most 2 x 2 x 2 cells; a pair is
+tested once, in the cell holding the lower corner of the intersection of the
+two boxes. Pairs further apart than their relative move are dropped before
+the cubic. libigl and pymeshlab answer static questions
 only (``pymeshlab`` selects self-intersecting faces of one mesh state), so
 the moving test is written here, and the static count :func:`self_intersections`
 shares its grid (the tests check it against an all-pairs search).

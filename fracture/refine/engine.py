@@ -40,7 +40,7 @@ from fracture.refine.flips import flip_edges
 from fracture.refine.flow import energy, sample_displacement, velocity
 from fracture.refine.kernels import EdgeTable, edge_table, face_geometry, limit_moves
 from fracture.refine.mesh import RefineMesh
-from fracture.topology import face_frames, scatter_add
+from fracture.topology import boundary_conormals, face_frames
 
 
 @dataclass
@@ -109,6 +109,8 @@ class Refiner:
         self.dt = 0.0
         self.velocity = np.zeros_like(mesh.V)  # of the last step, per vertex (for snapshots)
         self.hold = np.zeros(len(mesh.V), np.int64)  # iterations a stopped vertex stays stopped
+        self.psi = pyramid.value(mesh.V)  # unshifted psi at the vertices, after the last iteration
+        self.boundary = np.zeros(0, np.int64)  # boundary vertices of the last iteration
 
     def field(self, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         psi, grad = self.pyramid.value_and_gradient(P)
@@ -140,13 +142,16 @@ class Refiner:
         V[ids] = C
         return float(np.sqrt(d2.max()))
 
-    def boundary_error(self) -> float:
-        """Largest distance of a boundary vertex from B."""
-        ids = self.boundary_vertices()
+    def boundary_error(self, ids: np.ndarray | None = None) -> float:
+        """Largest distance of the boundary vertices (or of ``ids``) from B."""
+        ids = self.boundary_vertices() if ids is None else ids
         return float(np.sqrt(self.B.closest(self.mesh.V[ids])[0].max())) if len(ids) else 0.0
 
-    def _velocity(self, table: EdgeTable) -> tuple[np.ndarray, np.ndarray]:
-        """Eq. 3 at every vertex with the boundary constraint; returns it and the boundary vertices."""
+    def _velocity(self, table: EdgeTable) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Eq. 3 at every vertex with the boundary constraint.
+
+        Returns the velocity, the shifted psi at the vertices and the boundary vertices.
+        """
         m = self.mesh
         psi, grad = self.field(m.V)
         v = velocity(m.V, m.F, psi, grad)
@@ -156,29 +161,27 @@ class Refiner:
         # not normal to B) and the part normal to B (projection undoes it)
         rows = np.flatnonzero(table.row_count == 1)
         if not len(rows):
-            return v, np.zeros(0, np.int64)
+            return v, psi, np.zeros(0, np.int64)
         f, k = rows // 3, rows % 3
-        a, b = m.F[f, k], m.F[f, (k + 1) % 3]
-        _, N = face_geometry(m.V, m.F[f])
-        out = np.cross(m.V[b] - m.V[a], N)  # in the triangle's plane, away from it (counter-clockwise)
-        ends = np.concatenate([a, b])
-        verts, slot = np.unique(ends, return_inverse=True)
-        c = scatter_add(slot, np.concatenate([out, out]), len(verts))
-        c /= np.maximum(np.linalg.norm(c, axis=1), 1e-300)[:, None]
+        E = np.stack([m.F[f, k], m.F[f, (k + 1) % 3]], 1)
+        verts, c = boundary_conormals(m.V, m.F, E, strict=False, face=f, by_length=True)
         v[verts] -= np.einsum("ij,ij->i", v[verts], c)[:, None] * c
         _, tri, _ = self.B.closest(m.V[verts])
         nb = self.B_normals[tri]
         v[verts] -= np.einsum("ij,ij->i", v[verts], nb)[:, None] * nb
-        return v, verts
+        return v, psi, verts
 
     # -- one iteration --------------------------------------------------------------------
-    def _step_size(self, v: np.ndarray) -> float:
-        speed = np.linalg.norm(v[np.unique(self.mesh.F)] if len(self.mesh.F) else v, axis=1)
+    def _step_size(self, v: np.ndarray, used: np.ndarray) -> float:
+        speed = np.linalg.norm(v[used], axis=1)
         typical = max(float(np.median(speed)) if len(speed) else 0.0, self.slow)
         return self.scale * self.params.step * self.h / typical
 
-    def remesh(self, table: EdgeTable, v: np.ndarray, dt: float) -> int:
-        """One round of sampled splits; returns the number of new vertices."""
+    def remesh(self, table: EdgeTable, v: np.ndarray, psi: np.ndarray, dt: float) -> int:
+        """One round of sampled splits; returns the number of new vertices.
+
+        ``v`` and ``psi`` (shifted) are the velocity and psi at the vertices.
+        """
         m, p = self.mesh, self.params
         if len(m.F) >= p.max_triangles:
             return 0
@@ -200,7 +203,7 @@ class Refiner:
         # too close to a corner: skip
         near = np.einsum("fkc,fkc->fk", T - P[:, None], T - P[:, None]).min(axis=1) < (p.min_edge * self.h) ** 2
         psi_P, grad_P = self.field(P)
-        psi_T = self.field(m.V)[0][m.F]
+        psi_T = psi[m.F]
         # how far the sample leaves its triangle: its own move minus the move
         # the triangle's corners give it by linear interpolation
         d = sample_displacement(P, T, psi_P, grad_P, psi_T, dt)
@@ -253,13 +256,15 @@ class Refiner:
         m, p, log = self.mesh, self.params, self.log
         clock = time.perf_counter()
         table = self.edges()
-        v, _ = self._velocity(table)
-        self.dt = dt = self._step_size(v)
+        v, psi, boundary = self._velocity(table)
+        used = np.bincount(m.F.ravel(), minlength=len(m.V)) > 0
+        self.dt = dt = self._step_size(v, used)
         clock = log.tick("flow", clock)
-        if self.remesh(table, v, dt):
+        if self.remesh(table, v, psi, dt):
             clock = log.tick("remesh", clock)
             table = self.edges()
-            v, _ = self._velocity(table)
+            v, _, boundary = self._velocity(table)
+            used = np.r_[used, np.ones(len(m.V) - len(used), bool)]  # new vertices are on triangles
             clock = log.tick("flow", clock)
         self.velocity = v
         d = dt * v
@@ -271,7 +276,7 @@ class Refiner:
         self.hold = np.maximum(self.hold - 1, 0)
         limit_moves(m.V, m.F, d, p.max_move, self.h)
         X1 = m.V + d
-        boundary = self.boundary_vertices(table)
+        self.boundary = boundary  # flips keep the boundary: valid until the next splits
         self.project_to_exterior(boundary, X1)
         clock = log.tick("boundary", clock)
         stopped, _ = stop_collisions(m.V, X1, m.F, self.unique_edges(table), p.thickness * self.h)
@@ -282,7 +287,7 @@ class Refiner:
         flip_edges(m.V, m.F, m.sides, max_passes=3, safe=True)
         clock = log.tick("flips", clock)
         log.stopped.append(int(stopped.sum()))
-        return float(moved[np.unique(m.F)].mean() / self.h) if len(m.F) else 0.0
+        return float(moved[used].mean() / self.h) if used.any() else 0.0
 
     def run(self, callback=None) -> IterationLog:
         """Iterate until the mean move is below ``tolerance`` or ``iterations`` are done.
@@ -293,7 +298,8 @@ class Refiner:
         for it in range(p.iterations):
             move = self.iterate()
             clock = time.perf_counter()
-            E = energy(self.mesh.V, self.mesh.F, self.pyramid.value(self.mesh.V))  # E(S) of the unshifted psi
+            self.psi = self.pyramid.value(self.mesh.V)  # unshifted, at the current vertices
+            E = energy(self.mesh.V, self.mesh.F, self.psi)
             if self.log.energy and E > self.log.energy[-1]:
                 self.scale *= 0.5
             else:
@@ -301,7 +307,7 @@ class Refiner:
             self.log.energy.append(E)
             self.log.mean_move.append(move)
             self.log.triangles.append(len(self.mesh.F))
-            self.log.boundary_error.append(self.boundary_error())
+            self.log.boundary_error.append(self.boundary_error(self.boundary))
             self.log.tick("bookkeeping", clock)
             if callback is not None:
                 callback(it, self)

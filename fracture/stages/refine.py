@@ -15,7 +15,8 @@ Outputs (material space):
 
 from __future__ import annotations
 
-import io
+import json
+from pathlib import Path
 
 import numpy as np
 
@@ -63,7 +64,7 @@ def refine_stage(ctx: RunContext) -> None:
         map_data=W.data, map_indices=W.indices.astype(np.int64), map_indptr=W.indptr.astype(np.int64),
         map_shape=np.array(W.shape, np.int64),
     )
-    _save_npz(ctx, "refined/tree.npz", tree)
+    ctx.save_npz("refined/tree.npz", tree)
     if snaps is not None:
         snaps.save(ctx, "refined/iterations")
 
@@ -83,32 +84,18 @@ def refine_stage(ctx: RunContext) -> None:
         ctx.notes.append(f"refine: {crossings} pairs of refined triangles intersect")
 
 
-def _save_npz(ctx: RunContext, rel: str, arrays: dict) -> None:
-    """An uncompressed ``.npz`` with fixed member timestamps (same bytes for the same data)."""
-    import zipfile
-
-    with zipfile.ZipFile(ctx.path(rel), "w", zipfile.ZIP_STORED) as z:
-        for name, a in arrays.items():
-            buf = io.BytesIO()
-            np.save(buf, np.ascontiguousarray(a), allow_pickle=False)
-            info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
-            z.writestr(info, buf.getvalue())
-
-
 class Snapshots:
     """Per-iteration positions, triangles, psi and speed, kept compact (float32, int32)."""
 
     def __init__(self):
         self.V, self.F, self.psi, self.speed = [], [], [], []
-        self.energy = []
 
     def add(self, r: Refiner) -> None:
         m = r.mesh
         self.V.append(m.V.astype(np.float32))
         self.F.append(m.F.astype(np.int32))
-        self.psi.append(r.pyramid.value(m.V).astype(np.float32))
-        speed = np.linalg.norm(r.velocity, axis=1) if len(r.velocity) == len(m.V) else np.zeros(len(m.V))
-        self.speed.append(speed.astype(np.float32))
+        self.psi.append(r.psi.astype(np.float32))
+        self.speed.append(np.linalg.norm(r.velocity, axis=1).astype(np.float32))
 
     def save(self, ctx: RunContext, stem: str) -> None:
         nv = np.cumsum([0] + [len(v) for v in self.V])
@@ -123,9 +110,6 @@ class Snapshots:
 
 def load_snapshots(run_dir, stem: str = "refined/iterations") -> list[dict]:
     """The snapshots of a run: per iteration a dict of positions, faces, psi, speed."""
-    import json
-    from pathlib import Path
-
     base = Path(run_dir) / stem
     meta = json.loads(base.with_suffix(".json").read_text())
     arrays = {k: np.load(f"{base}_{k}.npy") for k in ("positions", "faces", "psi", "speed")}
