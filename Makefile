@@ -21,6 +21,7 @@ test: install
 bench: install
 	$(BIN)/python benchmarks/bench_fields.py
 	$(BIN)/python benchmarks/bench_coarse.py
+	$(BIN)/python benchmarks/bench_refine.py
 
 install: system-deps $(STAMP)
 
