@@ -88,6 +88,13 @@ SCHEMA: dict[str, Any] = {
         "hold": Param(3, "int", lo=0, hi=100, doc="iterations a vertex stopped by a collision stays stopped"),
         "snapshots": Param(True, "bool", doc="save every iteration for the viewer (refined/iterations.*)"),
     },
+    "animate": {
+        "obj_frames": Param(True, "bool", doc="write frames/frame_NNNN.obj (one object per piece, for Blender)"),
+        "ply_frames": Param(False, "bool", doc="also write frames/frame_NNNN.ply (all pieces, face property piece)"),
+        "check_samples": Param(20000, "int", lo=0, hi=10_000_000,
+                               doc="random points for the piece overlap check (0: skip)"),
+        "check_intersections": Param(True, "bool", doc="count self-intersecting triangle pairs of every piece"),
+    },
     "preview": {
         "axis": Param(None, "str", choices=("x", "y", "z"), nullable=True,
                       doc="normal of the preview slices; null: the axis with the fewest nodes"),

@@ -1,3 +1,3 @@
 """Pipeline stages; importing this package registers them with the runner."""
 
-from fracture.stages import coarse, fields, refine  # noqa: F401
+from fracture.stages import animate, coarse, fields, refine  # noqa: F401

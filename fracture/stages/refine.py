@@ -38,7 +38,8 @@ def refine_stage(ctx: RunContext) -> None:
     fs = ctx.products["fields"]
     params = refine_params(ctx.cfg)
     mesh = RefineMesh.from_coarse(cf.V, cf.F, cf.sides)
-    refiner = Refiner(mesh, fs.pyramid, cf.exterior_V, cf.exterior_F, params,
+    BV, BF = ctx.products["exterior"]
+    refiner = Refiner(mesh, fs.pyramid, BV, BF, params,
                       np.random.default_rng(ctx.cfg["seed"]))
     snaps = Snapshots() if ctx.cfg["refine"]["snapshots"] else None
     if snaps is not None:

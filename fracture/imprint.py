@@ -1,0 +1,460 @@
+"""Cut the exterior B along the refined fracture surface's boundary (Section 5, Figure 7).
+
+The boundary vertices of the refined surface S lie on B (the refinement
+projects them there), but not on B's vertices, and S's boundary edges cut
+through B's triangles. To merge B and S into closed pieces, both are
+remeshed so that they share that curve exactly:
+
+1. every boundary vertex of S is inserted into B (a 1-to-3 split of the
+   triangle it lies on, an edge split when it lies on an edge, or it snaps
+   to a vertex of B it sits on);
+2. every boundary edge ``(p, q)`` of S is traced on B, from ``p`` to ``q``,
+   in the plane through them that contains B's normal (a surface traversal
+   that approximates the geodesic, as in the paper): each B edge the trace
+   crosses is split at the crossing, so the trace becomes a chain of B edges;
+3. the same crossing points are inserted into S's boundary edge (its triangle
+   becomes a fan), recorded in S's barycentric tree by their arc-length
+   position between ``p`` and ``q``.
+
+Afterwards every boundary edge of S is a cut edge of B, and the two share
+the vertices along it. libigl and pymeshlab have no operation that embeds a
+polyline lying on a mesh into it (booleans need closed operands, and S is
+open and non-manifold), so the insertion is written here on a half-edge map
+of B. It touches only the triangles along the cut.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from fracture.errors import InputError
+from fracture.exterior import Exterior
+from fracture.refine.kernels import edge_table
+from fracture.refine.mesh import RefineMesh
+
+# A point within this barycentric distance of an edge (or two edges) of a B
+# triangle is put on that edge (vertex): no sliver triangles of relative
+# height below it. The point moves by at most this fraction of the height.
+SNAP = 1e-4
+
+# Boundary edges of S are split until their midpoints are this close to B,
+# relative to B's median edge length.
+CHORD = 0.05
+# A triangle of S with every corner on B whose centroid is closer to B than
+# this fraction of its longest edge lies along B (see clip_tangent_triangles).
+TANGENT = 0.05
+
+
+@dataclass
+class Imprint:
+    """B remeshed along S's boundary.
+
+    Attributes
+    ----------
+    V, F : B's vertices and triangles after the insertions (B's own vertices first).
+    to_fracture : (len(V),) int
+        The refined-surface vertex that each B vertex on the cut is, or -1.
+    cut_edges : (k, 2) int
+        B edges along S's boundary (pairs of B vertex ids).
+    cut_faces : (k,) int
+        The triangle of S on each cut edge.
+    origin : (len(F),) int
+        The original B triangle each triangle lies in.
+    """
+
+    V: np.ndarray
+    F: np.ndarray
+    to_fracture: np.ndarray
+    cut_edges: np.ndarray
+    cut_faces: np.ndarray
+    origin: np.ndarray
+
+
+class _Surface:
+    """A closed, oriented triangle mesh under vertex insertion, as a half-edge map.
+
+    ``he[(a, b)]`` is the triangle holding the directed edge ``a -> b``; the
+    triangle across it holds ``b -> a``. Splits rewrite one triangle in place
+    and append the others, so triangle ids stay valid.
+    """
+
+    def __init__(self, V: np.ndarray, F: np.ndarray):
+        self.V = [tuple(v) for v in np.asarray(V, np.float64).tolist()]
+        self.F = [list(f) for f in np.asarray(F, np.int64).tolist()]
+        self.origin = list(range(len(self.F)))
+        self.cover: dict[int, list[int]] = {}
+        a, b, c = np.asarray(F, np.int64).T.tolist()
+        faces = list(range(len(self.F)))
+        self.he = dict(zip(zip(a + b + c, b + c + a), faces * 3))
+        if len(self.he) != 3 * len(self.F):
+            raise InputError("exterior: B has a directed edge twice (it is not an oriented 2-manifold)")
+        self.vface = [0] * len(self.V)
+        for f, (x, y, z) in enumerate(self.F):
+            self.vface[x] = self.vface[y] = self.vface[z] = f
+
+    # -- elementary operations ------------------------------------------------------------
+
+    def _new_face(self, tri, parent):
+        f = len(self.F)
+        self.F.append(tri)
+        o = self.origin[parent]
+        self.origin.append(o)
+        self.cover.setdefault(o, [o]).append(f)
+        return f
+
+    def _set(self, f, tri):
+        self.F[f] = tri
+        a, b, c = tri
+        self.he[(a, b)] = self.he[(b, c)] = self.he[(c, a)] = f
+        self.vface[a] = self.vface[b] = self.vface[c] = f
+
+    def _vertex(self, p):
+        self.V.append(tuple(p))
+        self.vface.append(-1)
+        return len(self.V) - 1
+
+    def split_face(self, f, p):
+        """Insert point ``p`` inside triangle ``f`` (1-to-3); returns the new vertex."""
+        a, b, c = self.F[f]
+        x = self._vertex(p)
+        self._set(f, [a, b, x])
+        self._set(self._new_face([b, c, x], f), [b, c, x])
+        self._set(self._new_face([c, a, x], f), [c, a, x])
+        return x
+
+    def split_edge(self, a, b, p):
+        """Insert point ``p`` on edge ``a - b``, splitting both its triangles; returns the new vertex."""
+        f, g = self.he.pop((a, b)), self.he.pop((b, a))
+        c = self._third(f, a, b)
+        d = self._third(g, b, a)
+        x = self._vertex(p)
+        self._set(f, [a, x, c])
+        self._set(self._new_face([x, b, c], f), [x, b, c])
+        self._set(g, [b, x, d])
+        self._set(self._new_face([x, a, d], g), [x, a, d])
+        return x
+
+    def _third(self, f, a, b):
+        for v in self.F[f]:
+            if v != a and v != b:
+                return v
+        raise AssertionError("degenerate triangle")
+
+    def fan(self, v):
+        """Triangles around vertex ``v``, each rotated to start at ``v``: ``(v, a, b)``."""
+        start = f = self.vface[v]
+        out = []
+        while True:
+            tri = self.F[f]
+            k = tri.index(v)
+            a, b = tri[(k + 1) % 3], tri[(k + 2) % 3]
+            out.append((f, a, b))
+            f = self.he[(v, b)]
+            if f == start or len(out) > 1000:
+                return out
+
+    # -- queries --------------------------------------------------------------------------
+
+    def locate(self, p, f0):
+        """The triangle covering the original triangle ``f0`` that holds ``p``, with ``p``'s barycentrics."""
+        faces = self.cover.get(f0, [f0])
+        T = np.array([[self.V[v] for v in self.F[f]] for f in faces])
+        bary = _barycentric(np.asarray(p)[None], T)
+        best = int(np.argmax(bary.min(axis=1)))
+        return faces[best], bary[best]
+
+
+def _barycentric(p, T):
+    """Barycentric coordinates ``(k, 3)`` of points ``p`` in triangles ``T (k, 3, 3)`` (projected to their planes)."""
+    a, b, c = T[:, 0], T[:, 1], T[:, 2]
+    e1, e2, x = b - a, c - a, p - a
+    d00, d01, d11 = (e1 * e1).sum(1), (e1 * e2).sum(1), (e2 * e2).sum(1)
+    d20, d21 = (x * e1).sum(1), (x * e2).sum(1)
+    den = np.maximum(d00 * d11 - d01 * d01, 1e-300)
+    v = (d11 * d20 - d01 * d21) / den
+    w = (d00 * d21 - d01 * d20) / den
+    return np.stack([1.0 - v - w, v, w], 1)
+
+
+def _insert(surf: _Surface, p, f0, claimed: set, where: str) -> int:
+    """Insert the point ``p`` (on B's original triangle ``f0``) as a vertex of B; returns its id."""
+    f, bary = surf.locate(p, f0)
+    tri = surf.F[f]
+    small = bary < SNAP
+    if small.sum() >= 2:  # on a vertex
+        v = tri[int(np.argmax(bary))]
+        if v not in claimed:
+            return v
+        if np.linalg.norm(np.asarray(surf.V[v]) - p) <= 1e-12 * max(1.0, np.abs(p).max()):
+            raise InputError(f"{where}: two boundary vertices of the refined fracture surface coincide on B "
+                             f"at {np.round(p, 6).tolist()}")
+        # another boundary vertex is there already: insert beside it
+        bary = np.maximum(bary, 2 * SNAP)
+        bary /= bary.sum()
+        small = bary < SNAP
+    bary = np.clip(bary, 0.0, None)
+    if small.any():  # on an edge: the one opposite the small coordinate
+        k = int(np.argmax(small))
+        a, b = tri[(k + 1) % 3], tri[(k + 2) % 3]
+        s = bary[(k + 2) % 3] / (bary[(k + 1) % 3] + bary[(k + 2) % 3])
+        return surf.split_edge(a, b, (1 - s) * np.asarray(surf.V[a]) + s * np.asarray(surf.V[b]))
+    P = np.array([surf.V[v] for v in tri])
+    return surf.split_face(f, bary @ P)
+
+
+def _fan_normal(surf: _Surface, u: int) -> np.ndarray:
+    U = np.asarray(surf.V[u])
+    fan = surf.fan(u)
+    A = np.array([surf.V[a] for _, a, _ in fan]) - U
+    B = np.array([surf.V[b] for _, _, b in fan]) - U
+    n = np.cross(A, B).sum(axis=0)
+    return n / max(np.linalg.norm(n), 1e-300)
+
+
+def _trace(surf: _Surface, p: int, q: int, claimed: set, cut: set, where: str) -> list[int]:
+    """Embed a path from vertex ``p`` to vertex ``q`` of B as a chain of B edges; returns its vertices.
+
+    The path is B's section by the plane through ``p`` and ``q`` that holds
+    their mean normal, walked vertex to vertex: from each vertex, the plane
+    leaves through one edge of the fan ahead (farther along ``q - p``),
+    which is split there (or the walk steps onto a vertex of B it meets).
+    """
+    P, Q = np.asarray(surf.V[p]), np.asarray(surf.V[q])
+    d = Q - P
+    m = np.cross(d, _fan_normal(surf, p) + _fan_normal(surf, q))  # the plane's normal
+    dd = d @ d
+    chain = [p]
+    u, progress = p, 0.0
+    for _ in range(20000):
+        if (u, q) in surf.he or (q, u) in surf.he:
+            chain.append(q)
+            return chain
+        U = np.asarray(surf.V[u])
+        fan = surf.fan(u)
+        A = np.array([surf.V[a] for _, a, _ in fan])
+        B = np.array([surf.V[b] for _, _, b in fan])
+        sa, sb = (A - U) @ m, (B - U) @ m
+        lam = np.clip(sa / np.where(sa == sb, 1.0, sa - sb), 0.0, 1.0)
+        Y = A + lam[:, None] * (B - A)
+        ahead = ((Y - P) @ d) / dd
+        score = np.where((sa * sb <= 0) & (sa != sb) & (ahead > progress), ahead, -np.inf)
+        k = int(np.argmax(score))
+        if not np.isfinite(score[k]):
+            raise InputError(f"{where}: cannot trace the fracture boundary on B from "
+                             f"{np.round(U, 6).tolist()} toward {np.round(Q, 6).tolist()}")
+        _, a, b = fan[k]
+        t = lam[k]
+        if t < SNAP and a not in claimed:
+            u = a
+        elif t > 1 - SNAP and b not in claimed:
+            u = b
+        else:
+            if (min(a, b), max(a, b)) in cut:
+                raise InputError(f"{where}: two boundary curves of the refined fracture surface cross on B near "
+                                 f"{np.round(Y[k], 6).tolist()}")
+            # (a claimed end is another curve's vertex: pass beside it, not through it)
+            t = min(max(t, 2 * SNAP), 1 - 2 * SNAP)
+            u = surf.split_edge(a, b, A[k] + t * (B[k] - A[k]))
+        progress = max(progress, float(score[k]))
+        chain.append(u)
+        claimed.add(u)
+    raise InputError(f"{where}: tracing the fracture boundary on B did not reach its end")
+
+
+def clip_tangent_triangles(mesh: RefineMesh, exterior: Exterior, ratio: float = TANGENT, max_rounds: int = 20) -> int:
+    """Remove triangles that lie along B: every corner on S's boundary, centroid within ``ratio`` of their size from B.
+
+    Such a triangle separates nothing (B is on one of its sides); kept, it
+    would double a patch of B (a flat B) or cut through it (a curved B).
+    Removing one can expose another, so this repeats. Returns the removals.
+    """
+    total = 0
+    for _ in range(max_rounds):
+        table = edge_table(mesh.F, len(mesh.V))
+        on_b = np.zeros(len(mesh.V), bool)
+        rows = table.first[table.count == 1]
+        on_b[mesh.F[rows // 3, rows % 3]] = on_b[mesh.F[rows // 3, (rows % 3 + 1) % 3]] = True
+        cand = np.flatnonzero(on_b[mesh.F].all(axis=1))
+        if not len(cand):
+            break
+        T = mesh.V[mesh.F[cand]]
+        size = np.linalg.norm(T - np.roll(T, 1, axis=1), axis=2).max(axis=1)
+        d2, _, _ = exterior.closest(T.mean(axis=1))
+        flat = cand[d2 < (ratio * size) ** 2]
+        if not len(flat):
+            break
+        keep = np.ones(len(mesh.F), bool)
+        keep[flat] = False
+        mesh.F, mesh.sides = mesh.F[keep], mesh.sides[keep]
+        total += len(flat)
+    return total
+
+
+def collapse_short_boundary(mesh: RefineMesh, length: float) -> int:
+    """Merge the ends of boundary edges shorter than ``length`` (the triangle on the edge goes away).
+
+    Two boundary vertices a hair apart cannot both be inserted into B without
+    slivers that cross each other. An edge is collapsed only when its ends
+    have no common neighbour but the third corner of its triangle (the link
+    condition), which keeps the surface's topology. Returns the collapses.
+    """
+    table = edge_table(mesh.F, len(mesh.V))
+    boundary = np.flatnonzero(table.count == 1)
+    rows = table.first[boundary]
+    face, k = rows // 3, rows % 3
+    E = np.stack([mesh.F[face, k], mesh.F[face, (k + 1) % 3]], 1)
+    short = np.flatnonzero(np.linalg.norm(mesh.V[E[:, 1]] - mesh.V[E[:, 0]], axis=1) < length)
+    if not len(short):
+        return 0
+    F = mesh.F.copy()
+    gone = np.zeros(len(F), bool)
+    merged = np.arange(len(mesh.V))
+    done = 0
+    for i in short.tolist():
+        a, b = merged[E[i, 0]], merged[E[i, 1]]
+        if a == b:
+            continue
+        around_a = np.flatnonzero(~gone & (F == a).any(axis=1))
+        around_b = np.flatnonzero(~gone & (F == b).any(axis=1))
+        both = np.intersect1d(around_a, around_b)
+        if len(both) != 1:
+            continue
+        common = np.intersect1d(F[around_a], F[around_b])
+        if len(common) != 3:  # a, b and the third corner only
+            continue
+        gone[both] = True
+        F[around_b] = np.where(F[around_b] == b, a, F[around_b])
+        merged[merged == b] = a
+        done += 1
+    mesh.F = F[~gone]
+    mesh.sides = mesh.sides[~gone]
+    return done
+
+
+def subdivide_boundary(mesh: RefineMesh, exterior: Exterior, tolerance: float, max_rounds: int = 12) -> int:
+    """Split boundary edges of ``mesh`` whose midpoint is farther than ``tolerance`` from B.
+
+    The new vertex goes onto B (the closest point to the midpoint), so the
+    boundary polyline follows B within ``tolerance`` and every boundary
+    edge spans a few B triangles at most: the traces between its ends stay
+    short and close to the straight chord. Returns the number of splits.
+    """
+    total = 0
+    for _ in range(max_rounds):
+        table = edge_table(mesh.F, len(mesh.V))
+        boundary = np.flatnonzero(table.count == 1)
+        rows = table.first[boundary]
+        face, k = rows // 3, rows % 3
+        E = np.stack([mesh.F[face, k], mesh.F[face, (k + 1) % 3]], 1)
+        d2, _, closest = exterior.closest(0.5 * (mesh.V[E[:, 0]] + mesh.V[E[:, 1]]))
+        far = np.flatnonzero(d2 > tolerance ** 2)
+        # one split edge per triangle per round
+        far = far[np.unique(face[far], return_index=True)[1]]
+        if not len(far):
+            break
+        new = mesh.split_edges(E[far], np.full(len(far), 0.5), rows=rows[far], which=np.arange(len(far)))
+        mesh.V[new] = closest[far]
+        total += len(far)
+    return total
+
+
+def imprint_boundary(BV: np.ndarray, BF: np.ndarray, mesh: RefineMesh, where: str = "animate") -> Imprint:
+    """Remesh B and the refined surface ``mesh`` (edited in place) so that S's boundary is a chain of B edges.
+
+    Boundary vertices of ``mesh`` move onto B exactly (by at most their
+    distance to it plus :data:`SNAP` of a B triangle). New vertices of
+    ``mesh`` are recorded in its barycentric tree.
+    """
+    BV = np.asarray(BV, np.float64)
+    BF = np.asarray(BF, np.int64)
+    exterior = Exterior(BV, BF)
+    h = float(np.median(np.linalg.norm(BV[BF[:, 1]] - BV[BF[:, 0]], axis=1)))
+    clip_tangent_triangles(mesh, exterior)
+    collapse_short_boundary(mesh, 10 * SNAP * h)
+    subdivide_boundary(mesh, exterior, CHORD * h)
+    table = edge_table(mesh.F, len(mesh.V))
+    boundary = np.flatnonzero(table.count == 1)
+    rows = table.first[boundary]
+    sface, k = rows // 3, rows % 3
+    E = np.stack([mesh.F[sface, k], mesh.F[sface, (k + 1) % 3]], 1)  # as directed in their triangle
+    surf = _Surface(BV, BF)
+    verts = np.unique(E)
+    _, f0, closest = exterior.closest(mesh.V[verts])
+    claimed: set[int] = set()
+    to_b = {}
+    for v, f, p in zip(verts.tolist(), f0.tolist(), closest):
+        b = _insert(surf, p, f, claimed, where)
+        claimed.add(b)
+        to_b[v] = b
+    # S's boundary vertices take their positions on B
+    mesh.V[verts] = np.array([surf.V[to_b[v]] for v in verts.tolist()])
+
+    cut: set[tuple[int, int]] = set()
+    chains = []
+    for a, b in E.tolist():
+        chain = _trace(surf, to_b[a], to_b[b], claimed, cut, where)
+        cut.update((min(x, y), max(x, y)) for x, y in zip(chain[:-1], chain[1:]))
+        chains.append(chain)
+
+    cut_edges, cut_faces, to_fracture = _split_fracture_edges(mesh, E, sface, chains, surf, to_b)
+    return Imprint(V=np.array(surf.V), F=np.array(surf.F, np.int64), to_fracture=to_fracture,
+                   cut_edges=cut_edges, cut_faces=cut_faces, origin=np.array(surf.origin, np.int64))
+
+
+def _split_fracture_edges(mesh: RefineMesh, E, sface, chains, surf: _Surface, to_b: dict):
+    """Insert the chains' inner vertices into S's boundary edges (each triangle becomes a fan)."""
+    n0 = len(mesh.V)
+    to_fracture = np.full(len(surf.V), -1, np.int64)
+    for s, b in to_b.items():
+        to_fracture[b] = s
+    parents, weights = [], []
+    inner = []
+    for (a, b), chain in zip(E.tolist(), chains):
+        if len(chain) == 2:
+            continue
+        P = np.array([surf.V[v] for v in chain])
+        arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(P, axis=0), axis=1))])
+        t = arc[1:-1] / arc[-1]
+        parents.append(np.tile([a, b, a], (len(t), 1)))
+        weights.append(np.stack([1 - t, t, np.zeros_like(t)], 1))
+        inner.append(chain[1:-1])
+    if parents:
+        ids = mesh._add_vertices(np.concatenate(parents), np.concatenate(weights))
+        chain_inner = np.concatenate([np.asarray(c, np.int64) for c in inner])
+        mesh.V[ids] = np.array(surf.V)[chain_inner]
+        to_fracture[chain_inner] = ids
+
+    # S's triangles: each boundary edge u -> v of triangle (u, v, w) becomes a
+    # fan (u, x1, w), (x1, x2, w), ..., (xk, v, w); a triangle with several
+    # boundary edges is handled edge by edge (its other edges stay in the fan)
+    F = [list(f) for f in mesh.F.tolist()]
+    sides = mesh.sides.tolist()
+    owner = {(a, b): f for (a, b), f in zip(E.tolist(), sface.tolist())}
+    cut_edges, cut_faces = [], []
+    for (a, b), chain in zip(E.tolist(), chains):
+        f = owner[(a, b)]
+        S = [a] + [int(to_fracture[x]) for x in chain[1:-1]] + [b]
+        tri = F[f]
+        k = tri.index(a)
+        w = tri[(k + 2) % 3]
+        fan_faces = [f] + list(range(len(F), len(F) + len(S) - 2))
+        for i, g in enumerate(fan_faces):
+            tri_i = [S[i], S[i + 1], w]
+            if g == f:
+                F[f] = tri_i
+            else:
+                F.append(tri_i)
+                sides.append(sides[f])
+        # the triangle's other edges now live in the first (w -> a) and last (b -> w) fan triangles
+        if (w, a) in owner:
+            owner[(w, a)] = fan_faces[0]
+        if (b, w) in owner:
+            owner[(b, w)] = fan_faces[-1]
+        cut_edges.extend(zip(chain[:-1], chain[1:]))
+        cut_faces.extend(fan_faces)
+    mesh.F = np.array(F, np.int64)
+    mesh.sides = np.array(sides, np.int64)
+    assert len(mesh.V) == n0 + sum(len(c) for c in inner)
+    return np.array(cut_edges, np.int64).reshape(-1, 2), np.array(cut_faces, np.int64), to_fracture
