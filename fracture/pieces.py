@@ -111,9 +111,36 @@ def build_pieces(im: Imprint, mesh: RefineMesh, n_components: int, fallback) -> 
         fb = to_u[im.F[component == c]]
         front = mesh.F[mesh.sides[:, 0] == c]  # normal points away from c: outward already
         back = mesh.F[mesh.sides[:, 1] == c][:, ::-1]
-        faces.append(np.concatenate([fb, front, back]))
-        exterior.append(np.r_[np.ones(len(fb), bool), np.zeros(len(front) + len(back), bool)])
+        F = np.concatenate([fb, front, back])
+        ext = np.r_[np.ones(len(fb), bool), np.zeros(len(front) + len(back), bool)]
+        keep = ~_cancelling(F, len(V))
+        faces.append(F[keep])
+        exterior.append(ext[keep])
     return Pieces(V=V, n_fracture=n_s, faces=faces, exterior=exterior, patch_agreement=agreement)
+
+
+def _cancelling(F: np.ndarray, n: int) -> np.ndarray:
+    """Triangles that come in pairs on the same corners with opposite orientations (a fin of no volume).
+
+    A fracture triangle lying on B (its corners all on the cut) meets B's
+    triangle there face to face; the two bound nothing and both go.
+    """
+    S = np.sort(F, axis=1)
+    key = (S[:, 0] * n + S[:, 1]) * n + S[:, 2]
+    _, inv, count = np.unique(key, return_inverse=True, return_counts=True)
+    twin = np.flatnonzero(count[inv] == 2)
+    out = np.zeros(len(F), bool)
+    if len(twin):
+        # even permutations of the sorted corners have the same orientation
+        rot = F[twin] == S[twin, :1]
+        k = rot.argmax(axis=1)
+        second = F[twin, (k + 1) % 3]
+        parity = second == S[twin, 1]
+        order = np.argsort(inv[twin], kind="stable")
+        a, b = order[0::2], order[1::2]
+        opposite = parity[a] != parity[b]
+        out[twin[a[opposite]]] = out[twin[b[opposite]]] = True
+    return out
 
 
 def mesh_checks(V: np.ndarray, F: np.ndarray, intersections: bool = True) -> dict:
