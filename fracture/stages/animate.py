@@ -144,4 +144,4 @@ def _save_transfer(ctx: RunContext, tr: Transfer) -> None:
         "shared_data": tr.shared.data, "shared_indices": tr.shared.indices.astype(np.int64),
         "shared_indptr": tr.shared.indptr.astype(np.int64), "shared_shape": np.array(tr.shared.shape, np.int64),
         "shared_rows": tr.shared_rows, "shared_time": tr.shared_time, "maps": tr.maps,
-        "offsets": tr.offsets, "time": tr.time, "vertex": tr.vertex})
+        "offsets": tr.offsets, "time": tr.time, "vertex": tr.vertex, "material": tr.material})
