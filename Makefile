@@ -22,6 +22,7 @@ bench: install
 	$(BIN)/python benchmarks/bench_fields.py
 	$(BIN)/python benchmarks/bench_coarse.py
 	$(BIN)/python benchmarks/bench_refine.py
+	$(BIN)/python benchmarks/bench_animate.py --triangles 200000
 
 install: system-deps $(STAMP)
 
