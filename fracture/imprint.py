@@ -31,7 +31,7 @@ import numpy as np
 
 from fracture.errors import InputError
 from fracture.exterior import Exterior
-from fracture.refine.kernels import edge_table
+from fracture.refine.kernels import edge_table, row_edges
 from fracture.refine.mesh import RefineMesh
 
 # A point within this barycentric distance of an edge (or two edges) of a B
@@ -274,8 +274,7 @@ def clip_tangent_triangles(mesh: RefineMesh, exterior: Exterior, ratio: float = 
     for _ in range(max_rounds):
         table = edge_table(mesh.F, len(mesh.V))
         on_b = np.zeros(len(mesh.V), bool)
-        rows = table.first[table.count == 1]
-        on_b[mesh.F[rows // 3, rows % 3]] = on_b[mesh.F[rows // 3, (rows % 3 + 1) % 3]] = True
+        on_b[row_edges(mesh.F, table.boundary_rows)] = True
         cand = np.flatnonzero(on_b[mesh.F].all(axis=1))
         if not len(cand):
             break
@@ -300,11 +299,7 @@ def collapse_short_boundary(mesh: RefineMesh, length: float) -> int:
     have no common neighbour but the third corner of its triangle (the link
     condition), which keeps the surface's topology. Returns the collapses.
     """
-    table = edge_table(mesh.F, len(mesh.V))
-    boundary = np.flatnonzero(table.count == 1)
-    rows = table.first[boundary]
-    face, k = rows // 3, rows % 3
-    E = np.stack([mesh.F[face, k], mesh.F[face, (k + 1) % 3]], 1)
+    E = row_edges(mesh.F, edge_table(mesh.F, len(mesh.V)).boundary_rows)
     short = np.flatnonzero(np.linalg.norm(mesh.V[E[:, 1]] - mesh.V[E[:, 0]], axis=1) < length)
     if not len(short):
         return 0
@@ -343,11 +338,8 @@ def subdivide_boundary(mesh: RefineMesh, exterior: Exterior, tolerance: float, m
     """
     total = 0
     for _ in range(max_rounds):
-        table = edge_table(mesh.F, len(mesh.V))
-        boundary = np.flatnonzero(table.count == 1)
-        rows = table.first[boundary]
-        face, k = rows // 3, rows % 3
-        E = np.stack([mesh.F[face, k], mesh.F[face, (k + 1) % 3]], 1)
+        rows = edge_table(mesh.F, len(mesh.V)).boundary_rows
+        face, E = rows // 3, row_edges(mesh.F, rows)
         d2, _, closest = exterior.closest(0.5 * (mesh.V[E[:, 0]] + mesh.V[E[:, 1]]))
         far = np.flatnonzero(d2 > tolerance ** 2)
         # one split edge per triangle per round
@@ -374,11 +366,8 @@ def imprint_boundary(BV: np.ndarray, BF: np.ndarray, mesh: RefineMesh, where: st
     clip_tangent_triangles(mesh, exterior)
     collapse_short_boundary(mesh, 10 * SNAP * h)
     subdivide_boundary(mesh, exterior, CHORD * h)
-    table = edge_table(mesh.F, len(mesh.V))
-    boundary = np.flatnonzero(table.count == 1)
-    rows = table.first[boundary]
-    sface, k = rows // 3, rows % 3
-    E = np.stack([mesh.F[sface, k], mesh.F[sface, (k + 1) % 3]], 1)  # as directed in their triangle
+    rows = edge_table(mesh.F, len(mesh.V)).boundary_rows
+    sface, E = rows // 3, row_edges(mesh.F, rows)  # edges as directed in their triangle
     surf = _Surface(BV, BF)
     verts = np.unique(E)
     _, f0, closest = exterior.closest(mesh.V[verts])

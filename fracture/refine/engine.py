@@ -38,7 +38,7 @@ from fracture.exterior import Exterior
 from fracture.refine.collide import stop_collisions
 from fracture.refine.flips import flip_edges
 from fracture.refine.flow import energy, sample_displacement, velocity
-from fracture.refine.kernels import EdgeTable, edge_table, face_geometry, limit_moves
+from fracture.refine.kernels import EdgeTable, edge_table, face_geometry, limit_moves, row_edges
 from fracture.refine.mesh import RefineMesh
 from fracture.topology import boundary_conormals, face_frames
 
@@ -123,14 +123,10 @@ class Refiner:
 
     def boundary_vertices(self, table: EdgeTable | None = None) -> np.ndarray:
         table = self.edges() if table is None else table
-        rows = np.flatnonzero(table.row_count == 1)
-        F = self.mesh.F
-        return np.unique(np.concatenate([F[rows // 3, rows % 3], F[rows // 3, (rows % 3 + 1) % 3]]))
+        return np.unique(row_edges(self.mesh.F, table.boundary_rows))
 
     def unique_edges(self, table: EdgeTable) -> np.ndarray:
-        r = table.first
-        F = self.mesh.F
-        return np.stack([F[r // 3, r % 3], F[r // 3, (r % 3 + 1) % 3]], 1)
+        return row_edges(self.mesh.F, table.first)
 
     # -- constraints -----------------------------------------------------------------------
     def project_to_exterior(self, ids: np.ndarray, V: np.ndarray | None = None) -> float:
@@ -159,12 +155,10 @@ class Refiner:
         # points out of the sheet across its boundary (the area term of an
         # open sheet pulls its boundary inward; at a crease of B this pull is
         # not normal to B) and the part normal to B (projection undoes it)
-        rows = np.flatnonzero(table.row_count == 1)
+        rows = table.boundary_rows
         if not len(rows):
             return v, psi, np.zeros(0, np.int64)
-        f, k = rows // 3, rows % 3
-        E = np.stack([m.F[f, k], m.F[f, (k + 1) % 3]], 1)
-        verts, c = boundary_conormals(m.V, m.F, E, strict=False, face=f, by_length=True)
+        verts, c = boundary_conormals(m.V, m.F, row_edges(m.F, rows), strict=False, face=rows // 3, by_length=True)
         v[verts] -= np.einsum("ij,ij->i", v[verts], c)[:, None] * c
         _, tri, _ = self.B.closest(m.V[verts])
         nb = self.B_normals[tri]

@@ -114,10 +114,21 @@ class EdgeTable:
         """Triangle count of the edge of every directed triangle edge, ``(3m,)``."""
         return self.count[self.eid]
 
+    @property
+    def boundary_rows(self) -> np.ndarray:
+        """Directed triangle edges ``3 f + k`` on edges with one triangle, in row order."""
+        return np.flatnonzero(self.row_count == 1)
+
     def find(self, E: np.ndarray) -> np.ndarray:
         """Edge ids of vertex pairs ``E (k, 2)`` (-1 where there is no such edge)."""
         E = np.ascontiguousarray(E, np.int64).reshape(-1, 2)
         return _find_edges(self._start, self._hi, self._row, self.eid, E)
+
+
+def row_edges(F: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """Vertex pairs ``(k, 2)`` of directed triangle edges ``rows`` (``3 f + k``), as directed in their triangle."""
+    f, k = rows // 3, rows % 3
+    return np.stack([F[f, k], F[f, (k + 1) % 3]], 1)
 
 
 def edge_table(F: np.ndarray, n: int) -> EdgeTable:
