@@ -90,9 +90,9 @@ class _Surface:
         self.he = dict(zip(zip(a + b + c, b + c + a), faces * 3))
         if len(self.he) != 3 * len(self.F):
             raise InputError("exterior: B has a directed edge twice (it is not an oriented 2-manifold)")
-        self.vface = [0] * len(self.V)
-        for f, (x, y, z) in enumerate(self.F):
-            self.vface[x] = self.vface[y] = self.vface[z] = f
+        vface = np.zeros(len(self.V), np.int64)
+        vface[np.asarray(F, np.int64).ravel()] = np.repeat(np.arange(len(self.F)), 3)
+        self.vface = vface.tolist()
 
     # -- elementary operations ------------------------------------------------------------
 
@@ -394,7 +394,6 @@ def imprint_boundary(BV: np.ndarray, BF: np.ndarray, mesh: RefineMesh, where: st
 
 def _split_fracture_edges(mesh: RefineMesh, E, sface, chains, surf: _Surface, to_b: dict):
     """Insert the chains' inner vertices into S's boundary edges (each triangle becomes a fan)."""
-    n0 = len(mesh.V)
     to_fracture = np.full(len(surf.V), -1, np.int64)
     for s, b in to_b.items():
         to_fracture[b] = s
@@ -417,25 +416,30 @@ def _split_fracture_edges(mesh: RefineMesh, E, sface, chains, surf: _Surface, to
 
     # S's triangles: each boundary edge u -> v of triangle (u, v, w) becomes a
     # fan (u, x1, w), (x1, x2, w), ..., (xk, v, w); a triangle with several
-    # boundary edges is handled edge by edge (its other edges stay in the fan)
-    F = [list(f) for f in mesh.F.tolist()]
-    sides = mesh.sides.tolist()
+    # boundary edges is handled edge by edge (its other edges stay in the fan).
+    # Only the boundary triangles are touched: rewrites by id, new ones appended.
+    m = len(mesh.F)
+    rewritten: dict[int, list[int]] = {}
+    added, parent = [], []
+
+    def triangle(f):
+        return added[f - m] if f >= m else rewritten.get(f) or mesh.F[f].tolist()
+
     owner = {(a, b): f for (a, b), f in zip(E.tolist(), sface.tolist())}
     cut_edges, cut_faces = [], []
     for (a, b), chain in zip(E.tolist(), chains):
         f = owner[(a, b)]
         S = [a] + [int(to_fracture[x]) for x in chain[1:-1]] + [b]
-        tri = F[f]
-        k = tri.index(a)
-        w = tri[(k + 2) % 3]
-        fan_faces = [f] + list(range(len(F), len(F) + len(S) - 2))
-        for i, g in enumerate(fan_faces):
-            tri_i = [S[i], S[i + 1], w]
-            if g == f:
-                F[f] = tri_i
-            else:
-                F.append(tri_i)
-                sides.append(sides[f])
+        tri = triangle(f)
+        w = tri[(tri.index(a) + 2) % 3]
+        first = [S[0], S[1], w]
+        if f >= m:
+            added[f - m] = first
+        else:
+            rewritten[f] = first
+        fan_faces = [f] + list(range(m + len(added), m + len(added) + len(S) - 2))
+        added.extend([S[i], S[i + 1], w] for i in range(1, len(S) - 1))
+        parent.extend([f] * (len(S) - 2))
         # the triangle's other edges now live in the first (w -> a) and last (b -> w) fan triangles
         if (w, a) in owner:
             owner[(w, a)] = fan_faces[0]
@@ -443,7 +447,12 @@ def _split_fracture_edges(mesh: RefineMesh, E, sface, chains, surf: _Surface, to
             owner[(b, w)] = fan_faces[-1]
         cut_edges.extend(zip(chain[:-1], chain[1:]))
         cut_faces.extend(fan_faces)
-    mesh.F = np.array(F, np.int64)
-    mesh.sides = np.array(sides, np.int64)
-    assert len(mesh.V) == n0 + sum(len(c) for c in inner)
+    if rewritten:
+        mesh.F[list(rewritten)] = np.array(list(rewritten.values()), np.int64)
+    if added:
+        parent = np.array(parent, np.int64)
+        while (parent >= m).any():  # a fan triangle split again: its side ids are its parent's
+            parent = np.where(parent >= m, np.r_[np.arange(m), parent][parent], parent)
+        mesh.F = np.concatenate([mesh.F, np.array(added, np.int64)])
+        mesh.sides = np.concatenate([mesh.sides, mesh.sides[parent]])
     return np.array(cut_edges, np.int64).reshape(-1, 2), np.array(cut_faces, np.int64), to_fracture
