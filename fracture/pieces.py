@@ -14,6 +14,7 @@ meet there) followed by B's vertices off the cut.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import igl
 import numpy as np
@@ -54,10 +55,18 @@ class Pieces:
     def n_pieces(self) -> int:
         return len(self.faces)
 
+    @cached_property
+    def parts(self) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """Per piece: vertex ids (into ``V``, sorted), local vertices and local triangles."""
+        out = []
+        for F in self.faces:
+            ids, local = np.unique(F, return_inverse=True)
+            out.append((ids, self.V[ids], local.reshape(-1, 3)))
+        return out
+
     def piece(self, c: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Vertex ids (into ``V``), local vertices and local triangles of piece ``c``."""
-        ids, local = np.unique(self.faces[c], return_inverse=True)
-        return ids, self.V[ids], local.reshape(-1, 3)
+        return self.parts[c]
 
 
 def label_patches(im: Imprint, mesh: RefineMesh, n_components: int, fallback) -> tuple[np.ndarray, float]:

@@ -136,10 +136,9 @@ def bonded_representatives(cf: CoarseFracture) -> np.ndarray:
     return rep[label]
 
 
-def _nearest_coarse(cf: CoarseFracture, c: int, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Coarse points (ids into ``[cf.V; cf.exterior_V]``) and weights of the nearest location on component c's coarse surface."""
+def _nearest_coarse(cf: CoarseFracture, K: np.ndarray, c: int, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Coarse points (ids into ``K = [cf.V; cf.exterior_V]``) and weights of the nearest location on component c's coarse surface."""
     n0 = len(cf.V)
-    K = np.concatenate([cf.V, cf.exterior_V])
     faces = np.concatenate([cf.exterior_F[cf.exterior_component == c] + n0,
                             cf.F[(cf.sides == c).any(axis=1)]]).astype(np.int64)
     _, f, P = igl.point_mesh_squared_distance(np.ascontiguousarray(X), K, faces)
@@ -161,7 +160,7 @@ def build_transfer(cf: CoarseFracture, pieces: Pieces, tree: sp.csr_matrix) -> T
     # hold it) and the fracture time interpolated through the tree
     shared_comp = np.full(nf, C)
     for c in range(C):
-        verts = np.unique(pieces.faces[c])
+        verts = pieces.piece(c)[0]
         verts = verts[verts < nf]
         shared_comp[verts] = np.minimum(shared_comp[verts], c)
     vtime = tree @ cf.vertex_fracture_time.astype(np.float64)
@@ -170,7 +169,7 @@ def build_transfer(cf: CoarseFracture, pieces: Pieces, tree: sp.csr_matrix) -> T
     offsets = [0]
     start = 0
     for c in range(C):
-        ids = np.unique(pieces.faces[c])
+        ids = pieces.piece(c)[0]
         rows_v.append(ids)
         rows_c.append(np.full(len(ids), c))
         frac = ids < nf
@@ -179,7 +178,7 @@ def build_transfer(cf: CoarseFracture, pieces: Pieces, tree: sp.csr_matrix) -> T
         ent_row.append(r[sub.row]), ent_k.append(sub.col), ent_w.append(sub.data), ent_c.append(np.full(sub.nnz, c))
         ext = np.flatnonzero(~frac)
         if len(ext):
-            T, w = _nearest_coarse(cf, c, pieces.V[ids[ext]])
+            T, w = _nearest_coarse(cf, K, c, pieces.V[ids[ext]])
             ent_row.append(np.repeat(start + ext, 3)), ent_k.append(T.ravel()), ent_w.append(w.ravel())
             ent_c.append(np.full(w.size, c))
         start += len(ids)

@@ -53,10 +53,10 @@ def animate_stage(ctx: RunContext) -> None:
         pieces = build_pieces(im, mesh, cf.n_components, fallback)
         transfer = build_transfer(cf, pieces, mesh.tree_matrix())
         bar.update()
-        checks = _check(ctx, pieces, transfer, BV, BF, opts)
+        checks = _check(ctx, pieces, BV, BF, opts)
         bar.update()
 
-        local = [pieces.piece(c) for c in range(pieces.n_pieces)]
+        local = pieces.parts
         for c, (ids, V, F) in enumerate(local):
             rows = slice(transfer.offsets[c], transfer.offsets[c + 1])
             write_ply(ctx.path(f"pieces/piece_{c:03d}.ply"), V, F,
@@ -64,18 +64,22 @@ def animate_stage(ctx: RunContext) -> None:
                       face_data={"exterior": pieces.exterior[c].astype(np.uint8)})
         _save_transfer(ctx, transfer)
         writer = ObjFrames(cf.names, [F for _, _, F in local], [len(ids) for ids, _, _ in local])
+        if opts["ply_frames"]:  # rows of piece c start at transfer.offsets[c]
+            all_F = np.concatenate([F + transfer.offsets[c] for c, (_, _, F) in enumerate(local)])
+            piece_of = np.repeat(np.arange(pieces.n_pieces, dtype=np.int32), [len(F) for _, _, F in local])
+        gap = EarlyGap(transfer)
         for t in range(transfer.n_frames):
             X = transfer.positions(t)
-            per_piece = [transfer.piece(X, c) for c in range(pieces.n_pieces)]
+            if t == 0:
+                checks["hausdorff_first_frame_relative"] = _hausdorff_to_b(pieces, transfer, X, BV, BF)
+            gap.add(t, X)
             if opts["obj_frames"]:
-                writer.write(ctx.path(f"frames/frame_{t + 1:04d}.obj"), per_piece, header=f"frame {t + 1}")
+                writer.write(ctx.path(f"frames/frame_{t + 1:04d}.obj"),
+                             [transfer.piece(X, c) for c in range(pieces.n_pieces)], header=f"frame {t + 1}")
             if opts["ply_frames"]:
-                offsets = np.r_[0, np.cumsum([len(V) for V in per_piece])]
-                write_ply(ctx.path(f"frames/frame_{t + 1:04d}.ply"), X,
-                          np.concatenate([F + offsets[c] for c, (_, _, F) in enumerate(local)]),
-                          face_data={"piece": np.repeat(np.arange(pieces.n_pieces, dtype=np.int32),
-                                                        [len(F) for _, _, F in local])})
+                write_ply(ctx.path(f"frames/frame_{t + 1:04d}.ply"), X, all_F, face_data={"piece": piece_of})
             bar.update()
+        checks["early_gap_max"] = gap.worst
 
     ctx.products["pieces"] = pieces
     ctx.products["transfer"] = transfer
@@ -91,11 +95,11 @@ def animate_stage(ctx: RunContext) -> None:
                          f"({sum(checks['pieces'][c]['self_intersections'] for c in crossing)} triangle pairs)")
 
 
-def _check(ctx: RunContext, pieces, transfer: Transfer, BV, BF, opts) -> dict:
+def _check(ctx: RunContext, pieces, BV, BF, opts) -> dict:
+    """Per-piece mesh checks, the volume balance and the overlap sampling (material space)."""
     per_piece = []
     total = 0.0
-    for c in range(pieces.n_pieces):
-        _, V, F = pieces.piece(c)
+    for _, V, F in pieces.parts:
         ch = mesh_checks(V, F, intersections=opts["check_intersections"])
         total += ch["volume"]
         per_piece.append(ch)
@@ -105,36 +109,33 @@ def _check(ctx: RunContext, pieces, transfer: Transfer, BV, BF, opts) -> dict:
     if opts["check_samples"]:
         overlap, gap = overlap_and_gap(pieces, BV, BF, opts["check_samples"], np.random.default_rng(ctx.cfg["seed"]))
         out.update(overlap_share=overlap, uncovered_share=gap)
-    # the first frame's exterior against B, both ways (vertices to surface)
-    X = transfer.positions(0)
-    ext_V, ext_F = [], []
-    for c in range(pieces.n_pieces):
-        ids, _, F = pieces.piece(c)
-        ext_V.append(transfer.piece(X, c))
-        ext_F.append(F[pieces.exterior[c]] + sum(len(v) for v in ext_V[:-1]))
-    EV, EF = np.concatenate(ext_V), np.concatenate(ext_F)
-    d1 = np.sqrt(igl.point_mesh_squared_distance(np.ascontiguousarray(EV[np.unique(EF)]), BV, BF)[0].max())
-    d2 = np.sqrt(igl.point_mesh_squared_distance(np.ascontiguousarray(BV), EV, EF)[0].max())
-    diag = float(np.linalg.norm(BV.max(axis=0) - BV.min(axis=0)))
-    out["hausdorff_first_frame_relative"] = float(max(d1, d2) / diag)
-    out["early_gap_max"] = early_gap(transfer)
     return out
 
 
-def early_gap(transfer: Transfer) -> float:
+def _hausdorff_to_b(pieces, transfer: Transfer, X: np.ndarray, BV, BF) -> float:
+    """Hausdorff distance (vertices to surface, both ways) between the pieces' B triangles at ``X`` and B, over B's diagonal."""
+    EF = np.concatenate([F[pieces.exterior[c]] + transfer.offsets[c] for c, (_, _, F) in enumerate(pieces.parts)])
+    used = np.unique(EF)
+    d1 = np.sqrt(igl.point_mesh_squared_distance(np.ascontiguousarray(X[used]), BV, BF)[0].max())
+    d2 = np.sqrt(igl.point_mesh_squared_distance(np.ascontiguousarray(BV), X, EF)[0].max())
+    return float(max(d1, d2) / np.linalg.norm(BV.max(axis=0) - BV.min(axis=0)))
+
+
+class EarlyGap:
     """Largest distance between two copies of one vertex at a frame before its fracture time."""
-    order = np.argsort(transfer.vertex, kind="stable")
-    v = transfer.vertex[order]
-    twin = np.flatnonzero(v[1:] == v[:-1])
-    a, b = order[twin], order[twin + 1]
-    worst = 0.0
-    for t in range(transfer.n_frames):
-        early = transfer.time[a] > t
-        if not early.any():
-            continue
-        X = transfer.positions(t)
-        worst = max(worst, float(np.linalg.norm(X[a[early]] - X[b[early]], axis=1).max()))
-    return worst
+
+    def __init__(self, transfer: Transfer):
+        order = np.argsort(transfer.vertex, kind="stable")
+        twin = np.flatnonzero(transfer.vertex[order][1:] == transfer.vertex[order][:-1])
+        self.a, self.b = order[twin], order[twin + 1]
+        self.time = transfer.time[self.a]
+        self.worst = 0.0
+
+    def add(self, t: int, X: np.ndarray) -> None:
+        early = self.time > t
+        if early.any():
+            d = np.linalg.norm(X[self.a[early]] - X[self.b[early]], axis=1).max()
+            self.worst = max(self.worst, float(d))
 
 
 def _save_transfer(ctx: RunContext, tr: Transfer) -> None:
