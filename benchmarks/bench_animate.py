@@ -12,37 +12,20 @@ Usage: python benchmarks/bench_animate.py [--scenes bunny wall ...] [--triangles
 from __future__ import annotations
 
 import argparse
-import multiprocessing as mp
 import time
-from pathlib import Path
 
-CONFIGS = Path(__file__).resolve().parents[1] / "configs"
+from scenes import in_processes, refine, scene_with_fields
+
 SCENES = ("bunny", "branch", "wall", "clay", "jello")
 
 
-def run_scene(name: str, triangles: int, frames: int, out: mp.Queue) -> None:
-    import numpy as np
-
-    from fields.build import build_fields
-    from fracture.config import load_config
+def run_scene(name: str, triangles: int, frames: int, out) -> None:
     from fracture.imprint import imprint_boundary
     from fracture.pieces import build_pieces
-    from fracture.refine.engine import Refiner
-    from fracture.refine.mesh import RefineMesh
-    from fracture.scenes import build_scene
-    from fracture.stages.refine import refine_params
     from fracture.transfer import build_transfer
 
-    cfg = load_config(CONFIGS / f"{name}.yaml", [f"input.frames={frames}", f"refine.max_triangles={triangles}"])
-    cf = build_scene(name, cfg["seed"], frames)
-    fs = build_fields(cf.exterior_V, cf.V, cf.F, resolution=cfg["grid"]["resolution"],
-                      padding=cfg["grid"]["padding"], layers=cfg["strength"]["layers"], seed=cfg["seed"],
-                      normalize=cfg["strength"]["normalize"], stress_length=cfg["stress"]["length"],
-                      strength_weight=cfg["psi"]["strength_weight"], stress_weight=cfg["psi"]["stress_weight"],
-                      levels=cfg["pyramid"]["levels"], sigma=cfg["pyramid"]["sigma"])
-    mesh = RefineMesh.from_coarse(cf.V, cf.F, cf.sides)
-    Refiner(mesh, fs.pyramid, cf.exterior_V, cf.exterior_F, refine_params(cfg),
-            np.random.default_rng(cfg["seed"])).run()
+    cfg, cf, fs = scene_with_fields(name, [f"input.frames={frames}", f"refine.max_triangles={triangles}"])
+    mesh, _ = refine(cfg, cf, fs)
     t0 = time.perf_counter()
     im = imprint_boundary(cf.exterior_V, cf.exterior_F, mesh)
     t1 = time.perf_counter()
@@ -66,16 +49,10 @@ def main() -> None:
     ap.add_argument("--triangles", type=int, default=100_000, help="refined fracture triangles (refine.max_triangles)")
     ap.add_argument("--frames", type=int, default=60)
     args = ap.parse_args()
-    ctx = mp.get_context("fork")
     print("| scene | fracture tris | pieces | piece tris | vertex copies | nonzeros | imprint s | assemble s "
           "| transfer s | ms per frame | frames per s |")
     print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
-    for name in args.scenes:
-        q = ctx.Queue()
-        p = ctx.Process(target=run_scene, args=(name, args.triangles, args.frames, q))
-        p.start()
-        r = q.get()
-        p.join()
+    for name, r in in_processes(run_scene, args.scenes, args.triangles, args.frames):
         print(f"| {name} | {r['fracture']} | {r['pieces']} | {r['triangles']} | {r['rows']} | {r['nnz']} "
               f"| {r['imprint']:.2f} | {r['assemble']:.2f} | {r['transfer']:.2f} | {1e3 * r['per_frame']:.2f} "
               f"| {1 / r['per_frame']:.0f} |", flush=True)

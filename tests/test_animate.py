@@ -6,7 +6,7 @@ import json
 
 import numpy as np
 import pytest
-from conftest import CONFIGS
+from conftest import CONFIGS, SCENE_CASES, SHARED, scene_config
 
 from fracture import runner
 from fracture.config import load_config
@@ -105,18 +105,9 @@ def test_the_example_run_writes_pieces_and_frames(tmp_path):
     assert (out / "frames" / "frame_0001.ply").is_file()
 
 
-SHARED = CONFIGS.parents[1] / "shared" / "data" / "blender_cellfracture_cube8"
-CASES = ["bunny", "branch", "wall", "clay", "jello", "blender_cube8"]
-
-
-@pytest.mark.parametrize("name", CASES)
+@pytest.mark.parametrize("name", SCENE_CASES)
 def test_every_scene_animates_into_closed_pieces(name, tmp_path):
-    if name == "blender_cube8" and not SHARED.is_dir():
-        pytest.skip("the Blender sample is not beside the repository")
-    over = ["refine.max_triangles=6000", "refine.iterations=8", "animate.check_samples=4000"]
-    if name != "blender_cube8":
-        over.append("input.frames=8")
-    cfg = load_config(CONFIGS / f"{name}.yaml", over)
+    cfg = scene_config(name, ["refine.max_triangles=6000", "refine.iterations=8", "animate.check_samples=4000"])
     out = runner.run(cfg, tmp_path / "run", progress=False)
     manifest = json.loads((out / "manifest.json").read_text())
     a, counts = manifest["stats"]["animate"], manifest["counts"]

@@ -6,9 +6,8 @@ import json
 
 import numpy as np
 import pytest
-from conftest import CONFIGS
+from conftest import CONFIGS, SCENE_CASES, scene_config
 
-from fields.build import build_fields
 from fracture import runner
 from fracture.components import label_components
 from fracture.config import load_config
@@ -17,20 +16,12 @@ from fracture.refine.collide import self_intersections
 from fracture.refine.engine import RefineParams, Refiner
 from fracture.refine.mesh import RefineMesh
 from fracture.scenes import build_scene
+from fracture.stages.fields import fields_from_config
 from fracture.stages.refine import load_snapshots
 
-SHARED = CONFIGS.parents[1] / "shared" / "data" / "blender_cellfracture_cube8"
-CASES = ["bunny", "branch", "wall", "clay", "jello", "blender_cube8"]
-
-
-@pytest.mark.parametrize("name", CASES)
+@pytest.mark.parametrize("name", SCENE_CASES)
 def test_refined_surface_is_clean_on_b_and_separates_the_components(name, tmp_path):
-    if name == "blender_cube8" and not SHARED.is_dir():
-        pytest.skip("the Blender sample is not beside the repository")
-    over = ["refine.max_triangles=6000", "refine.iterations=8"]
-    if name != "blender_cube8":
-        over.append("input.frames=8")
-    cfg = load_config(CONFIGS / f"{name}.yaml", over)
+    cfg = scene_config(name, ["refine.max_triangles=6000", "refine.iterations=8"])
     out = runner.run(cfg, tmp_path / "run", until="refine", progress=False)
     manifest = json.loads((out / "manifest.json").read_text())
     stats, counts = manifest["stats"]["refine"], manifest["counts"]
@@ -58,12 +49,8 @@ def test_refined_surface_is_clean_on_b_and_separates_the_components(name, tmp_pa
 @pytest.mark.parametrize("name", ["wall", "branch"])
 def test_the_tree_reproduces_every_vertex_when_nothing_moves(name):
     cf = build_scene(name, 0, 8)
-    cfg = load_config(CONFIGS / f"{name}.yaml", ["input.frames=8"])
-    fs = build_fields(cf.exterior_V, cf.V, cf.F, resolution=cfg["grid"]["resolution"],
-                      padding=cfg["grid"]["padding"], layers=cfg["strength"]["layers"], seed=0, normalize=True,
-                      stress_length=cfg["stress"]["length"], strength_weight=cfg["psi"]["strength_weight"],
-                      stress_weight=cfg["psi"]["stress_weight"], levels=cfg["pyramid"]["levels"],
-                      sigma=cfg["pyramid"]["sigma"])
+    cfg = load_config(CONFIGS / f"{name}.yaml", ["input.frames=8", "seed=0"])
+    fs = fields_from_config(cfg, cf.exterior_V, cf.V, cf.F)
     mesh = RefineMesh.from_coarse(cf.V, cf.F, cf.sides)
     r = Refiner(mesh, fs.pyramid, cf.exterior_V, cf.exterior_F, RefineParams(max_triangles=8000),
                 np.random.default_rng(0))

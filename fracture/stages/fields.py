@@ -14,25 +14,30 @@ _PREVIEW_WIDTH = 400
 _PREVIEW_GAP = 8
 
 
+def fields_from_config(cfg: dict, BV: np.ndarray, SV: np.ndarray, SF: np.ndarray, step=None):
+    """:func:`fields.build.build_fields` with the parameters of a resolved config."""
+    return build_fields(
+        BV, SV, SF,
+        resolution=cfg["grid"]["resolution"],
+        padding=cfg["grid"]["padding"],
+        layers=cfg["strength"]["layers"],
+        seed=cfg["seed"],
+        normalize=cfg["strength"]["normalize"],
+        stress_length=cfg["stress"]["length"],
+        strength_weight=cfg["psi"]["strength_weight"],
+        stress_weight=cfg["psi"]["stress_weight"],
+        levels=cfg["pyramid"]["levels"],
+        sigma=cfg["pyramid"]["sigma"],
+        step=step,
+    )
+
+
 @stage("fields")
 def fields_stage(ctx: RunContext) -> None:
     cfg = ctx.cfg
     (BV, BF), (SV, SF) = ctx.products["exterior"], ctx.products["coarse_fracture"]
     with ctx.bar(3, "fields") as bar:
-        fs = build_fields(
-            BV, SV, SF,
-            resolution=cfg["grid"]["resolution"],
-            padding=cfg["grid"]["padding"],
-            layers=cfg["strength"]["layers"],
-            seed=cfg["seed"],
-            normalize=cfg["strength"]["normalize"],
-            stress_length=cfg["stress"]["length"],
-            strength_weight=cfg["psi"]["strength_weight"],
-            stress_weight=cfg["psi"]["stress_weight"],
-            levels=cfg["pyramid"]["levels"],
-            sigma=cfg["pyramid"]["sigma"],
-            step=lambda name: (bar.set_postfix_str(name), bar.update()),
-        )
+        fs = fields_from_config(cfg, BV, SV, SF, step=lambda name: (bar.set_postfix_str(name), bar.update()))
     ctx.products["fields"] = fs
 
     ctx.save_json("fields/grid.json", fs.grid.to_dict())

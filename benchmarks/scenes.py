@@ -1,0 +1,49 @@
+"""What the scene benchmarks share: a scene with its fields, and one process per scene.
+
+Each scene runs in a fresh process so that its peak memory is its own and
+one scene's caches do not speed up the next.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+from pathlib import Path
+
+CONFIGS = Path(__file__).resolve().parents[1] / "configs"
+
+
+def scene_with_fields(name: str, overrides: list[str]):
+    """The resolved config, the coarse input and the fields of built-in scene ``name``."""
+    from fracture.config import load_config
+    from fracture.scenes import build_scene
+    from fracture.stages.fields import fields_from_config
+
+    cfg = load_config(CONFIGS / f"{name}.yaml", overrides)
+    cf = build_scene(name, cfg["seed"], cfg["input"]["frames"])
+    return cfg, cf, fields_from_config(cfg, cf.exterior_V, cf.V, cf.F)
+
+
+def refine(cfg, cf, fs):
+    """Refine the coarse fracture surface of ``cf``; returns the mesh and the iteration log."""
+    import numpy as np
+
+    from fracture.refine.engine import Refiner
+    from fracture.refine.mesh import RefineMesh
+    from fracture.stages.refine import refine_params
+
+    mesh = RefineMesh.from_coarse(cf.V, cf.F, cf.sides)
+    log = Refiner(mesh, fs.pyramid, cf.exterior_V, cf.exterior_F, refine_params(cfg),
+                  np.random.default_rng(cfg["seed"])).run()
+    return mesh, log
+
+
+def in_processes(target, scenes, *args):
+    """Yield ``(scene, result)`` where ``target(scene, *args, queue)`` puts its result on the queue, one process each."""
+    ctx = mp.get_context("fork")
+    for name in scenes:
+        q = ctx.Queue()
+        p = ctx.Process(target=target, args=(name, *args, q))
+        p.start()
+        result = q.get()
+        p.join()
+        yield name, result
