@@ -45,6 +45,9 @@ CHORD = 0.05
 # A triangle of S with every corner on B whose centroid is closer to B than
 # this fraction of its longest edge lies along B (see clip_tangent_triangles).
 TANGENT = 0.05
+# An interior edge of S between two boundary vertices is split, and the new
+# vertex put this fraction of the edge's length inside B.
+BRIDGE_DEPTH = 0.2
 
 
 @dataclass
@@ -352,6 +355,51 @@ def subdivide_boundary(mesh: RefineMesh, exterior: Exterior, tolerance: float, m
     return total
 
 
+def split_bridge_edges(mesh: RefineMesh, exterior: Exterior, depth: float = BRIDGE_DEPTH,
+                       max_rounds: int = 20) -> int:
+    """Split the interior edges of S that join two boundary vertices; the new vertex goes inside B.
+
+    Such a bridge edge runs along B when B is flat between its ends and
+    outside B where B is concave, so the triangles on it touch or cross B's
+    triangles beside the cut. Its midpoint goes at least ``depth`` times the
+    edge's length below B (to B's closest point, pushed in along the normal
+    of B's closest triangle), which leaves every triangle of S with a corner
+    strictly inside the material: the fans of the imprint then meet B only
+    along the cut. A triangle may carry two bridges; a round splits those
+    that are the first (lowest id) bridge of every triangle on them.
+    Returns the number of splits.
+    """
+    total = 0
+    for _ in range(max_rounds):
+        table = edge_table(mesh.F, len(mesh.V))
+        on_b = np.zeros(len(mesh.V), bool)
+        on_b[row_edges(mesh.F, table.boundary_rows)] = True
+        rows = np.flatnonzero(on_b[row_edges(mesh.F, np.arange(3 * len(mesh.F)))].all(axis=1)
+                              & (table.row_count > 1))
+        if not len(rows):
+            break
+        eid = table.eid[rows]
+        lowest = np.full(len(mesh.F), np.iinfo(np.int64).max)
+        np.minimum.at(lowest, rows // 3, eid)
+        first = np.ones(len(table.count), bool)
+        np.logical_and.at(first, eid, lowest[rows // 3] == eid)
+        chosen = np.unique(eid[first[eid]])
+        on = np.flatnonzero(np.isin(table.eid, chosen))
+        which = np.searchsorted(chosen, table.eid[on])
+        ends = row_edges(mesh.F, on[np.unique(which, return_index=True)[1]])
+        mid = 0.5 * (mesh.V[ends[:, 0]] + mesh.V[ends[:, 1]])
+        target = depth * np.linalg.norm(mesh.V[ends[:, 1]] - mesh.V[ends[:, 0]], axis=1)
+        d2, f, closest = exterior.closest(mid)
+        n = np.cross(exterior.V[exterior.F[f, 1]] - exterior.V[exterior.F[f, 0]],
+                     exterior.V[exterior.F[f, 2]] - exterior.V[exterior.F[f, 0]])
+        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+        shallow = ~exterior.inside(mid) | (d2 < target ** 2)
+        new = mesh.split_edges(ends, np.full(len(chosen), 0.5), rows=on, which=which)
+        mesh.V[new] = np.where(shallow[:, None], closest - target[:, None] * n, mid)
+        total += len(chosen)
+    return total
+
+
 def imprint_boundary(BV: np.ndarray, BF: np.ndarray, mesh: RefineMesh, where: str = "animate") -> Imprint:
     """Remesh B and the refined surface ``mesh`` (edited in place) so that S's boundary is a chain of B edges.
 
@@ -366,6 +414,7 @@ def imprint_boundary(BV: np.ndarray, BF: np.ndarray, mesh: RefineMesh, where: st
     clip_tangent_triangles(mesh, exterior)
     collapse_short_boundary(mesh, 10 * SNAP * h)
     subdivide_boundary(mesh, exterior, CHORD * h)
+    split_bridge_edges(mesh, exterior)
     rows = edge_table(mesh.F, len(mesh.V)).boundary_rows
     sface, E = rows // 3, row_edges(mesh.F, rows)  # edges as directed in their triangle
     surf = _Surface(BV, BF)

@@ -10,7 +10,8 @@ from conftest import CONFIGS, SCENE_CASES, SHARED, scene_config
 
 from fracture import runner
 from fracture.config import load_config
-from fracture.imprint import imprint_boundary
+from fracture.exterior import Exterior
+from fracture.imprint import BRIDGE_DEPTH, imprint_boundary, split_bridge_edges
 from fracture.meshio import read_obj_objects
 from fracture.objio import ObjFrames
 from fracture.pieces import build_pieces, mesh_checks, overlap_and_gap
@@ -71,6 +72,25 @@ def test_imprinting_keeps_the_tree_and_puts_the_boundary_on_b():
     s_edges = {tuple(sorted(e)) for e in boundary_edges(mesh.F).tolist()}
     b_edges = {tuple(sorted(e)) for e in im.to_fracture[im.cut_edges].tolist()}
     assert s_edges == b_edges
+
+
+def test_bridge_edges_along_b_are_split_into_the_material():
+    # two triangles of S hinge on an edge lying in B's bottom face (both its
+    # ends on S's boundary): the triangles would touch B along it
+    BV, BF = box((0, 0, 0), (1, 1, 1), (4, 4, 4))
+    V = np.array([[0.2, 0.5, 0.0], [0.8, 0.5, 0.0], [0.5, 0.2, 0.3], [0.5, 0.8, 0.3]])
+    mesh = RefineMesh.from_coarse(V, np.array([[0, 1, 2], [1, 0, 3]]), np.array([[0, 1], [0, 1]]))
+    assert split_bridge_edges(mesh, Exterior(BV, BF)) == 1
+    # the new vertex is the bridge's midpoint lowered to BRIDGE_DEPTH x its length inside B
+    assert np.allclose(mesh.V[4], [0.5, 0.5, BRIDGE_DEPTH * 0.6])
+    assert len(mesh.F) == 4 and not any({0, 1} <= set(f) for f in mesh.F.tolist())
+    W = mesh.tree_matrix()
+    assert np.allclose(W[4].toarray(), [[0.5, 0.5, 0, 0]])
+    # an interior bridge already deep enough stays at its midpoint
+    V2 = np.array([[0.5, 0.0, 0.5], [0.5, 1.0, 0.5], [0.5, 0.5, 0.0], [0.5, 0.5, 1.0]])
+    mesh2 = RefineMesh.from_coarse(V2, np.array([[0, 1, 2], [1, 0, 3]]), np.array([[0, 1], [0, 1]]))
+    split_bridge_edges(mesh2, Exterior(BV, BF))
+    assert np.allclose(mesh2.V[4], [0.5, 0.5, 0.5])
 
 
 def test_obj_frames_round_trip(tmp_path):
