@@ -6,8 +6,9 @@ PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
-# Shared libraries open3d loads (OpenGL, EGL, OpenMP, USB).
-DEBIAN_PACKAGES := libgl1 libegl1 libgomp1 libusb-1.0-0
+# Shared libraries open3d loads (OpenGL, EGL, OpenMP, USB); Xvfb and xauth for the
+# viewer window on a machine with no display.
+DEBIAN_PACKAGES := libgl1 libegl1 libgomp1 libusb-1.0-0 xvfb xauth
 
 .PHONY: demo test bench system-deps install clean
 

@@ -32,6 +32,28 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY.PATH=VALUE")
 
     sub.add_parser("stages", help="list the pipeline stages")
+
+    v = sub.add_parser("view", help="open the research viewer on a run directory or a config")
+    v.add_argument("target", type=Path, metavar="CONFIG_OR_RUN_DIR",
+                   help="a run directory, or a config (run first into --out, default runs/<name>)")
+    v.add_argument("--out", type=Path, help="run directory for a config (default: runs/<name>)")
+    v.add_argument("--width", type=int, default=1800)
+    v.add_argument("--height", type=int, default=900)
+
+    d = sub.add_parser("render", help="render PNGs and an MP4 of a run with no window")
+    d.add_argument("run_dir", type=Path, metavar="RUN_DIR")
+    d.add_argument("--what", action="append", choices=["slices", "iterations", "animation"],
+                   help="what to render (repeatable; default: all three)")
+    d.add_argument("--out", type=Path, help="output directory (default: RUN_DIR/renders)")
+    d.add_argument("--width", type=int, default=1280)
+    d.add_argument("--height", type=int, default=720)
+    d.add_argument("--fps", type=int, default=10)
+    d.add_argument("--field", default="psi", help="slices: psi, zeta or xi")
+    d.add_argument("--axis", default="z", help="slices: normal axis x, y or z")
+    d.add_argument("--level", type=int, default=0, help="slices: psi's pyramid level (0 = finest)")
+    d.add_argument("--color-by", default="psi", help="iterations: psi or speed")
+    d.add_argument("--overlay-coarse", action="store_true", help="animation: draw the coarse pieces too")
+    d.add_argument("--quiet", action="store_true", help="no progress bars")
     return p
 
 
@@ -46,6 +68,10 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "stages":
             print("\n".join(runner.available_stages()))
             return 0
+        if args.command == "render":
+            return _render(args)
+        if args.command == "view":
+            return _view(args)
         cfg = load_config(args.config, args.overrides)
         if args.command == "config":
             sys.stdout.write(dump_config(cfg))
@@ -61,6 +87,24 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("fracref: interrupted; nothing was written", file=sys.stderr)
         return 130
+
+
+def _render(args) -> int:
+    from viewer.looks import View
+    from viewer.render import WHAT, render
+
+    view = View(field=args.field, axis=args.axis, level=args.level, color_by=args.color_by,
+                overlay_coarse=args.overlay_coarse)
+    for what in args.what or WHAT:
+        files = render(args.run_dir, what, args.out, args.width, args.height, args.fps, view, args.quiet)
+        print(f"{what}: {len(files) - 1} images and {files[-1]}")
+    return 0
+
+
+def _view(args) -> int:
+    from viewer.app import main as view_main
+
+    return view_main(args.target, args.out, args.width, args.height)
 
 
 if __name__ == "__main__":

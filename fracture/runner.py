@@ -71,6 +71,12 @@ class RunContext:
     stats: dict[str, Any] = field(default_factory=dict)
     files: list[str] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    # called as listener(event, data) by stages that report as they go (the viewer's re-run)
+    listener: Any = None
+
+    def tell(self, event: str, **data) -> None:
+        if self.listener is not None:
+            self.listener(event, data)
 
     def path(self, rel: str) -> Path:
         """Absolute path of an output file, recorded for the manifest."""
@@ -140,7 +146,8 @@ def stages_until(until: str | None) -> list[str]:
     return stages[: stages.index(until) + 1]
 
 
-def run(cfg: dict, out: str | Path, until: str | None = None, force: bool = False, progress: bool = True) -> Path:
+def run(cfg: dict, out: str | Path, until: str | None = None, force: bool = False, progress: bool = True,
+        listener=None) -> Path:
     """Run the configured stages into the run directory ``out``.
 
     Parameters
@@ -155,6 +162,10 @@ def run(cfg: dict, out: str | Path, until: str | None = None, force: bool = Fals
         Replace an existing run directory (only once the new run succeeded).
     progress : bool
         Show progress bars on stderr.
+    listener : callable, optional
+        ``listener(event, data)``: ``("stage", {"name"})`` before each stage and
+        ``("iteration", {...})`` after each refinement iteration (positions,
+        faces, psi, speed, energy, iteration), from the running thread.
 
     Returns
     -------
@@ -174,10 +185,11 @@ def run(cfg: dict, out: str | Path, until: str | None = None, force: bool = Fals
         "stages": {},
     }
     with staged_directory(out, force) as staging:
-        ctx = RunContext(cfg=cfg, dir=staging, progress=progress)
+        ctx = RunContext(cfg=cfg, dir=staging, progress=progress, listener=listener)
         ctx.path("config.yaml").write_text(dump_config(cfg), encoding="utf-8")
         for name in names:
             t0 = time.perf_counter()
+            ctx.tell("stage", name=name)
             _REGISTRY[name](ctx)
             manifest["stages"][name] = {"seconds": round(time.perf_counter() - t0, 4)}
         manifest["stats"] = ctx.stats

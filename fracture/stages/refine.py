@@ -50,6 +50,9 @@ def refine_stage(ctx: RunContext) -> None:
                 snaps.add(r)
             bar.set_postfix_str(f"{len(r.mesh.F)} triangles")
             bar.update()
+            if ctx.listener is not None:
+                ctx.tell("iteration", iteration=it + 1, positions=r.mesh.V.copy(), faces=r.mesh.F.copy(),
+                         psi=r.psi.copy(), speed=np.linalg.norm(r.velocity, axis=1), energy=r.log.energy[-1])
         log = refiner.run(progress)
     ctx.products["refined"] = mesh
 

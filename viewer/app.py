@@ -1,0 +1,681 @@
+"""``fracref view CONFIG_OR_RUN_DIR``: the research viewer window.
+
+Three panels side by side, each an Open3D SceneWidget with its controls
+below it:
+
+1. material space: a slice of zeta, xi or psi (field, axis, offset, pyramid
+   level) with a colour bar, the coarse (wireframe) and refined fracture
+   surfaces and a see-through exterior;
+2. iterations: the fracture surface at iteration k coloured by psi or
+   speed (slider, step buttons, play), with iteration, triangles and energy;
+3. animation: the high-resolution pieces at frame t (slider, play), with
+   the coarse pieces as an optional wireframe overlay.
+
+The side panel binds the config's tunable numbers; "Re-run" runs the
+pipeline on a worker thread into a new run directory (never over the shown
+one) while the iteration panel follows the refinement live; errors go to a
+message box and the status line. "Save config" writes YAML that reproduces
+the run on screen. Screenshots (one panel or all three, chosen size) and
+videos (iterations or animation) are written next to the run.
+"""
+
+from __future__ import annotations
+
+import copy
+import threading
+import time
+import traceback
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import open3d as o3d
+from open3d.visualization import gui, rendering
+
+from fracture.atomic import atomic_write_bytes, atomic_write_text
+from fracture.errors import ConfigError, InputError, StageError
+from viewer import annotate
+from viewer.data import FIELDS, RunData, Surface
+from viewer.looks import (
+    COLOR_BY, FIELD_CMAPS, SURFACE_CMAPS, CameraPose, View, animation_box, apply_camera, frame_box,
+    iteration_pose, lit, glass, prepare, show_frame, show_iteration, show_slice, slice_pose, surface_range,
+    triangle_mesh,
+)
+from viewer.render import Video, png_bytes
+
+PANELS = ("material", "iterations", "animation")
+SIDE_WIDTH_EM = 20
+PLAY_SECONDS = 0.3
+# Config numbers the side panel offers (sections; every int or float leaf under them, and the strength layers').
+TUNABLE_SECTIONS = ("psi", "stress", "pyramid", "refine")
+
+
+def tunables(cfg: dict) -> list[tuple[str, object]]:
+    """``(key path, value)`` of the config's tunable numbers, e.g. ``("refine.step", 0.25)``."""
+    out = [("seed", cfg["seed"])]
+    for sec in TUNABLE_SECTIONS:
+        for k, v in cfg.get(sec, {}).items():
+            if isinstance(v, (int, float)) and not isinstance(v, bool):
+                out.append((f"{sec}.{k}", v))
+    for i, layer in enumerate(cfg.get("strength", {}).get("layers", [])):
+        for k, v in layer.items():
+            if isinstance(v, (int, float)) and not isinstance(v, bool):
+                out.append((f"strength.layers.{i}.{k}", v))
+    return out
+
+
+def set_key(cfg: dict, path: str, value) -> None:
+    node = cfg
+    parts = path.split(".")
+    for p in parts[:-1]:
+        node = node[int(p)] if isinstance(node, list) else node[p]
+    node[parts[-1]] = value
+
+
+class Viewer:
+    """The window and its state; the handlers are methods, so scripts and tests drive it like a user."""
+
+    def __init__(self, run: RunData, width: int = 1800, height: int = 900):
+        self.app = gui.Application.instance
+        self.run = run
+        self.cfg = copy.deepcopy(run.config)
+        self.view = View().check(run)
+        self.window = self.app.create_window(f"fracref: {run.name}", width, height)
+        self.window.set_on_layout(self._layout)
+        self.window.set_on_tick_event(self._tick)
+        self.window.set_on_close(self._on_close)
+        em = self.window.theme.font_size
+        self.em = em
+        self.scenes = []
+        for _ in PANELS:
+            sw = gui.SceneWidget()
+            sw.scene = rendering.Open3DScene(self.window.renderer)
+            sw.set_on_mouse(self._on_mouse(len(self.scenes)))
+            self.window.add_child(sw)
+            self.scenes.append(sw)
+        self.controls = [self._material_controls(), self._iteration_controls(), self._animation_controls()]
+        for c in self.controls:
+            self.window.add_child(c)
+        self.side = self._side_panel()
+        self.window.add_child(self.side)
+        self.poses: list[CameraPose | None] = [None, None, None]
+        self.playing = {"iterations": False, "animation": False}
+        self._last_step = 0.0
+        self._sync_from: int | None = None
+        self._job = None  # a generator stepped on ticks (video export)
+        self._worker: threading.Thread | None = None
+        self._live: dict | None = None
+        self._live_lock = threading.Lock()
+        self.rerun_dirs: list[Path] = []
+        self.errors: list[str] = []
+        self.last_export: list[Path] = []
+        self.live_updates = 0  # iterations of a re-run drawn while it ran
+        self.load(run)
+
+    # -- layout ---------------------------------------------------------------------------
+
+    def _layout(self, ctx) -> None:
+        r = self.window.content_rect
+        side_w = SIDE_WIDTH_EM * self.em
+        ctrl_h = int(9 * self.em)
+        pw = (r.width - side_w) // 3
+        for i, (sw, c) in enumerate(zip(self.scenes, self.controls)):
+            sw.frame = gui.Rect(r.x + i * pw, r.y, pw, r.height - ctrl_h)
+            c.frame = gui.Rect(r.x + i * pw, r.y + r.height - ctrl_h, pw, ctrl_h)
+        self.side.frame = gui.Rect(r.x + 3 * pw, r.y, r.width - 3 * pw, r.height)
+
+    def _material_controls(self) -> gui.Widget:
+        em = self.window.theme.font_size
+        v = gui.Vert(0.25 * em, gui.Margins(0.5 * em, 0.25 * em, 0.5 * em, 0.25 * em))
+        row = gui.Horiz(0.5 * em)
+        self.field_box = gui.Combobox()
+        for f in FIELDS:
+            self.field_box.add_item(f)
+        self.field_box.set_on_selection_changed(lambda text, i: self.set_field(text))
+        self.axis_box = gui.Combobox()
+        for a in "xyz":
+            self.axis_box.add_item(a)
+        self.axis_box.set_on_selection_changed(lambda text, i: self.set_axis(text))
+        row.add_child(gui.Label("field"))
+        row.add_child(self.field_box)
+        row.add_child(gui.Label("axis"))
+        row.add_child(self.axis_box)
+        v.add_child(row)
+        row = gui.Horiz(0.5 * em)
+        row.add_child(gui.Label("offset"))
+        self.offset_slider = gui.Slider(gui.Slider.DOUBLE)
+        self.offset_slider.set_limits(0.0, 1.0)
+        self.offset_slider.set_on_value_changed(self.set_offset)
+        row.add_child(self.offset_slider)
+        v.add_child(row)
+        row = gui.Horiz(0.5 * em)
+        row.add_child(gui.Label("level"))
+        self.level_slider = gui.Slider(gui.Slider.INT)
+        self.level_slider.set_on_value_changed(lambda x: self.set_level(int(x)))
+        row.add_child(self.level_slider)
+        v.add_child(row)
+        row = gui.Horiz(0.5 * em)
+        self.bar_low = gui.Label("      ")
+        self.bar_image = gui.ImageWidget(o3d.geometry.Image(np.zeros((12, 200, 3), np.uint8)))
+        self.bar_high = gui.Label("      ")
+        row.add_child(self.bar_low)
+        row.add_child(self.bar_image)
+        row.add_child(self.bar_high)
+        v.add_child(row)
+        return v
+
+    def _iteration_controls(self) -> gui.Widget:
+        em = self.window.theme.font_size
+        v = gui.Vert(0.25 * em, gui.Margins(0.5 * em, 0.25 * em, 0.5 * em, 0.25 * em))
+        row = gui.Horiz(0.5 * em)
+        self.iter_slider = gui.Slider(gui.Slider.INT)
+        self.iter_slider.set_on_value_changed(lambda x: self.set_iteration(int(x)))
+        row.add_child(self.iter_slider)
+        v.add_child(row)
+        row = gui.Horiz(0.5 * em)
+        for text, step in (("<", -1), (">", 1)):
+            b = gui.Button(text)
+            b.set_on_clicked(lambda s=step: self.set_iteration(self.view.iteration + s))
+            row.add_child(b)
+        self.iter_play = gui.Button("play")
+        self.iter_play.set_on_clicked(lambda: self.toggle_play("iterations"))
+        row.add_child(self.iter_play)
+        row.add_child(gui.Label("colour"))
+        self.color_box = gui.Combobox()
+        for c in COLOR_BY:
+            self.color_box.add_item(c)
+        self.color_box.set_on_selection_changed(lambda text, i: self.set_color_by(text))
+        row.add_child(self.color_box)
+        v.add_child(row)
+        self.iter_label = gui.Label("")
+        v.add_child(self.iter_label)
+        return v
+
+    def _animation_controls(self) -> gui.Widget:
+        em = self.window.theme.font_size
+        v = gui.Vert(0.25 * em, gui.Margins(0.5 * em, 0.25 * em, 0.5 * em, 0.25 * em))
+        self.frame_slider = gui.Slider(gui.Slider.INT)
+        self.frame_slider.set_on_value_changed(lambda x: self.set_frame(int(x) - 1))
+        v.add_child(self.frame_slider)
+        row = gui.Horiz(0.5 * em)
+        self.frame_play = gui.Button("play")
+        self.frame_play.set_on_clicked(lambda: self.toggle_play("animation"))
+        row.add_child(self.frame_play)
+        self.overlay_box = gui.Checkbox("coarse overlay")
+        self.overlay_box.set_on_checked(self.set_overlay)
+        row.add_child(self.overlay_box)
+        self.link_box = gui.Checkbox("link cameras")
+        row.add_child(self.link_box)
+        v.add_child(row)
+        self.frame_label = gui.Label("")
+        v.add_child(self.frame_label)
+        return v
+
+    def _side_panel(self) -> gui.Widget:
+        em = self.window.theme.font_size
+        side = gui.ScrollableVert(0.25 * em, gui.Margins(0.5 * em, 0.5 * em, 0.5 * em, 0.5 * em))
+        side.add_child(gui.Label("Parameters"))
+        self.edits: dict[str, gui.NumberEdit] = {}
+        section = None
+        for key, value in tunables(self.cfg):
+            head = key.split(".")[0] if key != "seed" else "run"
+            if head != section:
+                section = head
+                group = gui.CollapsableVert(head, 0.2 * em, gui.Margins(0.5 * em, 0, 0, 0))
+                group.set_is_open(head in ("run", "psi", "refine"))
+                side.add_child(group)
+            row = gui.Horiz(0.5 * em)
+            edit = gui.NumberEdit(gui.NumberEdit.INT if isinstance(value, int) else gui.NumberEdit.DOUBLE)
+            if isinstance(value, int):
+                edit.int_value = value
+            else:
+                edit.double_value = value
+                edit.decimal_precision = 4
+            row.add_child(gui.Label(key.split(".", 1)[-1] if key != "seed" else "seed"))
+            row.add_stretch()
+            row.add_child(edit)
+            group.add_child(row)
+            self.edits[key] = edit
+        buttons = gui.Horiz(0.5 * em)
+        b = gui.Button("Re-run")
+        b.set_on_clicked(self.rerun)
+        buttons.add_child(b)
+        b = gui.Button("Save config")
+        b.set_on_clicked(lambda: self.save_config())
+        buttons.add_child(b)
+        side.add_child(buttons)
+        self.status = gui.Label("ready")
+        side.add_child(self.status)
+
+        side.add_child(gui.Label("Export"))
+        row = gui.Horiz(0.5 * em)
+        self.export_w = gui.NumberEdit(gui.NumberEdit.INT)
+        self.export_w.int_value = 1280
+        self.export_h = gui.NumberEdit(gui.NumberEdit.INT)
+        self.export_h.int_value = 720
+        self.export_fps = gui.NumberEdit(gui.NumberEdit.INT)
+        self.export_fps.int_value = 10
+        for label, w in (("w", self.export_w), ("h", self.export_h), ("fps", self.export_fps)):
+            row.add_child(gui.Label(label))
+            row.add_child(w)
+        side.add_child(row)
+        row = gui.Horiz(0.5 * em)
+        self.shot_box = gui.Combobox()
+        for name in ("all panels",) + PANELS:
+            self.shot_box.add_item(name)
+        row.add_child(self.shot_box)
+        b = gui.Button("Screenshot")
+        b.set_on_clicked(lambda: self.screenshot(self.shot_box.selected_text))
+        row.add_child(b)
+        side.add_child(row)
+        row = gui.Horiz(0.5 * em)
+        for what in ("iterations", "animation"):
+            b = gui.Button(f"Video: {what}")
+            b.set_on_clicked(lambda w=what: self.export_video(w))
+            row.add_child(b)
+        side.add_child(row)
+        return side
+
+    # -- loading and drawing -------------------------------------------------------------------
+
+    def load(self, run: RunData) -> None:
+        """Show ``run`` in all panels (after start-up or a re-run)."""
+        self.run = run
+        self.view = replace(self.view, iteration=-1, frame=0).check(run)
+        self.level_slider.set_limits(0, max(run.pyramid_levels - 1, 0))
+        n_it = len(run.iterations) if run.has_iterations else 1
+        self.iter_slider.set_limits(0, max(n_it - 1, 0))
+        self.iter_slider.int_value = self.view.iteration if run.has_iterations else 0
+        self.frame_slider.set_limits(1, max(run.n_frames, 1))
+        self.frame_slider.int_value = 1
+        self.offset_slider.double_value = self.view.offset
+        self.field_box.selected_index = FIELDS.index(self.view.field)
+        self.axis_box.selected_index = "xyz".index(self.view.axis)
+        self.color_box.selected_index = COLOR_BY.index(self.view.color_by)
+        self._iter_range = surface_range(run, self.view.color_by) if run.has_iterations else None
+        self.poses = [None, None, None]
+        self.draw_material()
+        self.draw_iteration()
+        self.draw_frame()
+
+    def _aspect(self, i: int) -> float:
+        f = self.scenes[i].frame
+        return f.width / max(f.height, 1) if f.width > 0 else 1.0
+
+    def _pose(self, i: int) -> CameraPose:
+        if self.poses[i] is None:
+            a = self._aspect(i)
+            if i == 0:
+                self.poses[i] = slice_pose(self.run, self.view, a)
+            elif i == 1 and self.run.has_iterations:
+                self.poses[i] = iteration_pose(self.run, a)
+            elif i == 2 and self.run.has_animation:
+                self.poses[i] = frame_box(*animation_box(self.run), a)
+            else:
+                V = self.run.exterior.V
+                self.poses[i] = frame_box(V.min(axis=0), V.max(axis=0), a)
+            f = self.scenes[i].frame
+            apply_camera(self.scenes[i].scene.camera, self.poses[i], max(f.width, 1), max(f.height, 1))
+        return self.poses[i]
+
+    def draw_material(self) -> None:
+        rng = show_slice(self.scenes[0].scene, self.run, self.view)
+        bar = annotate.colorbar_strip(FIELD_CMAPS[self.view.field], 200, 12)
+        self.bar_image.update_image(o3d.geometry.Image(bar))
+        self.bar_low.text = f"{rng[0]:.3g}"
+        self.bar_high.text = f"{rng[1]:.3g} ({self.view.field})"
+        self._pose(0)
+        self.scenes[0].force_redraw()
+
+    def draw_iteration(self, live: dict | None = None) -> None:
+        scene = self.scenes[1].scene
+        if live is not None:  # a re-run in progress: its latest iteration
+            prepare(scene)
+            rng = self._iter_range or (float(live[self.view.color_by].min()), float(live[self.view.color_by].max()))
+            from fields.colormap import colormap
+            colors = colormap(live[self.view.color_by], SURFACE_CMAPS[self.view.color_by], *rng)
+            scene.add_geometry("surface", triangle_mesh(live["positions"], live["faces"], colors), lit((1, 1, 1, 1)))
+            ext = self.run.exterior
+            scene.add_geometry("exterior", triangle_mesh(ext.V, ext.F, flat=True), glass(0.12))
+            self.iter_label.text = (f"re-run: iteration {live['iteration']}, {len(live['faces'])} triangles, "
+                                    f"E = {live['energy']:.4g}")
+        elif self.run.has_iterations:
+            show_iteration(scene, self.run, self.view, self._iter_range)
+            k = self.view.iteration
+            e = self.run.energy[k - 1] if 0 < k <= len(self.run.energy) else None
+            self.iter_label.text = (f"iteration {k} / {len(self.run.iterations) - 1}, "
+                                    f"{len(self.run.iterations[k]['faces'])} triangles"
+                                    + (f", E = {e:.4g}" if e is not None else ""))
+        else:
+            prepare(scene)
+            self.iter_label.text = "no iterations in this run (refine.snapshots: false, or stopped early)"
+        self._pose(1)
+        self.scenes[1].force_redraw()
+
+    def draw_frame(self) -> None:
+        if self.run.has_animation:
+            show_frame(self.scenes[2].scene, self.run, self.view)
+            self.frame_label.text = f"frame {self.view.frame + 1} / {self.run.n_frames}, {len(self.run.piece_faces)} pieces"
+        else:
+            prepare(self.scenes[2].scene)
+            self.frame_label.text = "no animation in this run (stopped before the animate stage)"
+        self._pose(2)
+        self.scenes[2].force_redraw()
+
+    # -- handlers ---------------------------------------------------------------------------------
+
+    def set_field(self, name: str) -> None:
+        self.view = replace(self.view, field=name)
+        self.draw_material()
+
+    def set_axis(self, axis: str) -> None:
+        self.view = replace(self.view, axis=axis)
+        self.poses[0] = None
+        self.draw_material()
+
+    def set_offset(self, offset: float) -> None:
+        self.view = replace(self.view, offset=float(np.clip(offset, 0.0, 1.0)))
+        self.offset_slider.double_value = self.view.offset
+        self.draw_material()
+
+    def set_level(self, level: int) -> None:
+        self.view = replace(self.view, level=int(np.clip(level, 0, self.run.pyramid_levels - 1)))
+        self.level_slider.int_value = self.view.level
+        self.draw_material()
+
+    def set_iteration(self, k: int) -> None:
+        if not self.run.has_iterations:
+            return
+        k = int(np.clip(k, 0, len(self.run.iterations) - 1))
+        self.view = replace(self.view, iteration=k)
+        self.iter_slider.int_value = k
+        self.draw_iteration()
+
+    def set_color_by(self, name: str) -> None:
+        self.view = replace(self.view, color_by=name)
+        if self.run.has_iterations:
+            self._iter_range = surface_range(self.run, name)
+        self.draw_iteration()
+
+    def set_frame(self, t: int) -> None:
+        if not self.run.has_animation:
+            return
+        t = int(np.clip(t, 0, self.run.n_frames - 1))
+        self.view = replace(self.view, frame=t)
+        self.frame_slider.int_value = t + 1
+        self.draw_frame()
+
+    def set_overlay(self, on: bool) -> None:
+        self.view = replace(self.view, overlay_coarse=bool(on))
+        self.overlay_box.checked = bool(on)
+        self.draw_frame()
+
+    def toggle_play(self, which: str) -> None:
+        self.playing[which] = not self.playing[which]
+        (self.iter_play if which == "iterations" else self.frame_play).text = "pause" if self.playing[which] else "play"
+
+    def _on_mouse(self, i: int):
+        def handler(event):
+            if self.link_box.checked and event.type in (gui.MouseEvent.Type.DRAG, gui.MouseEvent.Type.WHEEL,
+                                                        gui.MouseEvent.Type.BUTTON_UP):
+                self._sync_from = i
+            return gui.Widget.EventCallbackResult.IGNORED
+        return handler
+
+    def _tick(self) -> bool:
+        redraw = False
+        if self._sync_from is not None:  # linked cameras follow the one the user moved
+            src = self.scenes[self._sync_from].scene.camera
+            for j, sw in enumerate(self.scenes):
+                if j != self._sync_from:
+                    sw.scene.camera.copy_from(src)
+                    sw.force_redraw()
+            self._sync_from = None
+            redraw = True
+        now = time.monotonic()
+        if now - self._last_step >= PLAY_SECONDS and any(self.playing.values()):
+            self._last_step = now
+            if self.playing["iterations"] and self.run.has_iterations:
+                self.set_iteration((self.view.iteration + 1) % len(self.run.iterations))
+            if self.playing["animation"] and self.run.has_animation:
+                self.set_frame((self.view.frame + 1) % self.run.n_frames)
+            redraw = True
+        with self._live_lock:
+            live, self._live = self._live, None
+        if live is not None:
+            self.draw_iteration(live)
+            self.live_updates += 1
+            redraw = True
+        if self._job is not None:
+            try:
+                next(self._job)
+            except StopIteration:
+                self._job = None
+            except Exception as exc:  # noqa: BLE001 - shown to the user, not lost
+                self._job = None
+                self.report_error("export failed", exc)
+            redraw = True
+        return redraw
+
+    def _on_close(self) -> bool:
+        if self._worker is not None and self._worker.is_alive():
+            self.status.text = "a re-run is still going; it finishes in the background"
+        return True
+
+    # -- re-run and config ---------------------------------------------------------------------------
+
+    def edited_config(self) -> dict:
+        cfg = copy.deepcopy(self.cfg)
+        for key, edit in self.edits.items():
+            value = edit.int_value if isinstance(dict(tunables(self.cfg))[key], int) else edit.double_value
+            set_key(cfg, key, value)
+        return cfg
+
+    def save_config(self, path: str | Path | None = None) -> Path | None:
+        """Write the on-screen parameters as YAML (checked by loading it back); returns the file."""
+        from fracture.config import dump_config, load_config
+
+        path = Path(path) if path is not None else self.run.dir.parent / f"{self.run.name}_viewer.yaml"
+        try:
+            cfg = self.edited_config()
+            text = dump_config(cfg)
+            tmp = path.with_name(f".{path.name}.check.yaml")
+            tmp.write_text(text, encoding="utf-8")
+            try:
+                load_config(tmp)
+            finally:
+                tmp.unlink(missing_ok=True)
+            atomic_write_text(path, text)
+        except (ConfigError, OSError) as exc:
+            self.report_error("cannot save the config", exc)
+            return None
+        self.status.text = f"saved {path}"
+        return path
+
+    def _next_run_dir(self) -> Path:
+        base = self.run.dir
+        root = base.parent / f"{base.name.split('.rerun')[0]}.rerun"
+        k = 1
+        while Path(f"{root}{k}").exists():
+            k += 1
+        return Path(f"{root}{k}")
+
+    def rerun(self) -> None:
+        """Run the pipeline with the side panel's parameters on a worker thread, into a new run directory."""
+        from fracture import runner
+        from fracture.config import dump_config, load_config
+
+        if self._worker is not None and self._worker.is_alive():
+            self.status.text = "a re-run is already going"
+            return
+        out = self._next_run_dir()
+        try:
+            out.parent.mkdir(parents=True, exist_ok=True)
+            cfg_path = out.parent / f".{out.name}.yaml"
+            cfg_path.write_text(dump_config(self.edited_config()), encoding="utf-8")
+            try:
+                cfg = load_config(cfg_path)
+            finally:
+                cfg_path.unlink(missing_ok=True)
+        except (ConfigError, OSError) as exc:
+            self.report_error("the parameters are not valid", exc)
+            return
+        self.status.text = f"re-running into {out} ..."
+
+        def listener(event, data):
+            if event == "stage":
+                self.app.post_to_main_thread(self.window, lambda: setattr(self.status, "text",
+                                                                          f"re-run: {data['name']} ..."))
+            elif event == "iteration":
+                with self._live_lock:
+                    self._live = data
+
+        def work():
+            try:
+                runner.run(cfg, out, progress=False, listener=listener)
+                self.app.post_to_main_thread(self.window, lambda: self._rerun_done(out, cfg))
+            except Exception as exc:  # noqa: BLE001 - shown in the window
+                self.app.post_to_main_thread(self.window, lambda e=exc: self.report_error("re-run failed", e))
+
+        self._worker = threading.Thread(target=work, name="rerun", daemon=True)
+        self._worker.start()
+
+    def _rerun_done(self, out: Path, cfg: dict) -> None:
+        with self._live_lock:
+            self._live = None
+        self.cfg = cfg
+        self.rerun_dirs.append(out)
+        self.load(RunData(out))
+        self.window.title = f"fracref: {self.run.name} ({out.name})"
+        self.status.text = f"re-run done: {out}"
+
+    def report_error(self, what: str, exc: BaseException) -> None:
+        known = isinstance(exc, (ConfigError, InputError, StageError, OSError))
+        text = f"{what}: {exc}" if known else f"{what}: {exc!r}\n{traceback.format_exc(limit=4)}"
+        self.errors.append(text)
+        self.status.text = text.splitlines()[0][:120]
+        self.window.show_message_box("fracref", text)
+
+    # -- export ------------------------------------------------------------------------------------
+
+    def _export_size(self) -> tuple[int, int]:
+        from viewer.render import check_size
+
+        w, h = int(self.export_w.int_value), int(self.export_h.int_value)
+        check_size(w, h, "export")
+        return w, h
+
+    def panel_image(self, i: int, width: int, height: int) -> np.ndarray:
+        """Panel ``i`` rendered at ``width x height`` from its current camera (the window is unchanged)."""
+        sw = self.scenes[i]
+        cam = sw.scene.camera
+        M = np.asarray(cam.get_model_matrix())
+        eye, forward, up = M[:3, 3], -M[:3, 2], M[:3, 1]
+        pose = self._pose(i)
+        dist = float(np.linalg.norm(pose.eye - pose.center))
+        current = CameraPose(eye + dist * forward, eye, up, cam.get_field_of_view())
+        # keep all that the panel shows: a narrower picture gets a taller field of view
+        f = sw.frame
+        panel_aspect, aspect = f.width / max(f.height, 1), width / height
+        half = np.arctan(np.tan(np.radians(current.fov) / 2) * panel_aspect / aspect)
+        wide = replace(current, fov=max(current.fov, float(np.degrees(2 * half))))
+        apply_camera(cam, wide, width, height)
+        try:
+            img = np.asarray(self.app.render_to_image(sw.scene, width, height))[..., :3].copy()
+        finally:
+            apply_camera(cam, current, max(f.width, 1), max(f.height, 1))
+        if i == 0:
+            rng = (float(self.bar_low.text), float(self.bar_high.text.split()[0]))
+            img = annotate.with_colorbar(img, FIELD_CMAPS[self.view.field], rng, self.view.field)
+        elif i == 1 and self.run.has_iterations and self._iter_range is not None:
+            img = annotate.with_colorbar(img, SURFACE_CMAPS[self.view.color_by], self._iter_range,
+                                         self.view.color_by, self.iter_label.text)
+        elif i == 2:
+            img = annotate.caption(img, self.frame_label.text)
+        return img
+
+    def screenshot(self, which: str = "all panels", path: str | Path | None = None) -> Path | None:
+        """A PNG of one panel (``material``, ``iterations``, ``animation``) or of all three side by side."""
+        try:
+            w, h = self._export_size()
+            if which == "all panels":
+                pw = (w // 3) // 2 * 2
+                img = np.concatenate([self.panel_image(i, pw, h) for i in range(3)], axis=1)
+            else:
+                img = self.panel_image(PANELS.index(which), w, h)
+            path = Path(path) if path else self.run.dir / "renders" / f"screenshot_{which.replace(' ', '_')}.png"
+            path.parent.mkdir(parents=True, exist_ok=True)
+            atomic_write_bytes(path, png_bytes(img))
+        except (InputError, OSError, ValueError) as exc:
+            self.report_error("screenshot failed", exc)
+            return None
+        self.status.text = f"saved {path}"
+        self.last_export = [path]
+        return path
+
+    def export_video(self, what: str, path: str | Path | None = None) -> None:
+        """An MP4 of the iterations or the animation, one frame per window tick (the window stays live)."""
+        try:
+            w, h = self._export_size()
+            fps = int(self.export_fps.int_value)
+            if what == "iterations" and not self.run.has_iterations or what == "animation" and not self.run.has_animation:
+                raise InputError(f"this run has no {what} to export")
+            path = Path(path) if path else self.run.dir / "renders" / f"window_{what}.mp4"
+            path.parent.mkdir(parents=True, exist_ok=True)
+            video = Video(path, w, h, fps)
+        except (InputError, OSError) as exc:
+            self.report_error("video export failed", exc)
+            return
+        n = len(self.run.iterations) if what == "iterations" else self.run.n_frames
+        i = 1 if what == "iterations" else 2
+        keep = self.view
+
+        def job():
+            try:
+                for k in range(n):
+                    if what == "iterations":
+                        self.set_iteration(k)
+                    else:
+                        self.set_frame(k)
+                    video.add(self.panel_image(i, w, h))
+                    self.status.text = f"video: {k + 1} / {n}"
+                    yield
+            except BaseException:
+                video.abort()
+                raise
+            video.close()
+            self.view = keep
+            self.status.text = f"saved {path}"
+            self.last_export = [path]
+
+        self._job = job()
+
+
+def open_target(target: Path, out: Path | None) -> RunData:
+    """A run directory as is; a config is run first (into ``out`` or ``runs/<name>``, reused when complete)."""
+    from fracture import runner
+    from fracture.config import load_config
+
+    target = Path(target)
+    if target.is_dir():
+        return RunData(target)
+    if not target.is_file():
+        raise InputError(f"{target}: neither a run directory nor a config file")
+    cfg = load_config(target)
+    out = Path(out) if out is not None else Path("runs") / cfg["name"]
+    if not (out / "manifest.json").is_file():
+        print(f"running {target} into {out} first ...")
+        runner.run(cfg, out, progress=True)
+    return RunData(out)
+
+
+def main(target: Path, out: Path | None = None, width: int = 1800, height: int = 900) -> int:
+    run = open_target(target, out)
+    app = gui.Application.instance
+    app.initialize()
+    Viewer(run, width, height)
+    app.run()
+    return 0
+
+
+__all__ = ["Viewer", "main", "open_target", "tunables", "Surface"]

@@ -1,0 +1,210 @@
+"""What the viewer shows, read from a run directory (``fracref run``'s output).
+
+A run directory holds ``manifest.json`` (written last: a directory with one
+is a complete run), the resolved ``config.yaml`` and each stage's files.
+:class:`RunData` reads what is there; a run stopped early (``--until``)
+has no iterations or animation, and the views that need them say so.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+
+from fields.grid import Grid
+from fracture.errors import InputError
+
+FIELDS = ("psi", "zeta", "xi")
+
+
+@dataclass
+class Surface:
+    """A triangle mesh with optional per-vertex scalars."""
+
+    V: np.ndarray
+    F: np.ndarray
+    scalars: dict = field(default_factory=dict)
+
+
+class RunData:
+    """Lazy access to one run directory's outputs (material space unless said otherwise)."""
+
+    def __init__(self, run_dir: str | Path):
+        self.dir = Path(run_dir)
+        manifest = self.dir / "manifest.json"
+        if not self.dir.is_dir():
+            raise InputError(f"{self.dir}: no such run directory (make one with `fracref run CONFIG --out DIR`)")
+        if not manifest.is_file():
+            raise InputError(f"{self.dir}: not a complete run directory (no manifest.json; "
+                             f"a run writes it last, so the run failed or is still going)")
+        try:
+            self.manifest = json.loads(manifest.read_text(encoding="utf-8"))
+        except json.JSONDecodeError as exc:
+            raise InputError(f"{manifest}: not valid JSON ({exc})") from None
+
+    def _path(self, rel: str) -> Path:
+        return self.dir / rel
+
+    def has(self, rel: str) -> bool:
+        return self._path(rel).is_file()
+
+    def _require(self, rel: str, what: str) -> Path:
+        p = self._path(rel)
+        if not p.is_file():
+            stages = ", ".join(self.manifest.get("stages", {})) or "none"
+            raise InputError(f"{self.dir}: {what} needs {rel}, which this run does not have "
+                             f"(stages run: {stages})")
+        return p
+
+    @cached_property
+    def config(self) -> dict:
+        import yaml
+
+        return yaml.safe_load(self._require("config.yaml", "the config").read_text(encoding="utf-8"))
+
+    @property
+    def name(self) -> str:
+        return str(self.manifest.get("name", self.dir.name))
+
+    # -- fields ---------------------------------------------------------------------------
+
+    @cached_property
+    def grid(self) -> Grid:
+        return Grid.from_dict(json.loads(self._require("fields/grid.json", "the fields").read_text()))
+
+    @property
+    def has_fields(self) -> bool:
+        return self.has("fields/grid.json") and self.has("fields/psi.npy")
+
+    @cached_property
+    def _pyramid(self) -> np.ndarray:
+        return np.load(self._require("fields/pyramid.npy", "the strength pyramid"), mmap_mode="r")
+
+    @property
+    def pyramid_levels(self) -> int:
+        return int(self._pyramid.shape[0]) if self.has("fields/pyramid.npy") else 1
+
+    def field(self, name: str, level: int = 0) -> np.ndarray:
+        """Field ``name`` (zeta, xi or psi) on the grid; psi at pyramid ``level`` (0 = finest)."""
+        if name not in FIELDS:
+            raise InputError(f"field must be one of {', '.join(FIELDS)}, got {name!r}")
+        if name == "psi" and level:
+            if not 0 <= level < self.pyramid_levels:
+                raise InputError(f"pyramid level must be in 0..{self.pyramid_levels - 1}, got {level}")
+            return np.asarray(self._pyramid[level])
+        return np.load(self._require(f"fields/{name}.npy", f"the {name} field"))
+
+    # -- coarse input -----------------------------------------------------------------------
+
+    @cached_property
+    def exterior(self) -> Surface:
+        from fracture.plyio import read_ply
+
+        V, F, _, fd = read_ply(self._require("coarse/exterior.ply", "the exterior"))
+        return Surface(V, F, {"component": fd.get("component", np.zeros(len(F), np.int64))})
+
+    @cached_property
+    def coarse_fracture(self) -> Surface:
+        from fracture.plyio import read_ply
+
+        V, F, _, _ = read_ply(self._require("coarse/fracture_surface.ply", "the coarse fracture surface"))
+        return Surface(V, F)
+
+    @cached_property
+    def refined_fracture(self) -> Surface | None:
+        from fracture.plyio import read_ply
+
+        if not self.has("refined/fracture_surface.ply"):
+            return None
+        V, F, _, _ = read_ply(self._path("refined/fracture_surface.ply"))
+        return Surface(V, F)
+
+    @cached_property
+    def piece_names(self) -> list[str]:
+        if not self.has("coarse/components.json"):
+            return []
+        return list(json.loads(self._path("coarse/components.json").read_text())["names"])
+
+    @cached_property
+    def coarse_animation(self):
+        from fracture.animation import CoarseAnimation
+
+        return CoarseAnimation(lo=np.load(self._require("coarse/animation_lo.npy", "the coarse animation")),
+                               hi=np.load(self._require("coarse/animation_hi.npy", "the coarse animation")),
+                               nodes=np.load(self._require("coarse/animation_nodes.npy", "the coarse animation")))
+
+    def coarse_pieces(self, t: int) -> list[Surface]:
+        """The coarse exterior's triangles of each component, moved to frame ``t``."""
+        ext, anim = self.exterior, self.coarse_animation
+        out = []
+        for c in range(anim.n_components):
+            F = ext.F[ext.scalars["component"] == c]
+            used, local = np.unique(F, return_inverse=True)
+            out.append(Surface(anim.deform(c, t, ext.V[used]), local.reshape(-1, 3)))
+        return out
+
+    # -- iterations -------------------------------------------------------------------------
+
+    @property
+    def has_iterations(self) -> bool:
+        return self.has("refined/iterations.json")
+
+    @cached_property
+    def iterations(self) -> list[dict]:
+        from fracture.stages.refine import load_snapshots
+
+        self._require("refined/iterations.json", "the iteration view")
+        return load_snapshots(self.dir)
+
+    @property
+    def energy(self) -> list[float]:
+        """E(S) after each iteration; the first snapshot (the coarse surface) has none."""
+        return list(self.manifest.get("stats", {}).get("refine", {}).get("energy", []))
+
+    def iteration(self, k: int) -> Surface:
+        its = self.iterations
+        if not 0 <= k < len(its):
+            raise InputError(f"iteration must be in 0..{len(its) - 1}, got {k}")
+        s = its[k]
+        return Surface(s["positions"].astype(np.float64), s["faces"].astype(np.int64),
+                       {"psi": s["psi"], "speed": s["speed"]})
+
+    # -- animation --------------------------------------------------------------------------
+
+    @property
+    def has_animation(self) -> bool:
+        return self.has("animation/transfer.npz")
+
+    @cached_property
+    def transfer(self):
+        from fracture.transfer import load_transfer
+
+        return load_transfer(self._require("animation/transfer.npz", "the animation view"))
+
+    @cached_property
+    def piece_faces(self) -> list[np.ndarray]:
+        """Each piece's triangles, indexing its rows of the transfer (``transfer.piece``)."""
+        from fracture.plyio import read_ply
+
+        tr = self.transfer
+        out = []
+        for c in range(len(tr.offsets) - 1):
+            _, F, _, _ = read_ply(self._require(f"pieces/piece_{c:03d}.ply", "the animation view"))
+            out.append(F.astype(np.int64))
+        return out
+
+    @property
+    def n_frames(self) -> int:
+        return self.transfer.n_frames if self.has_animation else 0
+
+    def pieces_at(self, t: int) -> list[Surface]:
+        """The high-resolution pieces at frame ``t`` (0-based)."""
+        tr = self.transfer
+        if not 0 <= t < tr.n_frames:
+            raise InputError(f"frame must be in 1..{tr.n_frames}, got {t + 1}")
+        X = tr.positions(t)
+        return [Surface(tr.piece(X, c), F) for c, F in enumerate(self.piece_faces)]

@@ -1,0 +1,322 @@
+"""The look of the three panels, shared by the window and the headless renderer.
+
+Each ``show_*`` function fills an ``open3d.visualization.rendering.Open3DScene``
+(a SceneWidget's or an OffscreenRenderer's) from a :class:`~viewer.data.RunData`
+and a :class:`View` (which field, slice, iteration, frame, colouring), so a
+figure rendered with ``fracref render`` looks like the window.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+import open3d as o3d
+from open3d.visualization import rendering
+
+from fields.colormap import colormap
+from fields.slices import axis_slice
+from viewer.data import FIELDS, RunData
+
+BACKGROUND = (1.0, 1.0, 1.0, 1.0)
+# Piece colours: the Okabe-Ito palette (distinguishable with colour-blindness), then a hue walk.
+PIECE_COLORS = np.array([[0.90, 0.62, 0.00], [0.34, 0.71, 0.91], [0.00, 0.62, 0.45], [0.94, 0.89, 0.26],
+                         [0.00, 0.45, 0.70], [0.84, 0.37, 0.00], [0.80, 0.47, 0.65], [0.60, 0.60, 0.60]])
+FIELD_CMAPS = {"psi": "coolwarm", "zeta": "viridis", "xi": "magma"}
+SURFACE_CMAPS = {"psi": "coolwarm", "speed": "viridis"}
+COLOR_BY = tuple(SURFACE_CMAPS)
+
+
+@dataclass
+class View:
+    """What the panels show; every field is a control of the window and an option of ``fracref render``."""
+
+    field: str = "psi"
+    axis: str = "z"
+    offset: float = 0.5
+    level: int = 0
+    iteration: int = -1  # -1: the last
+    color_by: str = "psi"
+    frame: int = 0  # 0-based
+    overlay_coarse: bool = False
+
+    def check(self, run: RunData) -> "View":
+        """This view with ``iteration`` resolved, or an error naming the bad value and what is allowed."""
+        from fracture.errors import InputError
+
+        if self.field not in FIELDS:
+            raise InputError(f"field must be one of {', '.join(FIELDS)}, got {self.field!r}")
+        if self.axis not in ("x", "y", "z"):
+            raise InputError(f"axis must be x, y or z, got {self.axis!r}")
+        if not 0.0 <= self.offset <= 1.0:
+            raise InputError(f"slice offset must be in [0, 1], got {self.offset}")
+        if self.color_by not in COLOR_BY:
+            raise InputError(f"colour must be one of {', '.join(COLOR_BY)}, got {self.color_by!r}")
+        if not 0 <= self.level < max(run.pyramid_levels, 1):
+            raise InputError(f"pyramid level must be in 0..{run.pyramid_levels - 1}, got {self.level}")
+        v = View(**asdict(self))
+        if run.has_iterations and v.iteration < 0:
+            v.iteration = len(run.iterations) + v.iteration
+        return v
+
+
+# -- geometry ---------------------------------------------------------------------------------
+
+
+def triangle_mesh(V: np.ndarray, F: np.ndarray, colors: np.ndarray | None = None,
+                  flat: bool = False) -> o3d.geometry.TriangleMesh:
+    """An Open3D mesh; ``flat`` shades each triangle with its own normal (sharp creases, e.g. a box's edges)."""
+    m = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(np.asarray(V, np.float64)),
+                                  o3d.utility.Vector3iVector(np.asarray(F, np.int32)))
+    if colors is not None:
+        m.vertex_colors = o3d.utility.Vector3dVector(np.asarray(colors, np.float64))
+    if flat:  # Open3D draws a mesh without vertex normals with its triangle normals
+        m.compute_triangle_normals()
+    else:
+        m.compute_vertex_normals()
+    return m
+
+
+def wireframe(V: np.ndarray, F: np.ndarray) -> o3d.geometry.LineSet:
+    E = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
+    E = np.unique(E, axis=0)
+    return o3d.geometry.LineSet(o3d.utility.Vector3dVector(np.asarray(V, np.float64)),
+                                o3d.utility.Vector2iVector(E.astype(np.int32)))
+
+
+def slice_plane(run: RunData, view: View) -> tuple[o3d.geometry.TriangleMesh, tuple[float, float]]:
+    """The field slice as a flat coloured mesh in material space, and its value range."""
+    values = run.field(view.field, view.level if view.field == "psi" else 0)
+    plane, info = axis_slice(run.grid, values, view.axis, view.offset)
+    vmin, vmax = field_range(run, view)
+    nu, nv = plane.shape
+    u = np.linspace(*info["extent"][0], nu)
+    v = np.linspace(*info["extent"][1], nv)
+    U, W = np.meshgrid(u, v, indexing="ij")
+    P = np.zeros((nu * nv, 3))
+    P[:, info["u"]], P[:, info["v"]], P[:, info["axis"]] = U.ravel(), W.ravel(), info["position"]
+    idx = np.arange(nu * nv).reshape(nu, nv)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
+    F = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+    return triangle_mesh(P, F, colormap(plane.ravel(), FIELD_CMAPS[view.field], vmin, vmax)), (vmin, vmax)
+
+
+def field_range(run: RunData, view: View) -> tuple[float, float]:
+    """The colour range of a field: its 1st to 99th percentile over the whole grid (fixed while slicing)."""
+    values = run.field(view.field, view.level if view.field == "psi" else 0)
+    lo, hi = np.percentile(values[::2, ::2, ::2], [1, 99])
+    return float(lo), float(hi) if hi > lo else float(lo) + 1.0
+
+
+def surface_range(run: RunData, color_by: str) -> tuple[float, float]:
+    """Colour range of psi or speed over all iterations (so colours compare across iterations)."""
+    v = np.concatenate([it[color_by] for it in run.iterations])
+    lo, hi = np.percentile(v, [1, 99]) if color_by == "psi" else (0.0, np.percentile(v, 99))
+    return float(lo), float(hi) if hi > lo else float(lo) + 1.0
+
+
+# -- materials ----------------------------------------------------------------------------------
+
+
+def lit(color=(0.8, 0.8, 0.8, 1.0)) -> rendering.MaterialRecord:
+    m = rendering.MaterialRecord()
+    m.shader = "defaultLit"
+    m.base_color = list(color)
+    m.base_roughness = 0.7
+    return m
+
+
+def unlit() -> rendering.MaterialRecord:
+    m = rendering.MaterialRecord()
+    m.shader = "defaultUnlit"
+    return m
+
+
+def glass(alpha: float = 0.18) -> rendering.MaterialRecord:
+    m = rendering.MaterialRecord()
+    m.shader = "defaultLitTransparency"
+    m.base_color = [0.55, 0.6, 0.7, alpha]
+    m.base_roughness = 0.5
+    return m
+
+
+def lines(color=(0.1, 0.1, 0.1, 1.0), width: float = 1.5) -> rendering.MaterialRecord:
+    m = rendering.MaterialRecord()
+    m.shader = "unlitLine"
+    m.base_color = list(color)
+    m.line_width = width
+    return m
+
+
+# -- scenes -------------------------------------------------------------------------------------
+
+
+def prepare(scene: rendering.Open3DScene) -> None:
+    """White background (linear tone mapping keeps it white), soft light from the upper front, no axes."""
+    scene.clear_geometry()
+    scene.set_background(list(BACKGROUND))
+    scene.show_axes(False)
+    scene.set_lighting(rendering.Open3DScene.LightingProfile.SOFT_SHADOWS, np.array([0.3, -0.5, -0.8]))
+    scene.view.set_color_grading(rendering.ColorGrading(rendering.ColorGrading.Quality.HIGH,
+                                                        rendering.ColorGrading.ToneMapping.LINEAR))
+
+
+def show_slice(scene: rendering.Open3DScene, run: RunData, view: View) -> tuple[float, float]:
+    """Panel 1: the field slice with the coarse and refined fracture surfaces and a see-through exterior."""
+    prepare(scene)
+    plane, rng = slice_plane(run, view)
+    scene.add_geometry("slice", plane, unlit())
+    cf = run.coarse_fracture
+    scene.add_geometry("coarse", wireframe(cf.V, cf.F), lines((0.1, 0.1, 0.1, 1.0), 2.0))
+    if run.refined_fracture is not None:
+        rf = run.refined_fracture
+        scene.add_geometry("refined", triangle_mesh(rf.V, rf.F), lit((0.85, 0.85, 0.82, 1.0)))
+    ext = run.exterior
+    scene.add_geometry("exterior", triangle_mesh(ext.V, ext.F, flat=True), glass())
+    return rng
+
+
+def show_iteration(scene: rendering.Open3DScene, run: RunData, view: View,
+                   color_range: tuple[float, float] | None = None) -> tuple[float, float]:
+    """Panel 2: the fracture surface at iteration ``view.iteration`` coloured by psi or speed."""
+    prepare(scene)
+    s = run.iteration(view.iteration)
+    rng = color_range or surface_range(run, view.color_by)
+    colors = colormap(s.scalars[view.color_by], SURFACE_CMAPS[view.color_by], *rng)
+    scene.add_geometry("surface", triangle_mesh(s.V, s.F, colors), lit((1, 1, 1, 1)))
+    ext = run.exterior
+    scene.add_geometry("exterior", triangle_mesh(ext.V, ext.F, flat=True), glass(0.12))
+    return rng
+
+
+def show_frame(scene: rendering.Open3DScene, run: RunData, view: View) -> None:
+    """Panel 3: the high-resolution pieces at frame ``view.frame``, optionally with the coarse pieces as wireframes."""
+    prepare(scene)
+    for c, p in enumerate(run.pieces_at(view.frame)):
+        scene.add_geometry(f"piece_{c}", triangle_mesh(p.V, p.F, flat=True), lit((*piece_color(c), 1.0)))
+    if view.overlay_coarse:
+        for c, p in enumerate(run.coarse_pieces(view.frame)):
+            scene.add_geometry(f"coarse_{c}", wireframe(p.V, p.F), lines((0.15, 0.15, 0.15, 1.0), 1.0))
+
+
+def piece_color(c: int) -> tuple[float, float, float]:
+    if c < len(PIECE_COLORS):
+        return tuple(PIECE_COLORS[c])
+    h = (0.61803398875 * c) % 1.0  # golden-ratio hue walk
+    import colorsys
+
+    return colorsys.hsv_to_rgb(h, 0.55, 0.9)
+
+
+# -- cameras ------------------------------------------------------------------------------------
+
+
+@dataclass
+class CameraPose:
+    center: np.ndarray
+    eye: np.ndarray
+    up: np.ndarray
+    fov: float = 35.0
+
+
+def frame_points(P: np.ndarray, aspect: float = 16 / 9, look: np.ndarray | None = None,
+                 up: np.ndarray | None = None, fov: float = 35.0, margin: float = 1.15) -> CameraPose:
+    """A three-quarter view that fits points ``P`` (e.g. a box's corners) into the picture.
+
+    ``look`` is the main viewing direction (default: the points' thinnest
+    principal axis, so a slab is seen face-on) and ``up`` the screen's up
+    (default: the middle principal axis). The camera turns a little off
+    ``look`` (right and down), and its distance is the smallest at which
+    every point is inside both fields of view, times ``margin``.
+    """
+    P = np.asarray(P, np.float64).reshape(-1, 3)
+    center = 0.5 * (P.min(axis=0) + P.max(axis=0))
+    axes = np.linalg.svd(P - P.mean(axis=0), full_matrices=False)[2] if len(P) >= 3 else np.eye(3)
+    look = axes[-1] if look is None else np.asarray(look, np.float64)
+    look = look / np.linalg.norm(look)
+    up = axes[1] if up is None else np.asarray(up, np.float64)
+    up = up - (up @ look) * look
+    if np.linalg.norm(up) < 1e-6:
+        up = np.eye(3)[np.argmin(np.abs(look))]
+        up = up - (up @ look) * look
+    up /= np.linalg.norm(up)
+    right = np.cross(up, look)
+    direction = look + 0.45 * right + 0.3 * up
+    direction /= np.linalg.norm(direction)
+    cam_up = up - (up @ direction) * direction
+    cam_up /= np.linalg.norm(cam_up)
+    cam_right = np.cross(direction, cam_up)
+    tan_v = np.tan(np.radians(fov) / 2)
+    tan_h = tan_v * aspect
+    C = P - center
+    depth = C @ direction  # toward the camera
+    d = np.max(np.maximum(np.abs(C @ cam_right) / tan_h, np.abs(C @ cam_up) / tan_v) + depth)
+    d = margin * max(d, 1e-9) + 1e-9
+    return CameraPose(center, center + d * direction, cam_up, fov)
+
+
+def box_corners(lo, hi) -> np.ndarray:
+    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+    return np.array([[(lo, hi)[i][0], (lo, hi)[j][1], (lo, hi)[k][2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
+
+
+def frame_box(lo, hi, aspect: float = 16 / 9, look=None, up=None) -> CameraPose:
+    """:func:`frame_points` of a box, looking along its thinnest side, up along its middle one."""
+    ext = np.asarray(hi, np.float64) - np.asarray(lo, np.float64)
+    order = np.argsort(ext)
+    look = np.eye(3)[order[0]] if look is None else look
+    up = np.eye(3)[order[1]] if up is None else up
+    return frame_points(box_corners(lo, hi), aspect, look, up)
+
+
+def dominant_normal(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """The direction most triangles of a surface face (sign-free: the top eigenvector of sum of area n n^T)."""
+    N = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])  # area-weighted normals (x2)
+    area = np.linalg.norm(N, axis=1, keepdims=True)
+    M = (N / np.maximum(area, 1e-300)).T @ N
+    return np.linalg.eigh(M)[1][:, -1]
+
+
+def slice_pose(run: RunData, view: View, aspect: float) -> CameraPose:
+    """Panel 1's camera: facing the slice plane."""
+    lo, hi = scene_box(run)
+    a = "xyz".index(view.axis)
+    others = [b for b in range(3) if b != a]
+    up = others[int(np.argmin(hi[others] - lo[others]))]
+    return frame_box(lo, hi, aspect, look=np.eye(3)[a], up=np.eye(3)[up])
+
+
+def iteration_pose(run: RunData, aspect: float) -> CameraPose:
+    """Panel 2's camera: facing the fracture surface (its dominant normal), fitted to it over all iterations."""
+    its = run.iterations
+    P = np.concatenate([it["positions"] for it in its]).astype(np.float64)
+    last = its[-1]
+    look = dominant_normal(last["positions"].astype(np.float64), last["faces"])
+    lo, hi = scene_box(run)
+    up_axis = np.eye(3)[int(np.argsort(hi - lo)[1])]
+    lo_s, hi_s = P.min(axis=0), P.max(axis=0)
+    return frame_points(box_corners(lo_s, hi_s), aspect, look, up_axis, margin=1.25)
+
+
+def scene_box(run: RunData) -> tuple[np.ndarray, np.ndarray]:
+    V = run.exterior.V
+    return V.min(axis=0), V.max(axis=0)
+
+
+def animation_box(run: RunData) -> tuple[np.ndarray, np.ndarray]:
+    """The box holding every piece in every frame (the camera does not chase the pieces)."""
+    anim = run.coarse_animation
+    ext = run.exterior
+    lo, hi = ext.V.min(axis=0), ext.V.max(axis=0)
+    for c in range(anim.n_components):
+        X = ext.V[np.unique(ext.F[ext.scalars["component"] == c])]
+        if len(X):
+            P = anim.trajectories(c, X)
+            lo, hi = np.minimum(lo, P.min(axis=(0, 1))), np.maximum(hi, P.max(axis=(0, 1)))
+    return lo, hi
+
+
+def apply_camera(camera: rendering.Camera, pose: CameraPose, width: int, height: int) -> None:
+    camera.set_projection(pose.fov, width / max(height, 1), 0.01 * np.linalg.norm(pose.eye - pose.center),
+                          100.0 * np.linalg.norm(pose.eye - pose.center), rendering.Camera.FovType.Vertical)
+    camera.look_at(pose.center, pose.eye, pose.up)

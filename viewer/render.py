@@ -1,0 +1,196 @@
+"""Headless figures and videos of a run: ``fracref render RUN_DIR --what slices|iterations|animation``.
+
+Open3D's OffscreenRenderer draws the same scenes as the window (see
+:mod:`viewer.looks`) through EGL with no display. Every image is written
+atomically, the video to a temporary file first: an interrupted render
+never leaves a half-written file under a final name.
+
+* ``slices``: the material-space panel at a few offsets along the chosen
+  axis (PNG each, with a colour bar) and an MP4 sweeping through them;
+* ``iterations``: the fracture surface at every stored iteration (PNG each,
+  with a colour bar and the iteration, triangle count and energy) and an MP4;
+* ``animation``: the pieces at every frame (PNG each) and an MP4.
+"""
+
+from __future__ import annotations
+
+import os
+
+# Open3D 0.19 needs EGL's surfaceless platform to render with no X display;
+# it must be in the environment before the first renderer is made.
+if not os.environ.get("DISPLAY"):
+    os.environ.setdefault("EGL_PLATFORM", "surfaceless")
+
+from dataclasses import replace  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+from fracture.atomic import atomic_write_bytes  # noqa: E402
+from fracture.errors import InputError  # noqa: E402
+from viewer import annotate  # noqa: E402
+from viewer.data import RunData  # noqa: E402
+from viewer.looks import (  # noqa: E402
+    FIELD_CMAPS, SURFACE_CMAPS, View, animation_box, apply_camera, frame_box, iteration_pose, show_frame,
+    show_iteration, show_slice, slice_pose,
+)
+
+WHAT = ("slices", "iterations", "animation")
+# Views with a colour bar frame their content in this share of the width (the bar is at the right).
+BAR_ROOM = 0.8
+
+
+def check_size(width: int, height: int, where: str = "render") -> None:
+    """Image sizes an MP4 (yuv420p) can hold: even, at least 64 pixels, at most 8192."""
+    for name, v in (("width", width), ("height", height)):
+        if not isinstance(v, (int, np.integer)) or not 64 <= v <= 8192 or v % 2:
+            raise InputError(f"{where}: {name} must be an even number of pixels in 64..8192, got {v!r}")
+
+
+class Renderer:
+    """One offscreen renderer of a fixed size, reused for every image."""
+
+    def __init__(self, width: int, height: int, post_processing: bool = True):
+        from open3d.visualization import rendering
+
+        check_size(width, height)
+        self.width, self.height = width, height
+        self.r = rendering.OffscreenRenderer(width, height)
+        self.r.scene.view.set_post_processing(post_processing)
+
+    @property
+    def scene(self):
+        return self.r.scene
+
+    def image(self, pose) -> np.ndarray:
+        apply_camera(self.r.scene.camera, pose, self.width, self.height)
+        return np.asarray(self.r.render_to_image())[..., :3].copy()
+
+
+def png_bytes(image: np.ndarray) -> bytes:
+    import imageio.v3 as iio
+
+    return iio.imwrite("<bytes>", np.ascontiguousarray(image), extension=".png")
+
+
+class Video:
+    """An MP4 (H.264, yuv420p) written frame by frame to a temporary file, renamed into place on close."""
+
+    def __init__(self, path: Path, width: int, height: int, fps: int):
+        import imageio_ffmpeg
+
+        if not 1 <= fps <= 240:
+            raise InputError(f"fps must be in 1..240, got {fps}")
+        self.path = Path(path)
+        self.tmp = self.path.with_name(f".{self.path.stem}.partial.mp4")
+        self.size = (width, height)
+        self.writer = imageio_ffmpeg.write_frames(str(self.tmp), self.size, fps=fps, codec="libx264",
+                                                  pix_fmt_in="rgb24", pix_fmt_out="yuv420p", quality=8,
+                                                  macro_block_size=2, ffmpeg_log_level="error")
+        self.writer.send(None)
+        self.frames = 0
+
+    def add(self, image: np.ndarray) -> None:
+        if image.shape[:2] != (self.size[1], self.size[0]):
+            raise ValueError(f"frame of size {image.shape[1]}x{image.shape[0]}, video is {self.size[0]}x{self.size[1]}")
+        self.writer.send(np.ascontiguousarray(image, np.uint8))
+        self.frames += 1
+
+    def close(self) -> None:
+        self.writer.close()
+        os.replace(self.tmp, self.path)
+
+    def abort(self) -> None:
+        try:
+            self.writer.close()
+        finally:
+            self.tmp.unlink(missing_ok=True)
+
+
+def _progress(total: int, desc: str, quiet: bool):
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=desc, disable=quiet, leave=False)
+
+
+def _write_sequence(images, out: Path, stem: str, width: int, height: int, fps: int, total: int,
+                    quiet: bool) -> list[Path]:
+    """PNG per image (``stem_NNNN.png``) and ``stem.mp4``; returns the files written."""
+    out.mkdir(parents=True, exist_ok=True)
+    video = Video(out / f"{stem}.mp4", width, height, fps)
+    written = []
+    try:
+        with _progress(total, stem, quiet) as bar:
+            for i, img in enumerate(images):
+                p = out / f"{stem}_{i:04d}.png"
+                atomic_write_bytes(p, png_bytes(img))
+                written.append(p)
+                video.add(img)
+                bar.update()
+    except BaseException:
+        video.abort()
+        raise
+    video.close()
+    return written + [video.path]
+
+
+def slice_images(run: RunData, view: View, renderer: Renderer, offsets) -> list[np.ndarray]:
+    pose = slice_pose(run, view, BAR_ROOM * renderer.width / renderer.height)
+    out = []
+    for off in offsets:
+        v = replace(view, offset=float(off))
+        rng = show_slice(renderer.scene, run, v)
+        img = renderer.image(pose)
+        title = f"{v.field}" + (f" (level {v.level})" if v.field == "psi" and v.level else "") + \
+                f", {v.axis} = {off:.2f}"
+        out.append(annotate.with_colorbar(img, FIELD_CMAPS[v.field], rng, title))
+    return out
+
+
+def iteration_image(run: RunData, view: View, renderer: Renderer, pose, rng) -> np.ndarray:
+    show_iteration(renderer.scene, run, view, rng)
+    img = renderer.image(pose)
+    k = view.iteration
+    energy = run.energy[k - 1] if 0 < k <= len(run.energy) else None
+    text = f"iteration {k}, {len(run.iterations[k]['faces'])} triangles" + \
+           (f", E = {energy:.4g}" if energy is not None else "")
+    return annotate.with_colorbar(img, SURFACE_CMAPS[view.color_by], rng, f"{view.color_by}", text)
+
+
+def render(run_dir: str | Path, what: str, out: str | Path | None = None, width: int = 1280, height: int = 720,
+           fps: int = 10, view: View | None = None, quiet: bool = False) -> list[Path]:
+    """Render PNGs and an MP4 of one view of a run into ``out`` (default ``RUN_DIR/renders``).
+
+    Returns the files written.
+    """
+    from viewer.looks import surface_range
+
+    if what not in WHAT:
+        raise InputError(f"--what must be one of {', '.join(WHAT)}, got {what!r}")
+    check_size(width, height)
+    run = RunData(run_dir)
+    view = (view or View()).check(run)
+    out = Path(out) if out is not None else run.dir / "renders"
+    renderer = Renderer(width, height)
+    if what == "slices":
+        offsets = np.linspace(0.1, 0.9, 9)
+        return _write_sequence(iter(slice_images(run, view, renderer, offsets)), out, f"slices_{view.field}_{view.axis}",
+                               width, height, fps, len(offsets), quiet)
+    if what == "iterations":
+        if not run.has_iterations:
+            raise InputError(f"{run.dir}: no iterations to render (run the refine stage with refine.snapshots: true)")
+        pose = iteration_pose(run, BAR_ROOM * width / height)
+        rng = surface_range(run, view.color_by)
+        n = len(run.iterations)
+        images = (iteration_image(run, replace(view, iteration=k), renderer, pose, rng) for k in range(n))
+        return _write_sequence(images, out, f"iterations_{view.color_by}", width, height, fps, n, quiet)
+    if not run.has_animation:
+        raise InputError(f"{run.dir}: no animation to render (the run stopped before the animate stage)")
+    pose = frame_box(*animation_box(run), width / height)
+    n = run.n_frames
+
+    def frames():
+        for t in range(n):
+            show_frame(renderer.scene, run, replace(view, frame=t))
+            yield annotate.caption(renderer.image(pose), f"frame {t + 1} / {n}")
+    return _write_sequence(frames(), out, "animation", width, height, fps, n, quiet)
