@@ -14,7 +14,8 @@ DEBIAN_PACKAGES := libgl1 libegl1 libgomp1 libusb-1.0-0 xvfb xauth
 
 demo: install
 	$(BIN)/fracref run configs/example.yaml --out runs/example --force
-	@echo "results: runs/example (preview: runs/example/fields/preview.png, manifest: runs/example/manifest.json)"
+	$(BIN)/fracref render runs/example --what slices --what iterations --out runs/example/renders --quiet
+	@echo "results: runs/example (manifest.json), figures and videos: runs/example/renders (open the viewer: xvfb-run -a $(BIN)/fracref view runs/example, or without xvfb-run on a desktop)"
 
 test: install
 	$(BIN)/python -m pytest

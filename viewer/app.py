@@ -502,7 +502,6 @@ class Viewer:
 
     def rerun(self) -> None:
         """Run the pipeline with the side panel's parameters on a worker thread, into a new run directory."""
-        from fracture import runner
         from fracture.config import dump_config, load_config
 
         if self._worker is not None and self._worker.is_alive():
@@ -522,20 +521,39 @@ class Viewer:
             return
         self.status.text = f"re-running into {out} ..."
 
-        def listener(event, data):
-            if event == "stage":
-                self.app.post_to_main_thread(self.window, lambda: setattr(self.status, "text",
-                                                                          f"re-run: {data['name']} ..."))
-            elif event == "iteration":
-                with self._live_lock:
-                    self._live = data
-
         def work():
-            try:
-                runner.run(cfg, out, progress=False, listener=listener)
-                self.app.post_to_main_thread(self.window, lambda: self._rerun_done(out, cfg))
-            except Exception as exc:  # noqa: BLE001 - shown in the window
-                self.app.post_to_main_thread(self.window, lambda e=exc: self.report_error("re-run failed", e))
+            # the pipeline runs in a child process (its compiled loops hold the GIL for
+            # seconds); this thread relays its progress to the window
+            import multiprocessing as mp
+            import queue as queue_mod
+
+            ctx = mp.get_context("spawn")
+            q = ctx.Queue()
+            proc = ctx.Process(target=_run_child, args=(cfg, str(out), q), daemon=True)
+            proc.start()
+            while True:
+                try:
+                    event, data = q.get(timeout=0.2)
+                except queue_mod.Empty:
+                    if not proc.is_alive():
+                        self.app.post_to_main_thread(self.window, lambda: self.report_error(
+                            "re-run failed", StageError(f"the run stopped (exit code {proc.exitcode})")))
+                        return
+                    continue
+                if event == "stage":
+                    self.app.post_to_main_thread(self.window, lambda n=data["name"]: setattr(
+                        self.status, "text", f"re-run: {n} ..."))
+                elif event == "iteration":
+                    with self._live_lock:
+                        self._live = data
+                elif event == "done":
+                    self.app.post_to_main_thread(self.window, lambda: self._rerun_done(out, cfg))
+                    break
+                elif event == "error":
+                    self.app.post_to_main_thread(self.window, lambda e=data: self.report_error(
+                        "re-run failed", StageError(e)))
+                    break
+            proc.join(timeout=10)
 
         self._worker = threading.Thread(target=work, name="rerun", daemon=True)
         self._worker.start()
@@ -649,6 +667,26 @@ class Viewer:
             self.last_export = [path]
 
         self._job = job()
+
+
+def _run_child(cfg: dict, out: str, q) -> None:
+    """The re-run's process: the pipeline, with its stages and iterations sent to ``q``."""
+    from fracture import runner
+
+    last = [0.0]
+
+    def listener(event, data):
+        now = time.monotonic()
+        if event == "iteration" and now - last[0] < 0.25:  # at most four surfaces a second
+            return
+        last[0] = now
+        q.put((event, data))
+
+    try:
+        runner.run(cfg, out, progress=False, listener=listener)
+        q.put(("done", {}))
+    except Exception as exc:  # noqa: BLE001 - sent to the window
+        q.put(("error", f"{type(exc).__name__}: {exc}"))
 
 
 def open_target(target: Path, out: Path | None) -> RunData:

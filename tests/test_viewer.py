@@ -1,0 +1,184 @@
+"""The viewer: headless renders, the window under Xvfb (one subprocess each, with a timeout), cameras and inputs."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import CONFIGS
+
+from fracture import runner
+from fracture.config import load_config
+from fracture.errors import InputError
+
+HERE = Path(__file__).resolve().parent
+# a small run with fields, iterations and a 6-frame animation of 14 pieces (a few seconds)
+RUN_OVERRIDES = ["input.frames=6", "refine.max_triangles=4000", "refine.iterations=6", "grid.resolution=40",
+                 "animate.check_samples=0"]
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory):
+    out = tmp_path_factory.mktemp("viewer") / "jello"
+    runner.run(load_config(CONFIGS / "jello.yaml", RUN_OVERRIDES), out, progress=False)
+    return out
+
+
+def content_share(img: np.ndarray) -> float:
+    """Share of pixels that differ from the corner (background) colour."""
+    return float((np.abs(img.astype(int) - img[0, 0].astype(int)).sum(axis=2) > 30).mean())
+
+
+def read(path) -> np.ndarray:
+    import imageio.v3 as iio
+
+    return iio.imread(path)[..., :3]
+
+
+def video_frames(path) -> tuple[int, tuple[int, int]]:
+    import imageio_ffmpeg
+
+    gen = imageio_ffmpeg.read_frames(str(path))
+    meta = gen.__next__()
+    n = sum(1 for _ in gen)
+    return n, tuple(meta["size"])
+
+
+def _cli(args, timeout=300):
+    env = dict(os.environ)
+    env.pop("DISPLAY", None)
+    return subprocess.run([sys.executable, "-m", "fracture", *args], capture_output=True, text=True,
+                          timeout=timeout, env=env)
+
+
+def test_headless_renders_are_figures_and_videos(run_dir, tmp_path):
+    r = _cli(["render", str(run_dir), "--what", "iterations", "--what", "animation", "--out", str(tmp_path),
+              "--width", "320", "--height", "240", "--fps", "4", "--quiet"])
+    assert r.returncode == 0, r.stderr[-2000:]
+    its = sorted(tmp_path.glob("iterations_psi_*.png"))
+    assert len(its) == 7  # the coarse surface and 6 iterations
+    first, last = read(its[0]), read(its[-1])
+    assert first.shape == (240, 320, 3)
+    assert content_share(first) > 0.03 and content_share(last) > 0.03
+    assert np.abs(first.astype(int) - last.astype(int)).mean() > 1.0  # another iteration, another image
+    assert video_frames(tmp_path / "iterations_psi.mp4") == (7, (320, 240))
+    frames = sorted(tmp_path.glob("animation_*.png"))
+    assert len(frames) == 6 and content_share(read(frames[-1])) > 0.05
+    assert video_frames(tmp_path / "animation.mp4") == (6, (320, 240))
+
+
+def test_headless_slices_follow_the_field_and_level(run_dir, tmp_path):
+    r = _cli(["render", str(run_dir), "--what", "slices", "--out", str(tmp_path / "a"), "--width", "320",
+              "--height", "240", "--quiet"])
+    assert r.returncode == 0, r.stderr[-2000:]
+    r = _cli(["render", str(run_dir), "--what", "slices", "--out", str(tmp_path / "b"), "--width", "320",
+              "--height", "240", "--level", "3", "--quiet"])
+    assert r.returncode == 0, r.stderr[-2000:]
+    a, b = sorted((tmp_path / "a").glob("*.png")), sorted((tmp_path / "b").glob("*.png"))
+    assert len(a) == len(b) == 9
+    assert content_share(read(a[4])) > 0.1
+    assert np.abs(read(a[0]).astype(int) - read(a[8]).astype(int)).mean() > 1.0  # another offset
+    assert np.abs(read(a[4]).astype(int) - read(b[4]).astype(int)).mean() > 0.5  # a smoother level
+
+
+def test_render_rejects_bad_requests_clearly(run_dir, tmp_path):
+    r = _cli(["render", str(run_dir), "--what", "slices", "--width", "333", "--out", str(tmp_path)])
+    assert r.returncode == 2 and "width must be an even number" in r.stderr
+    r = _cli(["render", str(run_dir), "--what", "slices", "--field", "strength", "--out", str(tmp_path)])
+    assert r.returncode == 2 and "field must be one of psi, zeta, xi" in r.stderr
+    r = _cli(["render", str(tmp_path / "nothing"), "--what", "slices"])
+    assert r.returncode == 2 and "no such run directory" in r.stderr
+    assert not list(tmp_path.glob("*.png"))
+
+
+def _window(scenario: str, run_dir: Path, out: Path) -> dict:
+    xvfb = shutil.which("xvfb-run")
+    if xvfb is None:
+        pytest.fail("xvfb-run is missing: `make system-deps` installs it")
+    r = subprocess.run([xvfb, "-a", "-s", "-screen 0 1920x1080x24", sys.executable, str(HERE / "gui_driver.py"),
+                        scenario, str(run_dir), str(out)], capture_output=True, text=True, timeout=240,
+                       cwd=HERE.parent)
+    assert r.returncode == 0, (r.stdout[-2000:], r.stderr[-3000:])
+    return json.loads((out / "result.json").read_text())
+
+
+def test_the_window_shows_three_panels_that_follow_their_controls(run_dir, tmp_path):
+    res = _window("panels", run_dir, tmp_path)
+    assert res["errors"] == []
+    panels = [read(p) for p in res["initial"]]
+    for img in panels:
+        assert content_share(img) > 0.03
+    diff = lambda a, b: np.abs(read(a).astype(int) - read(b).astype(int)).mean()  # noqa: E731
+    assert diff(res["initial"][1], res["iteration1"]) > 0.5  # iteration slider
+    assert diff(res["initial"][2], res["frame_last"]) > 0.5  # frame slider
+    assert diff(res["initial"][0], res["offset"]) > 0.5  # slice offset
+    assert diff(res["offset"], res["zeta"]) > 0.5  # field
+    shot = read(res["screenshot"])
+    assert shot.shape == (360, 3 * 212, 3) and content_share(shot) > 0.05
+    assert video_frames(res["video"]) == (res["frames"], (640, 360))
+
+
+def test_rerun_in_the_window_gives_a_new_result_without_freezing_it(run_dir, tmp_path):
+    res = _window("rerun", run_dir, tmp_path)
+    assert len(res["rerun_dirs"]) == 1 and res["shown"] == res["rerun_dirs"][0]
+    assert Path(res["rerun_dirs"][0], "manifest.json").is_file() and Path(run_dir, "manifest.json").is_file()
+    assert res["stress_weight"] == 0.0 and not res["same_surface"]
+    assert res["live_updates"] >= 1  # iterations were drawn while the worker ran
+    assert res["ticks"] > 5 and res["max_tick_gap"] < 5.0  # the window kept ticking
+    saved = load_config(res["saved"])
+    assert saved["psi"]["stress_weight"] == 0.0
+    # the invalid step was reported in the window, and nothing ran
+    assert any("refine.step" in e for e in res["errors"])
+
+
+def test_camera_fits_every_point_in_the_picture():
+    from viewer.looks import frame_points
+
+    rng = np.random.default_rng(0)
+    for aspect in (0.5, 1.0, 16 / 9):
+        P = rng.normal(size=(200, 3)) * [3.0, 1.0, 0.2]
+        pose = frame_points(P, aspect, margin=1.0)
+        f = pose.center - pose.eye
+        f /= np.linalg.norm(f)
+        right = np.cross(f, pose.up)
+        C = P - pose.eye
+        depth = C @ f
+        assert (depth > 0).all()
+        tan_v = np.tan(np.radians(pose.fov) / 2)
+        x = np.abs(C @ right) / depth / (tan_v * aspect)
+        y = np.abs(C @ pose.up) / depth / tan_v
+        assert max(x.max(), y.max()) == pytest.approx(1.0, abs=1e-9)  # tight: the farthest point on the edge
+
+
+def test_run_data_and_view_say_what_is_wrong(run_dir, tmp_path):
+    from viewer.data import RunData
+    from viewer.looks import View
+
+    with pytest.raises(InputError, match="no manifest.json"):
+        RunData(tmp_path)
+    run = RunData(run_dir)
+    with pytest.raises(InputError, match="axis must be x, y or z"):
+        View(axis="w").check(run)
+    with pytest.raises(InputError, match="pyramid level must be in 0..4"):
+        View(level=9).check(run)
+    with pytest.raises(InputError, match="frame must be in 1..6"):
+        run.pieces_at(6)
+    assert View().check(run).iteration == len(run.iterations) - 1
+
+
+def test_tunables_round_trip_through_the_config(run_dir):
+    from viewer.app import set_key, tunables
+    from viewer.data import RunData
+
+    cfg = RunData(run_dir).config
+    keys = dict(tunables(cfg))
+    assert {"seed", "psi.stress_weight", "refine.step", "pyramid.levels"} <= set(keys)
+    assert any(k.startswith("strength.layers.0.") for k in keys)
+    set_key(cfg, "strength.layers.0.weight", 0.5)
+    assert cfg["strength"]["layers"][0]["weight"] == 0.5
