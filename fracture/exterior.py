@@ -7,8 +7,12 @@ per-iteration projections, seed sampling) holds an :class:`Exterior` instead.
 
 from __future__ import annotations
 
+from functools import cached_property
+
 import igl
 import numpy as np
+
+from fracture.topology import face_frames
 
 
 class Exterior:
@@ -21,6 +25,11 @@ class Exterior:
         self._wn.init(self.V, self.F)
         self._tree = igl.AABB()
         self._tree.init(self.V, self.F)
+
+    @cached_property
+    def normals(self) -> np.ndarray:
+        """Unit outward normals of B's triangles, ``(m, 3)``."""
+        return face_frames(self.V, self.F)[1]
 
     def inside(self, P: np.ndarray) -> np.ndarray:
         """Whether points are inside (winding number above one half)."""

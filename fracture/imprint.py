@@ -390,9 +390,7 @@ def split_bridge_edges(mesh: RefineMesh, exterior: Exterior, depth: float = BRID
         mid = 0.5 * (mesh.V[ends[:, 0]] + mesh.V[ends[:, 1]])
         target = depth * np.linalg.norm(mesh.V[ends[:, 1]] - mesh.V[ends[:, 0]], axis=1)
         d2, f, closest = exterior.closest(mid)
-        n = np.cross(exterior.V[exterior.F[f, 1]] - exterior.V[exterior.F[f, 0]],
-                     exterior.V[exterior.F[f, 2]] - exterior.V[exterior.F[f, 0]])
-        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+        n = exterior.normals[f]
         shallow = ~exterior.inside(mid) | (d2 < target ** 2)
         new = mesh.split_edges(ends, np.full(len(chosen), 0.5), rows=on, which=which)
         mesh.V[new] = np.where(shallow[:, None], closest - target[:, None] * n, mid)

@@ -16,6 +16,7 @@ from open3d.visualization import rendering
 
 from fields.colormap import colormap
 from fields.slices import axis_slice
+from fracture.topology import face_frames
 from viewer.data import FIELDS, RunData
 
 BACKGROUND = (1.0, 1.0, 1.0, 1.0)
@@ -271,10 +272,8 @@ def frame_box(lo, hi, aspect: float = 16 / 9, look=None, up=None) -> CameraPose:
 
 def dominant_normal(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     """The direction most triangles of a surface face (sign-free: the top eigenvector of sum of area n n^T)."""
-    N = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])  # area-weighted normals (x2)
-    area = np.linalg.norm(N, axis=1, keepdims=True)
-    M = (N / np.maximum(area, 1e-300)).T @ N
-    return np.linalg.eigh(M)[1][:, -1]
+    area, n = face_frames(V, F)
+    return np.linalg.eigh((n * area[:, None]).T @ n)[1][:, -1]
 
 
 def slice_pose(run: RunData, view: View, aspect: float) -> CameraPose:

@@ -40,7 +40,7 @@ from fracture.refine.flips import flip_edges
 from fracture.refine.flow import energy, sample_displacement, velocity
 from fracture.refine.kernels import EdgeTable, edge_table, face_geometry, limit_moves, row_edges
 from fracture.refine.mesh import RefineMesh
-from fracture.topology import boundary_conormals, face_frames
+from fracture.topology import boundary_conormals
 
 
 @dataclass
@@ -101,7 +101,6 @@ class Refiner:
         values = pyramid.levels[0]
         self.offset = params.tension * float(np.ptp(values)) - float(values.min())
         self.scale = 1.0  # halved when an iteration raises the energy (overshoot), regrown after
-        self.B_normals = face_frames(self.BV, self.BF)[1]
         self.B = Exterior(self.BV, self.BF)  # trees built once: every iteration queries them
         # speeds below this (psi changing by 1 % of its range per grid cell)
         # count as at rest: dt stops growing, the moves shrink, the loop ends
@@ -161,7 +160,7 @@ class Refiner:
         verts, c = boundary_conormals(m.V, m.F, row_edges(m.F, rows), strict=False, face=rows // 3, by_length=True)
         v[verts] -= np.einsum("ij,ij->i", v[verts], c)[:, None] * c
         _, tri, _ = self.B.closest(m.V[verts])
-        nb = self.B_normals[tri]
+        nb = self.B.normals[tri]
         v[verts] -= np.einsum("ij,ij->i", v[verts], nb)[:, None] * nb
         return v, psi, verts
 
