@@ -38,8 +38,8 @@ from viewer import annotate
 from viewer.data import FIELDS, RunData, Surface
 from viewer.looks import (
     COLOR_BY, FIELD_CMAPS, SURFACE_CMAPS, CameraPose, View, animation_box, apply_camera, frame_box,
-    iteration_pose, lit, glass, prepare, show_frame, show_iteration, show_slice, slice_pose, surface_range,
-    triangle_mesh,
+    iteration_caption, iteration_pose, prepare, set_slice, set_surface, show_context, show_frame, show_material,
+    slice_pose, slice_title, surface_range,
 )
 from viewer.render import Video, png_bytes
 
@@ -72,6 +72,15 @@ def set_key(cfg: dict, path: str, value) -> None:
     node[parts[-1]] = value
 
 
+def _combobox(items, on_change=None) -> gui.Combobox:
+    box = gui.Combobox()
+    for item in items:
+        box.add_item(item)
+    if on_change is not None:
+        box.set_on_selection_changed(lambda text, index: on_change(text))
+    return box
+
+
 class Viewer:
     """The window and its state; the handlers are methods, so scripts and tests drive it like a user."""
 
@@ -84,8 +93,7 @@ class Viewer:
         self.window.set_on_layout(self._layout)
         self.window.set_on_tick_event(self._tick)
         self.window.set_on_close(self._on_close)
-        em = self.window.theme.font_size
-        self.em = em
+        self.em = self.window.theme.font_size
         self.scenes = []
         for _ in PANELS:
             sw = gui.SceneWidget()
@@ -125,17 +133,11 @@ class Viewer:
         self.side.frame = gui.Rect(r.x + 3 * pw, r.y, r.width - 3 * pw, r.height)
 
     def _material_controls(self) -> gui.Widget:
-        em = self.window.theme.font_size
+        em = self.em
         v = gui.Vert(0.25 * em, gui.Margins(0.5 * em, 0.25 * em, 0.5 * em, 0.25 * em))
         row = gui.Horiz(0.5 * em)
-        self.field_box = gui.Combobox()
-        for f in FIELDS:
-            self.field_box.add_item(f)
-        self.field_box.set_on_selection_changed(lambda text, i: self.set_field(text))
-        self.axis_box = gui.Combobox()
-        for a in "xyz":
-            self.axis_box.add_item(a)
-        self.axis_box.set_on_selection_changed(lambda text, i: self.set_axis(text))
+        self.field_box = _combobox(FIELDS, self.set_field)
+        self.axis_box = _combobox("xyz", self.set_axis)
         row.add_child(gui.Label("field"))
         row.add_child(self.field_box)
         row.add_child(gui.Label("axis"))
@@ -165,7 +167,7 @@ class Viewer:
         return v
 
     def _iteration_controls(self) -> gui.Widget:
-        em = self.window.theme.font_size
+        em = self.em
         v = gui.Vert(0.25 * em, gui.Margins(0.5 * em, 0.25 * em, 0.5 * em, 0.25 * em))
         row = gui.Horiz(0.5 * em)
         self.iter_slider = gui.Slider(gui.Slider.INT)
@@ -181,10 +183,7 @@ class Viewer:
         self.iter_play.set_on_clicked(lambda: self.toggle_play("iterations"))
         row.add_child(self.iter_play)
         row.add_child(gui.Label("colour"))
-        self.color_box = gui.Combobox()
-        for c in COLOR_BY:
-            self.color_box.add_item(c)
-        self.color_box.set_on_selection_changed(lambda text, i: self.set_color_by(text))
+        self.color_box = _combobox(COLOR_BY, self.set_color_by)
         row.add_child(self.color_box)
         v.add_child(row)
         self.iter_label = gui.Label("")
@@ -192,7 +191,7 @@ class Viewer:
         return v
 
     def _animation_controls(self) -> gui.Widget:
-        em = self.window.theme.font_size
+        em = self.em
         v = gui.Vert(0.25 * em, gui.Margins(0.5 * em, 0.25 * em, 0.5 * em, 0.25 * em))
         self.frame_slider = gui.Slider(gui.Slider.INT)
         self.frame_slider.set_on_value_changed(lambda x: self.set_frame(int(x) - 1))
@@ -212,10 +211,11 @@ class Viewer:
         return v
 
     def _side_panel(self) -> gui.Widget:
-        em = self.window.theme.font_size
+        em = self.em
         side = gui.ScrollableVert(0.25 * em, gui.Margins(0.5 * em, 0.5 * em, 0.5 * em, 0.5 * em))
         side.add_child(gui.Label("Parameters"))
         self.edits: dict[str, gui.NumberEdit] = {}
+        self._integer: set[str] = set()  # keys edited as integers
         section = None
         for key, value in tunables(self.cfg):
             head = key.split(".")[0] if key != "seed" else "run"
@@ -228,6 +228,7 @@ class Viewer:
             edit = gui.NumberEdit(gui.NumberEdit.INT if isinstance(value, int) else gui.NumberEdit.DOUBLE)
             if isinstance(value, int):
                 edit.int_value = value
+                self._integer.add(key)
             else:
                 edit.double_value = value
                 edit.decimal_precision = 4
@@ -260,9 +261,7 @@ class Viewer:
             row.add_child(w)
         side.add_child(row)
         row = gui.Horiz(0.5 * em)
-        self.shot_box = gui.Combobox()
-        for name in ("all panels",) + PANELS:
-            self.shot_box.add_item(name)
+        self.shot_box = _combobox(("all panels",) + PANELS)
         row.add_child(self.shot_box)
         b = gui.Button("Screenshot")
         b.set_on_clicked(lambda: self.screenshot(self.shot_box.selected_text))
@@ -294,6 +293,8 @@ class Viewer:
         self.color_box.selected_index = COLOR_BY.index(self.view.color_by)
         self._iter_range = surface_range(run, self.view.color_by) if run.has_iterations else None
         self.poses = [None, None, None]
+        show_material(self.scenes[0].scene, run)
+        show_context(self.scenes[1].scene, run)
         self.draw_material()
         self.draw_iteration()
         self.draw_frame()
@@ -319,7 +320,7 @@ class Viewer:
         return self.poses[i]
 
     def draw_material(self) -> None:
-        rng = show_slice(self.scenes[0].scene, self.run, self.view)
+        self._slice_range = rng = set_slice(self.scenes[0].scene, self.run, self.view)
         bar = annotate.colorbar_strip(FIELD_CMAPS[self.view.field], 200, 12)
         self.bar_image.update_image(o3d.geometry.Image(bar))
         self.bar_low.text = f"{rng[0]:.3g}"
@@ -330,24 +331,16 @@ class Viewer:
     def draw_iteration(self, live: dict | None = None) -> None:
         scene = self.scenes[1].scene
         if live is not None:  # a re-run in progress: its latest iteration
-            prepare(scene)
-            rng = self._iter_range or (float(live[self.view.color_by].min()), float(live[self.view.color_by].max()))
-            from fields.colormap import colormap
-            colors = colormap(live[self.view.color_by], SURFACE_CMAPS[self.view.color_by], *rng)
-            scene.add_geometry("surface", triangle_mesh(live["positions"], live["faces"], colors), lit((1, 1, 1, 1)))
-            ext = self.run.exterior
-            scene.add_geometry("exterior", triangle_mesh(ext.V, ext.F, flat=True), glass(0.12))
+            c = live[self.view.color_by]
+            rng = self._iter_range or (float(c.min()), float(c.max()))
+            surface = Surface(live["positions"], live["faces"], {k: live[k] for k in COLOR_BY})
+            set_surface(scene, surface, self.view.color_by, rng)
             self.iter_label.text = (f"re-run: iteration {live['iteration']}, {len(live['faces'])} triangles, "
                                     f"E = {live['energy']:.4g}")
         elif self.run.has_iterations:
-            show_iteration(scene, self.run, self.view, self._iter_range)
-            k = self.view.iteration
-            e = self.run.energy[k - 1] if 0 < k <= len(self.run.energy) else None
-            self.iter_label.text = (f"iteration {k} / {len(self.run.iterations) - 1}, "
-                                    f"{len(self.run.iterations[k]['faces'])} triangles"
-                                    + (f", E = {e:.4g}" if e is not None else ""))
+            set_surface(scene, self.run.iteration(self.view.iteration), self.view.color_by, self._iter_range)
+            self.iter_label.text = iteration_caption(self.run, self.view.iteration)
         else:
-            prepare(scene)
             self.iter_label.text = "no iterations in this run (refine.snapshots: false, or stopped early)"
         self._pose(1)
         self.scenes[1].force_redraw()
@@ -467,25 +460,29 @@ class Viewer:
     def edited_config(self) -> dict:
         cfg = copy.deepcopy(self.cfg)
         for key, edit in self.edits.items():
-            value = edit.int_value if isinstance(dict(tunables(self.cfg))[key], int) else edit.double_value
-            set_key(cfg, key, value)
+            set_key(cfg, key, edit.int_value if key in self._integer else edit.double_value)
         return cfg
+
+    def checked_config(self) -> tuple[dict, str]:
+        """The side panel's config, validated as ``fracref run`` would read it, and its YAML."""
+        import tempfile
+
+        from fracture.config import dump_config, load_config
+
+        text = dump_config(self.edited_config())
+        with tempfile.TemporaryDirectory() as tmp:
+            path = Path(tmp) / "viewer.yaml"
+            path.write_text(text, encoding="utf-8")
+            try:
+                return load_config(path), text
+            except ConfigError as exc:
+                raise ConfigError("the viewer's parameters", exc.key, exc.problem) from None
 
     def save_config(self, path: str | Path | None = None) -> Path | None:
         """Write the on-screen parameters as YAML (checked by loading it back); returns the file."""
-        from fracture.config import dump_config, load_config
-
         path = Path(path) if path is not None else self.run.dir.parent / f"{self.run.name}_viewer.yaml"
         try:
-            cfg = self.edited_config()
-            text = dump_config(cfg)
-            tmp = path.with_name(f".{path.name}.check.yaml")
-            tmp.write_text(text, encoding="utf-8")
-            try:
-                load_config(tmp)
-            finally:
-                tmp.unlink(missing_ok=True)
-            atomic_write_text(path, text)
+            atomic_write_text(path, self.checked_config()[1])
         except (ConfigError, OSError) as exc:
             self.report_error("cannot save the config", exc)
             return None
@@ -502,20 +499,12 @@ class Viewer:
 
     def rerun(self) -> None:
         """Run the pipeline with the side panel's parameters on a worker thread, into a new run directory."""
-        from fracture.config import dump_config, load_config
-
         if self._worker is not None and self._worker.is_alive():
             self.status.text = "a re-run is already going"
             return
         out = self._next_run_dir()
         try:
-            out.parent.mkdir(parents=True, exist_ok=True)
-            cfg_path = out.parent / f".{out.name}.yaml"
-            cfg_path.write_text(dump_config(self.edited_config()), encoding="utf-8")
-            try:
-                cfg = load_config(cfg_path)
-            finally:
-                cfg_path.unlink(missing_ok=True)
+            cfg = self.checked_config()[0]
         except (ConfigError, OSError) as exc:
             self.report_error("the parameters are not valid", exc)
             return
@@ -603,8 +592,7 @@ class Viewer:
         finally:
             apply_camera(cam, current, max(f.width, 1), max(f.height, 1))
         if i == 0:
-            rng = (float(self.bar_low.text), float(self.bar_high.text.split()[0]))
-            img = annotate.with_colorbar(img, FIELD_CMAPS[self.view.field], rng, self.view.field)
+            img = annotate.with_colorbar(img, FIELD_CMAPS[self.view.field], self._slice_range, slice_title(self.view))
         elif i == 1 and self.run.has_iterations and self._iter_range is not None:
             img = annotate.with_colorbar(img, SURFACE_CMAPS[self.view.color_by], self._iter_range,
                                          self.view.color_by, self.iter_label.text)
@@ -716,4 +704,4 @@ def main(target: Path, out: Path | None = None, width: int = 1800, height: int =
     return 0
 
 
-__all__ = ["Viewer", "main", "open_target", "tunables", "Surface"]
+__all__ = ["Viewer", "main", "open_target", "tunables"]

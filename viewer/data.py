@@ -45,6 +45,7 @@ class RunData:
             self.manifest = json.loads(manifest.read_text(encoding="utf-8"))
         except json.JSONDecodeError as exc:
             raise InputError(f"{manifest}: not valid JSON ({exc})") from None
+        self._fields: dict = {}
 
     def _path(self, rel: str) -> Path:
         return self.dir / rel
@@ -76,10 +77,6 @@ class RunData:
     def grid(self) -> Grid:
         return Grid.from_dict(json.loads(self._require("fields/grid.json", "the fields").read_text()))
 
-    @property
-    def has_fields(self) -> bool:
-        return self.has("fields/grid.json") and self.has("fields/psi.npy")
-
     @cached_property
     def _pyramid(self) -> np.ndarray:
         return np.load(self._require("fields/pyramid.npy", "the strength pyramid"), mmap_mode="r")
@@ -89,14 +86,30 @@ class RunData:
         return int(self._pyramid.shape[0]) if self.has("fields/pyramid.npy") else 1
 
     def field(self, name: str, level: int = 0) -> np.ndarray:
-        """Field ``name`` (zeta, xi or psi) on the grid; psi at pyramid ``level`` (0 = finest)."""
+        """Field ``name`` (zeta, xi or psi) on the grid; psi at pyramid ``level`` (0 = finest).
+
+        Read once per field and level (a slider moves through one field many times).
+        """
         if name not in FIELDS:
             raise InputError(f"field must be one of {', '.join(FIELDS)}, got {name!r}")
-        if name == "psi" and level:
-            if not 0 <= level < self.pyramid_levels:
-                raise InputError(f"pyramid level must be in 0..{self.pyramid_levels - 1}, got {level}")
-            return np.asarray(self._pyramid[level])
-        return np.load(self._require(f"fields/{name}.npy", f"the {name} field"))
+        level = level if name == "psi" else 0
+        if (name, level) not in self._fields:
+            if level:
+                if not 0 <= level < self.pyramid_levels:
+                    raise InputError(f"pyramid level must be in 0..{self.pyramid_levels - 1}, got {level}")
+                values = np.asarray(self._pyramid[level])
+            else:
+                values = np.load(self._require(f"fields/{name}.npy", f"the {name} field"))
+            self._fields[name, level] = values
+        return self._fields[name, level]
+
+    def field_range(self, name: str, level: int = 0) -> tuple[float, float]:
+        """Colour range of a field: its 1st to 99th percentile over the grid (fixed while slicing through it)."""
+        key = ("range", name, level if name == "psi" else 0)
+        if key not in self._fields:
+            lo, hi = np.percentile(self.field(name, level)[::2, ::2, ::2], [1, 99])
+            self._fields[key] = (float(lo), float(hi) if hi > lo else float(lo) + 1.0)
+        return self._fields[key]
 
     # -- coarse input -----------------------------------------------------------------------
 
@@ -124,12 +137,6 @@ class RunData:
         return Surface(V, F)
 
     @cached_property
-    def piece_names(self) -> list[str]:
-        if not self.has("coarse/components.json"):
-            return []
-        return list(json.loads(self._path("coarse/components.json").read_text())["names"])
-
-    @cached_property
     def coarse_animation(self):
         from fracture.animation import CoarseAnimation
 
@@ -137,15 +144,20 @@ class RunData:
                                hi=np.load(self._require("coarse/animation_hi.npy", "the coarse animation")),
                                nodes=np.load(self._require("coarse/animation_nodes.npy", "the coarse animation")))
 
+    @cached_property
+    def coarse_parts(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Per component: the coarse exterior's vertex ids on it and its triangles over them."""
+        ext = self.exterior
+        out = []
+        for c in range(self.coarse_animation.n_components):
+            used, local = np.unique(ext.F[ext.scalars["component"] == c], return_inverse=True)
+            out.append((used, local.reshape(-1, 3)))
+        return out
+
     def coarse_pieces(self, t: int) -> list[Surface]:
         """The coarse exterior's triangles of each component, moved to frame ``t``."""
-        ext, anim = self.exterior, self.coarse_animation
-        out = []
-        for c in range(anim.n_components):
-            F = ext.F[ext.scalars["component"] == c]
-            used, local = np.unique(F, return_inverse=True)
-            out.append(Surface(anim.deform(c, t, ext.V[used]), local.reshape(-1, 3)))
-        return out
+        V, anim = self.exterior.V, self.coarse_animation
+        return [Surface(anim.deform(c, t, V[used]), F) for c, (used, F) in enumerate(self.coarse_parts)]
 
     # -- iterations -------------------------------------------------------------------------
 

@@ -2,13 +2,15 @@
 
 Each ``show_*`` function fills an ``open3d.visualization.rendering.Open3DScene``
 (a SceneWidget's or an OffscreenRenderer's) from a :class:`~viewer.data.RunData`
-and a :class:`View` (which field, slice, iteration, frame, colouring), so a
-figure rendered with ``fracref render`` looks like the window.
+with what stays while a slider moves; the ``set_*`` functions replace only
+what the slider changes (the slice, the iteration's surface). A figure
+rendered with ``fracref render`` therefore looks like the window.
 """
 
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from functools import lru_cache
 
 import numpy as np
 import open3d as o3d
@@ -16,8 +18,9 @@ from open3d.visualization import rendering
 
 from fields.colormap import colormap
 from fields.slices import axis_slice
+from fracture.errors import InputError
 from fracture.topology import face_frames
-from viewer.data import FIELDS, RunData
+from viewer.data import FIELDS, RunData, Surface
 
 BACKGROUND = (1.0, 1.0, 1.0, 1.0)
 # Piece colours: the Okabe-Ito palette (distinguishable with colour-blindness), then a hue walk.
@@ -43,8 +46,6 @@ class View:
 
     def check(self, run: RunData) -> "View":
         """This view with ``iteration`` resolved, or an error naming the bad value and what is allowed."""
-        from fracture.errors import InputError
-
         if self.field not in FIELDS:
             raise InputError(f"field must be one of {', '.join(FIELDS)}, got {self.field!r}")
         if self.axis not in ("x", "y", "z"):
@@ -89,7 +90,7 @@ def slice_plane(run: RunData, view: View) -> tuple[o3d.geometry.TriangleMesh, tu
     """The field slice as a flat coloured mesh in material space, and its value range."""
     values = run.field(view.field, view.level if view.field == "psi" else 0)
     plane, info = axis_slice(run.grid, values, view.axis, view.offset)
-    vmin, vmax = field_range(run, view)
+    vmin, vmax = run.field_range(view.field, view.level)
     nu, nv = plane.shape
     u = np.linspace(*info["extent"][0], nu)
     v = np.linspace(*info["extent"][1], nv)
@@ -100,13 +101,6 @@ def slice_plane(run: RunData, view: View) -> tuple[o3d.geometry.TriangleMesh, tu
     a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
     F = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
     return triangle_mesh(P, F, colormap(plane.ravel(), FIELD_CMAPS[view.field], vmin, vmax)), (vmin, vmax)
-
-
-def field_range(run: RunData, view: View) -> tuple[float, float]:
-    """The colour range of a field: its 1st to 99th percentile over the whole grid (fixed while slicing)."""
-    values = run.field(view.field, view.level if view.field == "psi" else 0)
-    lo, hi = np.percentile(values[::2, ::2, ::2], [1, 99])
-    return float(lo), float(hi) if hi > lo else float(lo) + 1.0
 
 
 def surface_range(run: RunData, color_by: str) -> tuple[float, float]:
@@ -162,32 +156,58 @@ def prepare(scene: rendering.Open3DScene) -> None:
                                                         rendering.ColorGrading.ToneMapping.LINEAR))
 
 
-def show_slice(scene: rendering.Open3DScene, run: RunData, view: View) -> tuple[float, float]:
-    """Panel 1: the field slice with the coarse and refined fracture surfaces and a see-through exterior."""
+def _replace(scene: rendering.Open3DScene, name: str, geometry, material) -> None:
+    if scene.has_geometry(name):
+        scene.remove_geometry(name)
+    scene.add_geometry(name, geometry, material)
+
+
+@lru_cache(maxsize=4)
+def exterior_mesh(run: RunData) -> o3d.geometry.TriangleMesh:
+    """B as an Open3D mesh, built once per run (every panel shows it)."""
+    return triangle_mesh(run.exterior.V, run.exterior.F, flat=True)
+
+
+def show_material(scene: rendering.Open3DScene, run: RunData) -> None:
+    """Panel 1 without its slice: the coarse (wireframe) and refined fracture surfaces and a see-through exterior."""
     prepare(scene)
-    plane, rng = slice_plane(run, view)
-    scene.add_geometry("slice", plane, unlit())
     cf = run.coarse_fracture
     scene.add_geometry("coarse", wireframe(cf.V, cf.F), lines((0.1, 0.1, 0.1, 1.0), 2.0))
     if run.refined_fracture is not None:
         rf = run.refined_fracture
         scene.add_geometry("refined", triangle_mesh(rf.V, rf.F), lit((0.85, 0.85, 0.82, 1.0)))
-    ext = run.exterior
-    scene.add_geometry("exterior", triangle_mesh(ext.V, ext.F, flat=True), glass())
+    scene.add_geometry("exterior", exterior_mesh(run), glass())
+
+
+def set_slice(scene: rendering.Open3DScene, run: RunData, view: View) -> tuple[float, float]:
+    """Panel 1's field slice (replacing the previous one); returns its colour range."""
+    plane, rng = slice_plane(run, view)
+    _replace(scene, "slice", plane, unlit())
     return rng
 
 
-def show_iteration(scene: rendering.Open3DScene, run: RunData, view: View,
-                   color_range: tuple[float, float] | None = None) -> tuple[float, float]:
-    """Panel 2: the fracture surface at iteration ``view.iteration`` coloured by psi or speed."""
+def show_context(scene: rendering.Open3DScene, run: RunData) -> None:
+    """Panel 2 without its surface: a faint exterior."""
     prepare(scene)
-    s = run.iteration(view.iteration)
-    rng = color_range or surface_range(run, view.color_by)
-    colors = colormap(s.scalars[view.color_by], SURFACE_CMAPS[view.color_by], *rng)
-    scene.add_geometry("surface", triangle_mesh(s.V, s.F, colors), lit((1, 1, 1, 1)))
-    ext = run.exterior
-    scene.add_geometry("exterior", triangle_mesh(ext.V, ext.F, flat=True), glass(0.12))
-    return rng
+    scene.add_geometry("exterior", exterior_mesh(run), glass(0.12))
+
+
+def set_surface(scene: rendering.Open3DScene, surface: Surface, color_by: str, rng: tuple[float, float]) -> None:
+    """Panel 2's fracture surface coloured by its ``psi`` or ``speed`` scalars (replacing the previous one)."""
+    colors = colormap(surface.scalars[color_by], SURFACE_CMAPS[color_by], *rng)
+    _replace(scene, "surface", triangle_mesh(surface.V, surface.F, colors), lit((1, 1, 1, 1)))
+
+
+def slice_title(view: View) -> str:
+    level = f" (level {view.level})" if view.field == "psi" and view.level else ""
+    return f"{view.field}{level}, {view.axis} = {view.offset:.2f}"
+
+
+def iteration_caption(run: RunData, k: int) -> str:
+    """``iteration k / n, m triangles, E = e`` (no energy for the coarse surface, iteration 0)."""
+    e = run.energy[k - 1] if 0 < k <= len(run.energy) else None
+    return (f"iteration {k} / {len(run.iterations) - 1}, {len(run.iterations[k]['faces'])} triangles"
+            + (f", E = {e:.4g}" if e is not None else ""))
 
 
 def show_frame(scene: rendering.Open3DScene, run: RunData, view: View) -> None:
@@ -304,13 +324,11 @@ def scene_box(run: RunData) -> tuple[np.ndarray, np.ndarray]:
 
 def animation_box(run: RunData) -> tuple[np.ndarray, np.ndarray]:
     """The box holding every piece in every frame (the camera does not chase the pieces)."""
-    anim = run.coarse_animation
-    ext = run.exterior
-    lo, hi = ext.V.min(axis=0), ext.V.max(axis=0)
-    for c in range(anim.n_components):
-        X = ext.V[np.unique(ext.F[ext.scalars["component"] == c])]
-        if len(X):
-            P = anim.trajectories(c, X)
+    V = run.exterior.V
+    lo, hi = V.min(axis=0), V.max(axis=0)
+    for c, (used, _) in enumerate(run.coarse_parts):
+        if len(used):
+            P = run.coarse_animation.trajectories(c, V[used])
             lo, hi = np.minimum(lo, P.min(axis=(0, 1))), np.maximum(hi, P.max(axis=(0, 1)))
     return lo, hi
 

@@ -31,8 +31,8 @@ from fracture.errors import InputError  # noqa: E402
 from viewer import annotate  # noqa: E402
 from viewer.data import RunData  # noqa: E402
 from viewer.looks import (  # noqa: E402
-    FIELD_CMAPS, SURFACE_CMAPS, View, animation_box, apply_camera, frame_box, iteration_pose, show_frame,
-    show_iteration, show_slice, slice_pose,
+    FIELD_CMAPS, SURFACE_CMAPS, View, animation_box, apply_camera, frame_box, iteration_caption, iteration_pose,
+    set_slice, set_surface, show_context, show_frame, show_material, slice_pose, slice_title, surface_range,
 )
 
 WHAT = ("slices", "iterations", "animation")
@@ -134,27 +134,23 @@ def _write_sequence(images, out: Path, stem: str, width: int, height: int, fps: 
     return written + [video.path]
 
 
-def slice_images(run: RunData, view: View, renderer: Renderer, offsets) -> list[np.ndarray]:
+def slice_images(run: RunData, view: View, renderer: Renderer, offsets):
     pose = slice_pose(run, view, BAR_ROOM * renderer.width / renderer.height)
-    out = []
+    show_material(renderer.scene, run)
     for off in offsets:
         v = replace(view, offset=float(off))
-        rng = show_slice(renderer.scene, run, v)
-        img = renderer.image(pose)
-        title = f"{v.field}" + (f" (level {v.level})" if v.field == "psi" and v.level else "") + \
-                f", {v.axis} = {off:.2f}"
-        out.append(annotate.with_colorbar(img, FIELD_CMAPS[v.field], rng, title))
-    return out
+        rng = set_slice(renderer.scene, run, v)
+        yield annotate.with_colorbar(renderer.image(pose), FIELD_CMAPS[v.field], rng, slice_title(v))
 
 
-def iteration_image(run: RunData, view: View, renderer: Renderer, pose, rng) -> np.ndarray:
-    show_iteration(renderer.scene, run, view, rng)
-    img = renderer.image(pose)
-    k = view.iteration
-    energy = run.energy[k - 1] if 0 < k <= len(run.energy) else None
-    text = f"iteration {k}, {len(run.iterations[k]['faces'])} triangles" + \
-           (f", E = {energy:.4g}" if energy is not None else "")
-    return annotate.with_colorbar(img, SURFACE_CMAPS[view.color_by], rng, f"{view.color_by}", text)
+def iteration_images(run: RunData, view: View, renderer: Renderer):
+    pose = iteration_pose(run, BAR_ROOM * renderer.width / renderer.height)
+    rng = surface_range(run, view.color_by)
+    show_context(renderer.scene, run)
+    for k in range(len(run.iterations)):
+        set_surface(renderer.scene, run.iteration(k), view.color_by, rng)
+        yield annotate.with_colorbar(renderer.image(pose), SURFACE_CMAPS[view.color_by], rng, view.color_by,
+                                     iteration_caption(run, k))
 
 
 def render(run_dir: str | Path, what: str, out: str | Path | None = None, width: int = 1280, height: int = 720,
@@ -163,8 +159,6 @@ def render(run_dir: str | Path, what: str, out: str | Path | None = None, width:
 
     Returns the files written.
     """
-    from viewer.looks import surface_range
-
     if what not in WHAT:
         raise InputError(f"--what must be one of {', '.join(WHAT)}, got {what!r}")
     check_size(width, height)
@@ -174,16 +168,13 @@ def render(run_dir: str | Path, what: str, out: str | Path | None = None, width:
     renderer = Renderer(width, height)
     if what == "slices":
         offsets = np.linspace(0.1, 0.9, 9)
-        return _write_sequence(iter(slice_images(run, view, renderer, offsets)), out, f"slices_{view.field}_{view.axis}",
+        return _write_sequence(slice_images(run, view, renderer, offsets), out, f"slices_{view.field}_{view.axis}",
                                width, height, fps, len(offsets), quiet)
     if what == "iterations":
         if not run.has_iterations:
             raise InputError(f"{run.dir}: no iterations to render (run the refine stage with refine.snapshots: true)")
-        pose = iteration_pose(run, BAR_ROOM * width / height)
-        rng = surface_range(run, view.color_by)
-        n = len(run.iterations)
-        images = (iteration_image(run, replace(view, iteration=k), renderer, pose, rng) for k in range(n))
-        return _write_sequence(images, out, f"iterations_{view.color_by}", width, height, fps, n, quiet)
+        return _write_sequence(iteration_images(run, view, renderer), out, f"iterations_{view.color_by}",
+                               width, height, fps, len(run.iterations), quiet)
     if not run.has_animation:
         raise InputError(f"{run.dir}: no animation to render (the run stopped before the animate stage)")
     pose = frame_box(*animation_box(run), width / height)
