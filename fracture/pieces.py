@@ -7,8 +7,19 @@ edges. A piece is its component's patches plus every S triangle with the
 component on one side, turned so that the normal points out of it: one
 closed, 2-manifold, outward mesh per component.
 
+Where S leaves B between two boundary vertices (a fracture triangle grazing
+a concave part of B), the piece on the far side of S would cross itself: its
+B patch and its S triangles pass through each other and enclose a thin
+inverted pocket. Such a piece is resolved by libigl's exact mesh boolean
+(the union of the piece with nothing, Zhou et al. 2016): its triangles are
+cut along the crossing curves and what has winding number 1 is kept, so the
+pocket goes and the piece is closed, 2-manifold and free of
+self-intersections. The piece on the near side of S keeps the sliver of S
+outside B; both are a thin shell of S's grazing triangles in volume.
+
 All pieces index one vertex array: S's vertices (shared by the pieces that
-meet there) followed by B's vertices off the cut.
+meet there), vertices made on S triangles by the resolution, then B's
+vertices off the cut and vertices made on B triangles.
 """
 
 from __future__ import annotations
@@ -17,7 +28,9 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import igl
+import igl.copyleft.cgal as igl_cgal
 import numpy as np
+import scipy.sparse as sp
 
 from fracture.coarse import flood_fill_patches
 from fracture.imprint import Imprint
@@ -34,8 +47,11 @@ class Pieces:
     ----------
     V : (n, 3) float
         Material-space positions: the refined fracture surface's vertices
-        (the first ``n_fracture``) and then B's vertices that are not on it.
+        (the first ``n_surface``), the vertices the resolution of crossings
+        made on its triangles (up to ``n_fracture``), then B's vertices that
+        are not on S and those the resolution made on B's triangles.
     n_fracture : int
+        Vertices that move like the fracture surface (``V[:n_fracture]``).
     faces : list of (m_c, 3) int
         Triangles of each piece (component order), indexing ``V``.
     exterior : list of (m_c,) bool
@@ -43,6 +59,15 @@ class Pieces:
     patch_agreement : float
         Smallest share, over B's patches, of the cut-edge votes that agree
         with the patch's component (1 when every cut edge agrees).
+    derived : csr (n_fracture - n_surface, n_surface)
+        Barycentric weights of the vertices made on S triangles, over the
+        corners of the triangle each lies on.
+    resolved : list of int
+        Per piece, the crossing triangle pairs the resolution removed.
+    unresolved : list of int
+        Pieces whose resolution was refused (see :func:`resolve_crossings`).
+    crossings : list of int or None
+        Per piece, the crossing triangle pairs left (``None`` when not resolved).
     """
 
     V: np.ndarray
@@ -50,6 +75,21 @@ class Pieces:
     faces: list
     exterior: list
     patch_agreement: float
+    derived: sp.csr_matrix | None = None
+    resolved: list | None = None
+    unresolved: list | None = None
+    crossings: list | None = None
+
+    @property
+    def n_surface(self) -> int:
+        return self.n_fracture - (0 if self.derived is None else self.derived.shape[0])
+
+    def fracture_tree(self, tree: sp.csr_matrix) -> sp.csr_matrix:
+        """Extend S's barycentric tree map ``tree`` (``n_surface`` rows) to the first ``n_fracture`` vertices."""
+        tree = sp.csr_matrix(tree)
+        if self.derived is None or not self.derived.shape[0]:
+            return tree
+        return sp.vstack([tree, self.derived @ tree], format="csr")
 
     @property
     def n_pieces(self) -> int:
@@ -103,11 +143,12 @@ def label_patches(im: Imprint, mesh: RefineMesh, n_components: int, fallback) ->
     return label[patch], agreement
 
 
-def build_pieces(im: Imprint, mesh: RefineMesh, n_components: int, fallback) -> Pieces:
+def build_pieces(im: Imprint, mesh: RefineMesh, n_components: int, fallback, resolve: bool = True) -> Pieces:
     """Assemble the closed pieces from imprinted B ``im`` and the refined surface ``mesh``.
 
     ``fallback(face_ids)`` labels B triangles of patches that touch no cut
-    (see :func:`label_patches`).
+    (see :func:`label_patches`). With ``resolve``, pieces that cross
+    themselves are resolved (:func:`resolve_crossings`).
     """
     component, agreement = label_patches(im, mesh, n_components, fallback)
     n_s = len(mesh.V)
@@ -125,7 +166,109 @@ def build_pieces(im: Imprint, mesh: RefineMesh, n_components: int, fallback) -> 
         keep = ~_cancelling(F, len(V))
         faces.append(F[keep])
         exterior.append(ext[keep])
-    return Pieces(V=V, n_fracture=n_s, faces=faces, exterior=exterior, patch_agreement=agreement)
+    pieces = Pieces(V=V, n_fracture=n_s, faces=faces, exterior=exterior, patch_agreement=agreement,
+                    resolved=[0] * n_components, unresolved=[])
+    return _resolve_pieces(pieces) if resolve else pieces
+
+
+def _resolve_pieces(pieces: Pieces) -> Pieces:
+    """Resolve every self-crossing piece and renumber the shared vertices (see :class:`Pieces` for the order)."""
+    n_s, n_v = pieces.n_fracture, len(pieces.V)
+    faces, exterior = list(pieces.faces), list(pieces.exterior)
+    resolved, unresolved, left = [0] * pieces.n_pieces, [], [0] * pieces.n_pieces
+    new_pos, new_parents, new_weights, new_on_s = [], [], [], []
+    n_new = 0
+    for c, (ids, V, F) in enumerate(pieces.parts):
+        pairs = crossing_pairs(V, F)
+        if not pairs:
+            continue
+        out = resolve_crossings(V, F, pieces.exterior[c])
+        if out is None:
+            unresolved.append(c)
+            left[c] = int(pairs)
+            continue
+        FC, ext, source, P, parents, weights, on_s = out
+        to_global = np.where(source >= 0, ids[np.maximum(source, 0)], -1)
+        new = np.flatnonzero(source < 0)
+        to_global[new] = n_v + n_new + np.arange(len(new))
+        n_new += len(new)
+        faces[c], exterior[c] = to_global[FC], ext
+        new_pos.append(P), new_parents.append(ids[parents]), new_weights.append(weights), new_on_s.append(on_s)
+        resolved[c] = int(pairs)
+    if not n_new:
+        return Pieces(V=pieces.V, n_fracture=n_s, faces=faces, exterior=exterior,
+                      patch_agreement=pieces.patch_agreement, resolved=resolved, unresolved=unresolved,
+                      crossings=left)
+    P, parents, weights, on_s = (np.concatenate(a) for a in (new_pos, new_parents, new_weights, new_on_s))
+    # order: S's vertices, new ones on S, B's vertices, new ones on B
+    old = np.arange(n_v + n_new)
+    order = np.concatenate([old[:n_s], n_v + np.flatnonzero(on_s), old[n_s:n_v], n_v + np.flatnonzero(~on_s)])
+    renumber = np.empty_like(order)
+    renumber[order] = np.arange(len(order))
+    V = np.concatenate([pieces.V, P])[order]
+    k = int(on_s.sum())
+    derived = sp.csr_matrix((weights[on_s].ravel(), (np.repeat(np.arange(k), 3), parents[on_s].ravel())),
+                            shape=(k, n_s))
+    return Pieces(V=V, n_fracture=n_s + k, faces=[renumber[F] for F in faces], exterior=exterior,
+                  patch_agreement=pieces.patch_agreement, derived=derived, resolved=resolved,
+                  unresolved=unresolved, crossings=left)
+
+
+def resolve_crossings(V: np.ndarray, F: np.ndarray, exterior: np.ndarray, volume_tolerance: float = 0.5):
+    """Resolve a closed mesh that crosses itself into the boundary of its winding-number-positive region.
+
+    libigl's exact boolean (the union of ``(V, F)`` with nothing) cuts the
+    triangles along their crossing curves and keeps the boundary of the
+    region of positive winding number. The result is refused (``None``)
+    unless it is closed, 2-manifold, outward and free of crossings, with a
+    volume within ``volume_tolerance`` of the input's (the pockets it drops
+    are thin; a result that far off is not the same piece).
+
+    Returns ``(F, exterior, source, P, parents, weights, on_s)``: the new
+    triangles over ``[V[source >= 0]; P]`` ordered as the output vertices
+    (``source[i]`` is the input vertex output vertex ``i`` is, ``-1`` for
+    the new ones, which are ``P`` in order), each triangle's ``exterior``
+    flag, and per new vertex the corners (``parents``, into ``V``) and
+    barycentric ``weights`` of the input triangle it lies on, an S triangle
+    (``on_s``) where it lies on one.
+    """
+    VC, FC, J = igl_cgal.mesh_boolean(np.ascontiguousarray(V, np.float64), np.ascontiguousarray(F, np.int64),
+                                      np.zeros((0, 3)), np.zeros((0, 3), np.int64), "union")
+    VC, FC = split_pinches(VC, FC)
+    ch = mesh_checks(VC, FC)
+    if not (ch["closed_oriented"] and ch["vertex_manifold"] and ch["self_intersections"] == 0):
+        return None
+    before = signed_volume(V, F)
+    if abs(ch["volume"] - before) > volume_tolerance * abs(before):
+        return None
+    # input vertices come out with the same coordinates (the boolean rounds exact points to doubles)
+    _, inv = np.unique(np.concatenate([V, VC]), axis=0, return_inverse=True)
+    inv = inv.ravel()
+    first = np.full(inv.max() + 1, -1)
+    first[inv[:len(V)][::-1]] = np.arange(len(V))[::-1]
+    source = first[inv[len(V):]]
+    J = np.asarray(J).ravel()
+    ext = np.asarray(exterior, bool)[J]
+    new = np.flatnonzero(source < 0)
+    if not len(new):
+        return FC, ext, source, np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros((0, 3)), np.zeros(0, bool)
+    # each new vertex takes one triangle it was born on, an S triangle if it has one
+    corner_v = FC.ravel()
+    corner_f = np.repeat(np.arange(len(FC)), 3)
+    is_new = source[corner_v] < 0
+    corner_v, corner_f = corner_v[is_new], corner_f[is_new]
+    order = np.lexsort((ext[corner_f], corner_v))
+    corner_v, corner_f = corner_v[order], corner_f[order]
+    head = np.r_[True, corner_v[1:] != corner_v[:-1]]
+    birth = J[corner_f[head]]  # aligned with new (sorted vertex ids)
+    parents = np.asarray(F, np.int64)[birth]
+    P = VC[new]
+    T = V[parents]
+    bary = igl.barycentric_coordinates(np.ascontiguousarray(P), np.ascontiguousarray(T[:, 0]),
+                                       np.ascontiguousarray(T[:, 1]), np.ascontiguousarray(T[:, 2]))
+    bary = np.clip(np.atleast_2d(bary), 0.0, None)
+    weights = bary / bary.sum(axis=1, keepdims=True)
+    return FC, ext, source, P, parents, weights, ~np.asarray(exterior, bool)[birth]
 
 
 def _cancelling(F: np.ndarray, n: int) -> np.ndarray:
@@ -152,6 +295,64 @@ def _cancelling(F: np.ndarray, n: int) -> np.ndarray:
     return out
 
 
+def split_pinches(V: np.ndarray, F: np.ndarray, nudge: float = 1e-3) -> tuple[np.ndarray, np.ndarray]:
+    """Give every extra fan of triangles around a non-manifold vertex its own copy of the vertex.
+
+    Where a resolved pocket touched a vertex, the kept region meets itself
+    there in two fans (a pinch). Each fan but the largest gets a copy, moved
+    ``nudge`` of the way towards the centroid of one of its triangles, so it
+    stays in that triangle's plane and the two fans no longer touch.
+    (pymeshlab's ``meshing_repair_non_manifold_vertices`` does the same, on
+    its own copy of the mesh and without saying which vertex became which.)
+    """
+    bad = np.flatnonzero(~np.asarray(igl.is_vertex_manifold(np.ascontiguousarray(F, np.int64))).ravel())
+    if not len(bad):
+        return V, F
+    V, F = list(V), F.copy()
+    for v in bad.tolist():  # a handful of vertices
+        faces = np.flatnonzero((F == v).any(axis=1))
+        # two triangles at v are in one fan when they share an edge (v, w)
+        others = [set(F[f].tolist()) - {v} for f in faces]
+        fan = list(range(len(faces)))
+
+        def root(i):
+            while fan[i] != i:
+                fan[i] = fan[fan[i]]
+                i = fan[i]
+            return i
+
+        for i in range(len(faces)):
+            for j in range(i):
+                if others[i] & others[j]:
+                    fan[root(i)] = root(j)
+        label = np.array([root(i) for i in range(len(faces))])
+        groups = sorted((faces[label == r] for r in np.unique(label)), key=len, reverse=True)
+        for group in groups[1:]:
+            centroid = np.mean([V[u] for u in F[group[0]]], axis=0)
+            V.append(V[v] + nudge * (centroid - V[v]))
+            rows = F[group]
+            rows[rows == v] = len(V) - 1
+            F[group] = rows
+    return np.array(V), F
+
+
+def crossing_pairs(V: np.ndarray, F: np.ndarray) -> int:
+    """Number of pairs of triangles that meet other than at their shared vertex or edge, decided exactly.
+
+    libigl's exact-arithmetic test (CGAL predicates): triangles that come
+    within rounding of each other without meeting are not counted, unlike
+    the tolerant count the refinement uses for its moving surface
+    (:func:`fracture.refine.collide.self_intersections`). That count runs
+    first: it is three times faster and misses no crossing (coplanar
+    overlaps aside), so where it finds none the exact test is skipped.
+    """
+    if len(F) < 2 or not self_intersections(V, F):
+        return 0
+    out = igl_cgal.remesh_self_intersections(np.ascontiguousarray(V, np.float64), np.ascontiguousarray(F, np.int64),
+                                             detect_only=True, cutoff=np.iinfo(np.int32).max)
+    return int(len(out[2]))
+
+
 def mesh_checks(V: np.ndarray, F: np.ndarray, intersections: bool = True) -> dict:
     """Closedness, manifoldness, orientation, volume and self-intersections of one mesh.
 
@@ -169,7 +370,7 @@ def mesh_checks(V: np.ndarray, F: np.ndarray, intersections: bool = True) -> dic
     out = {"closed_oriented": closed_oriented, "vertex_manifold": vertex_manifold,
            "volume": signed_volume(V, F), "triangles": int(len(F)), "vertices": int(len(V))}
     if intersections:
-        out["self_intersections"] = int(self_intersections(V, F))
+        out["self_intersections"] = crossing_pairs(V, F)
     return out
 
 

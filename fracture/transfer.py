@@ -8,7 +8,9 @@ material position:
 
 * a vertex of the refined fracture surface: the coarse fracture vertices
   and weights of the barycentric tree (Section 4.4), with the piece's
-  component;
+  component (a vertex the resolution of a crossing made on an S triangle:
+  the tree rows of the triangle's corners, blended by its barycentric
+  weights);
 * a vertex of B off the cut: the nearest location on the coarse surface of
   its own component (barycentric weights of that coarse triangle).
 
@@ -158,7 +160,7 @@ def build_transfer(cf: CoarseFracture, pieces: Pieces, tree: sp.csr_matrix) -> T
     K = np.concatenate([cf.V, cf.exterior_V])
     rep = bonded_representatives(cf)
     nf = pieces.n_fracture
-    tree = sp.csr_matrix(tree)
+    tree = pieces.fracture_tree(tree)
 
     # per fracture vertex: the shared component (lowest among the pieces that
     # hold it) and the fracture time interpolated through the tree
@@ -167,6 +169,9 @@ def build_transfer(cf: CoarseFracture, pieces: Pieces, tree: sp.csr_matrix) -> T
         verts = pieces.piece(c)[0]
         verts = verts[verts < nf]
         shared_comp[verts] = np.minimum(shared_comp[verts], c)
+    if nf > pieces.n_surface:  # a vertex made on an S triangle is held by one piece: take its corners' component
+        D = pieces.derived
+        shared_comp[pieces.n_surface:] = np.minimum.reduceat(shared_comp[D.indices], D.indptr[:-1])
     vtime = tree @ cf.vertex_fracture_time.astype(np.float64)
 
     rows_v, rows_c, ent_row, ent_k, ent_w, ent_c = [], [], [], [], [], []

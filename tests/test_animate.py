@@ -74,6 +74,52 @@ def test_imprinting_keeps_the_tree_and_puts_the_boundary_on_b():
     assert s_edges == b_edges
 
 
+def test_a_surface_leaving_b_makes_pieces_without_crossings():
+    # S: the height field z = 0.7 + 0.4 b(x) b(y) (b a bump, 0 on the sides)
+    # reaches z = 1.1 and leaves the unit cube through its top face. The
+    # piece above S would enclose an inverted pocket: resolved, it is the
+    # positive part of its winding number.
+    import igl
+    BV, BF = box((0, 0, 0), (1, 1, 1), (10, 10, 10))
+    n = 9
+    x, y = np.meshgrid(np.linspace(0, 1, n + 1), np.linspace(0, 1, n + 1), indexing="ij")
+    x, y = x.ravel(), y.ravel()
+    V = np.stack([x, y, 0.7 + 6.4 * x * (1 - x) * y * (1 - y)], 1)
+    F = grid_faces(n + 1, n + 1)
+    up = np.cross(V[F[0, 1]] - V[F[0, 0]], V[F[0, 2]] - V[F[0, 0]])[2] > 0
+    sides = np.tile([0, 1] if up else [1, 0], (len(F), 1))  # component 1 above S
+    mesh = RefineMesh.from_coarse(V, F, sides)
+    im = imprint_boundary(BV, BF, mesh)
+
+    def labels(faces):
+        return np.zeros(len(faces), np.int64)
+
+    raw = build_pieces(im, mesh, 2, labels, resolve=False)
+    pieces = build_pieces(im, mesh, 2, labels)
+    assert mesh_checks(*raw.piece(1)[1:])["self_intersections"] > 0
+    assert mesh_checks(*raw.piece(0)[1:])["self_intersections"] == 0
+    assert pieces.resolved[0] == 0 and pieces.resolved[1] > 0 and pieces.unresolved == []
+    for c in range(2):
+        ch = mesh_checks(*pieces.piece(c)[1:])
+        assert ch["closed_oriented"] and ch["vertex_manifold"] and ch["self_intersections"] == 0
+    # the piece below S is untouched; the one above is where the raw piece winds positively
+    assert np.array_equal(np.sort(pieces.piece(0)[1], axis=0), np.sort(raw.piece(0)[1], axis=0))
+    P = np.random.default_rng(1).random((20000, 3)) * [1, 1, 1.3]
+    _, RV, RF = raw.piece(1)
+    _, QV, QF = pieces.piece(1)
+    w_raw = igl.winding_number(RV, RF, P)
+    w_new = igl.winding_number(QV, QF, P)
+    assert (w_raw < -0.5).sum() > 50  # the pocket
+    near = np.abs(np.abs(w_raw) - 0.5) < 0.45  # away from the surfaces
+    assert np.allclose(np.round(w_new[near]), np.maximum(np.round(w_raw[near]), 0))
+    # the new vertices lie on S's triangles, with barycentric weights over their corners
+    ns, nf = pieces.n_surface, pieces.n_fracture
+    assert nf > ns and np.allclose(pieces.derived @ pieces.V[:ns], pieces.V[ns:nf], atol=1e-12)
+    assert np.allclose(np.asarray(pieces.derived.sum(axis=1)).ravel(), 1.0)
+    W = pieces.fracture_tree(mesh.tree_matrix())
+    assert W.shape == (nf, mesh.n_coarse) and np.allclose(W @ mesh.V[:mesh.n_coarse], pieces.V[:nf], atol=1e-9)
+
+
 def test_bridge_edges_along_b_are_split_into_the_material():
     # two triangles of S hinge on an edge lying in B's bottom face (both its
     # ends on S's boundary): the triangles would touch B along it
@@ -133,6 +179,7 @@ def test_every_scene_animates_into_closed_pieces(name, tmp_path):
     a, counts = manifest["stats"]["animate"], manifest["counts"]
     for p in a["pieces"]:
         assert p["closed_oriented"] and p["vertex_manifold"] and p["volume"] > 0
+        assert p["self_intersections"] == 0
     assert a["volume_relative_error"] < 0.005 and a["overlap_share"] == 0
     assert a["hausdorff_first_frame_relative"] < 1e-3
     assert a["early_gap_max"] == 0
