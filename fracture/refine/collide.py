@@ -57,7 +57,10 @@ def _build_grid(lo, hi, inv, mask):
 
     Every box goes to the level where it covers at most 2 x 2 x 2 cells (cell
     size ``2^level / inv``), so large and small elements cost the same.
-    Returns (start, items, level) with buckets as a CSR table.
+    Returns ``(start, items, level, slot_box, slot_level)``: buckets as a CSR
+    table of element ids, each element's level, and per slot a copy of its
+    element's box (``(s, 6)``, lower then upper corner) and level, so a query
+    scans its buckets' boxes in order instead of looking each element up.
     """
     k = lo.shape[0]
     level = np.empty(k, np.int64)
@@ -73,6 +76,8 @@ def _build_grid(lo, hi, inv, mask):
         start[b + 1] += start[b]
     fill = start[:-1].copy()
     items = np.empty(start[-1], np.int64)
+    slot_box = np.empty((start[-1], 6))
+    slot_level = np.empty(start[-1], np.int64)
     for e in range(k):
         L = level[e]
         s = inv / 2.0 ** L
@@ -80,20 +85,25 @@ def _build_grid(lo, hi, inv, mask):
             for iy in range(_cell(lo[e, 1], s), _cell(hi[e, 1], s) + 1):
                 for iz in range(_cell(lo[e, 2], s), _cell(hi[e, 2], s) + 1):
                     h = _hash(ix, iy, iz, L, mask)
-                    items[fill[h]] = e
+                    p = fill[h]
+                    items[p] = e
+                    for c in range(3):
+                        slot_box[p, c] = lo[e, c]
+                        slot_box[p, 3 + c] = hi[e, c]
+                    slot_level[p] = L
                     fill[h] += 1
-    return start, items, level
+    return start, items, level, slot_box, slot_level
 
 
 @numba.njit(cache=True)
-def _gather(qlo, qhi, min_level, grid, lo, hi, inv, mask, buf):
+def _gather(qlo, qhi, min_level, grid, inv, mask, buf):
     """Elements of ``grid`` whose boxes overlap the box ``qlo, qhi``, each once, into ``buf``.
 
     Levels below ``min_level`` are skipped. An element is reported from the
     cell (at its own level) holding the lower corner of the two boxes'
     intersection. Returns (buf, count); ``buf`` grows when full.
     """
-    start, items, level, max_level = grid
+    start, items, level, max_level, box, slot_level = grid
     count = 0
     for L in range(min_level, max_level + 1):
         s = inv / 2.0 ** L
@@ -102,28 +112,27 @@ def _gather(qlo, qhi, min_level, grid, lo, hi, inv, mask, buf):
                 for iz in range(_cell(qlo[2], s), _cell(qhi[2], s) + 1):
                     h = _hash(ix, iy, iz, L, mask)
                     for p in range(start[h], start[h + 1]):
-                        e = items[p]
-                        if level[e] != L:
+                        if slot_level[p] != L:
                             continue
-                        if not (qlo[0] <= hi[e, 0] and lo[e, 0] <= qhi[0] and qlo[1] <= hi[e, 1]
-                                and lo[e, 1] <= qhi[1] and qlo[2] <= hi[e, 2] and lo[e, 2] <= qhi[2]):
+                        if not (qlo[0] <= box[p, 3] and box[p, 0] <= qhi[0] and qlo[1] <= box[p, 4]
+                                and box[p, 1] <= qhi[1] and qlo[2] <= box[p, 5] and box[p, 2] <= qhi[2]):
                             continue
-                        if (_cell(max(qlo[0], lo[e, 0]), s) != ix or _cell(max(qlo[1], lo[e, 1]), s) != iy
-                                or _cell(max(qlo[2], lo[e, 2]), s) != iz):
+                        if (_cell(max(qlo[0], box[p, 0]), s) != ix or _cell(max(qlo[1], box[p, 1]), s) != iy
+                                or _cell(max(qlo[2], box[p, 2]), s) != iz):
                             continue
                         if count == buf.shape[0]:
                             bigger = np.empty(2 * buf.shape[0], np.int64)
                             bigger[:count] = buf
                             buf = bigger
-                        buf[count] = e
+                        buf[count] = items[p]
                         count += 1
     return buf, count
 
 
 @numba.njit(cache=True)
 def _grid(lo, hi, inv, mask):
-    start, items, level = _build_grid(lo, hi, inv, mask)
-    return start, items, level, (level.max() if level.shape[0] else 0)
+    start, items, level, slot_box, slot_level = _build_grid(lo, hi, inv, mask)
+    return start, items, level, (level.max() if level.shape[0] else 0), slot_box, slot_level
 
 
 # -- geometry ------------------------------------------------------------------------------
@@ -401,11 +410,11 @@ def _vertex_triangle_pairs(X0, X1, F, query, by_vertex, vlo, vhi, tlo, thi, grid
     hits = 0
     for q in query:
         if by_vertex:
-            buf, k = _gather(vlo[q], vhi[q], 0, grid, tlo, thi, inv, mask, buf)
+            buf, k = _gather(vlo[q], vhi[q], 0, grid, inv, mask, buf)
             for i in range(k):
                 hits += _vertex_triangle_pair(X0, X1, F, q, buf[i], eta2, times, stop)
         else:
-            buf, k = _gather(tlo[q], thi[q], 0, grid, vlo, vhi, inv, mask, buf)
+            buf, k = _gather(tlo[q], thi[q], 0, grid, inv, mask, buf)
             for i in range(k):
                 hits += _vertex_triangle_pair(X0, X1, F, buf[i], q, eta2, times, stop)
     return hits
@@ -425,7 +434,7 @@ def _edge_edge_pairs(X0, X1, E, qe, elo, ehi, grid, inv, mask, eta2, all_pairs, 
     hits = 0
     for e in qe:
         p, q = E[e, 0], E[e, 1]
-        buf, k = _gather(elo[e], ehi[e], level[e] if all_pairs else 0, grid, elo, ehi, inv, mask, buf)
+        buf, k = _gather(elo[e], ehi[e], level[e] if all_pairs else 0, grid, inv, mask, buf)
         for i in range(k):
             g = buf[i]
             if g == e or (all_pairs and level[g] == level[e] and g < e):
@@ -594,7 +603,7 @@ def _intersections(X, F, query, all_pairs, inv, mask, eps, first):
     hit = np.zeros(query.shape[0], np.bool_)
     for i in range(query.shape[0]):
         f = query[i]
-        buf, k = _gather(lo[f], hi[f], level[f] if all_pairs else 0, grid, lo, hi, inv, mask, buf)
+        buf, k = _gather(lo[f], hi[f], level[f] if all_pairs else 0, grid, inv, mask, buf)
         for j in range(k):
             g = buf[j]
             if g == f or (all_pairs and level[g] == level[f] and g < f):
