@@ -616,6 +616,28 @@ def _intersections(X, F, query, all_pairs, inv, mask, eps, first):
     return count, hit
 
 
+@numba.njit(cache=True)
+def _query_hits(X, F, query, inv, mask, eps):
+    """Mask over ``query`` of the triangles that meet another triangle of ``F``.
+
+    The grid holds only the query triangles and every triangle looks itself
+    up in it: for a few queries (the flips of one pass) that is a scan of the
+    triangles' boxes instead of a grid of all of them.
+    """
+    lo, hi = _swept_boxes(X, X, F, 0.0)
+    grid = _grid(lo[query], hi[query], inv, mask)
+    buf = np.empty(256, np.int64)
+    hit = np.zeros(query.shape[0], np.bool_)
+    for g in range(F.shape[0]):
+        buf, k = _gather(lo[g], hi[g], 0, grid, inv, mask, buf)
+        for j in range(k):
+            i = buf[j]
+            f = query[i]
+            if f != g and not hit[i] and _triangles_intersect(X, F, f, g, eps):
+                hit[i] = True
+    return hit
+
+
 def _static(V, F, query, all_pairs, report=0):
     V = np.ascontiguousarray(V, np.float64)
     F = np.ascontiguousarray(F, np.int64)
@@ -638,4 +660,11 @@ def self_intersections(V: np.ndarray, F: np.ndarray, report: int = 0) -> int | t
 
 def faces_intersecting(V: np.ndarray, F: np.ndarray, query: np.ndarray) -> np.ndarray:
     """Which of the triangles ``query`` meet another triangle of ``F`` (other than at shared vertices or edges)."""
-    return _static(V, F, query, False)[1]
+    V = np.ascontiguousarray(V, np.float64)
+    F = np.ascontiguousarray(F, np.int64)
+    query = np.ascontiguousarray(query, np.int64)
+    if len(F) < 2 or not len(query):
+        return np.zeros(len(query), bool)
+    if 8 * len(query) > len(F):
+        return _static(V, F, query, False)[1]
+    return _query_hits(V, F, query, 1.0 / _cell_size(V, F[:, :2]), _table_size(len(query)) - 1, _EPS)
