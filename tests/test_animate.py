@@ -120,6 +120,25 @@ def test_a_surface_leaving_b_makes_pieces_without_crossings():
     assert W.shape == (nf, mesh.n_coarse) and np.allclose(W @ mesh.V[:mesh.n_coarse], pieces.V[:nf], atol=1e-9)
 
 
+def test_a_pinch_vertex_is_split_into_one_copy_per_fan():
+    from fracture.pieces import split_pinches
+    # two tetrahedra touching at vertex 0: closed, oriented, but not vertex-manifold there
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [-1, 0, 0], [0, -1, 0], [0, 0, -1]], float)
+    tet = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    F = np.vstack([tet, (tet + 3 * (tet > 0))[:, ::-1]])  # the second is the first reflected through 0
+    before = mesh_checks(V, F)
+    assert before["closed_oriented"] and not before["vertex_manifold"]
+    V2, F2 = split_pinches(V, F)
+    after = mesh_checks(V2, F2)
+    assert after["closed_oriented"] and after["vertex_manifold"] and after["self_intersections"] == 0
+    assert len(V2) == 8 and np.array_equal(V2[:7], V)
+    # one fan keeps vertex 0, the other its copy, moved 1e-3 of the way into one of its triangles
+    fans = [set(np.flatnonzero((F2 == v).any(axis=1)).tolist()) for v in (0, 7)]
+    assert sorted(map(sorted, fans)) == [[0, 1, 2], [4, 5, 6]]
+    assert 0 < np.linalg.norm(V2[7]) < 1e-3
+    assert before["volume"] == pytest.approx(2 / 6) and after["volume"] == pytest.approx(2 / 6, rel=1e-2)
+
+
 def test_bridge_edges_along_b_are_split_into_the_material():
     # two triangles of S hinge on an edge lying in B's bottom face (both its
     # ends on S's boundary): the triangles would touch B along it
