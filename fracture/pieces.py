@@ -234,6 +234,11 @@ def resolve_crossings(V: np.ndarray, F: np.ndarray, exterior: np.ndarray, volume
     """
     VC, FC, J = igl_cgal.mesh_boolean(np.ascontiguousarray(V, np.float64), np.ascontiguousarray(F, np.int64),
                                       np.zeros((0, 3)), np.zeros((0, 3), np.int64), "union")
+    used = np.unique(FC)
+    if len(used) < len(VC):  # every output vertex must be on a triangle (its birth triangle is read there)
+        remap = np.full(len(VC), -1)
+        remap[used] = np.arange(len(used))
+        VC, FC = VC[used], remap[FC]
     VC, FC = split_pinches(VC, FC)
     ch = mesh_checks(VC, FC)
     if not (ch["closed_oriented"] and ch["vertex_manifold"] and ch["self_intersections"] == 0):
