@@ -245,11 +245,26 @@ def load_config(path: str | Path, overrides: Iterable[str] = ()) -> dict:
     _collect(path, merged, ())
     for text in overrides:
         _apply_override(merged, text)
+    return _finish(merged, path.stem)
+
+
+def check_config(tree: dict, source: str) -> dict:
+    """Validate a whole config that is not in a file (e.g. edited in the viewer) as :func:`load_config` would.
+
+    Errors name ``source``; relative paths resolve against the working directory.
+    """
+    merged = _Merged()
+    merged.merge(tree, source)
+    return _finish(merged, "config", in_files=False)
+
+
+def _finish(merged: _Merged, name: str, in_files: bool = True) -> dict:
+    """Validate a merged tree: types and ranges, paths made absolute, the cross-key checks, ``name`` filled in."""
 
     def resolve(key: str, value: str, kind: str) -> str:
         source = merged.origin(key)
-        base = Path.cwd() if source.startswith(SET_SOURCE) or source == "defaults" else Path(source).parent
-        target = (base / value).resolve()
+        from_cwd = not in_files or source.startswith(SET_SOURCE) or source == "defaults"
+        target = ((Path.cwd() if from_cwd else Path(source).parent) / value).resolve()
         if kind == "dir" and not target.is_dir():
             raise ConfigError(source, key, f"directory not found: {value!r} (resolved to {target})")
         if kind == "path" and not target.is_file():
@@ -261,7 +276,7 @@ def load_config(path: str | Path, overrides: Iterable[str] = ()) -> dict:
         raise ConfigError(merged.origin("input.kind"), "input.path",
                           "input.kind is mesh_sequence, expected input.path: the folder of frame files")
     if cfg["name"] is None:
-        cfg["name"] = path.stem
+        cfg["name"] = name
     return cfg
 
 

@@ -38,10 +38,10 @@ from viewer import annotate
 from viewer.data import FIELDS, RunData, Surface
 from viewer.looks import (
     COLOR_BY, FIELD_CMAPS, SURFACE_CMAPS, CameraPose, View, animation_box, apply_camera, frame_box,
-    iteration_caption, iteration_pose, prepare, set_slice, set_surface, show_context, show_frame, show_material,
-    slice_pose, slice_title, surface_range,
+    iteration_caption, iteration_pose, prepare, scene_box, set_frame, set_slice, set_surface, show_context,
+    show_material, slice_pose, slice_title,
 )
-from viewer.render import Video, png_bytes
+from viewer.render import Video, check_size, png_bytes
 
 PANELS = ("material", "iterations", "animation")
 SIDE_WIDTH_EM = 20
@@ -87,8 +87,7 @@ class Viewer:
     def __init__(self, run: RunData, width: int = 1800, height: int = 900):
         self.app = gui.Application.instance
         self.run = run
-        self.cfg = copy.deepcopy(run.config)
-        self.view = View().check(run)
+        self.view = View()  # checked against the run by load()
         self.window = self.app.create_window(f"fracref: {run.name}", width, height)
         self.window.set_on_layout(self._layout)
         self.window.set_on_tick_event(self._tick)
@@ -116,7 +115,6 @@ class Viewer:
         self._live_lock = threading.Lock()
         self.rerun_dirs: list[Path] = []
         self.errors: list[str] = []
-        self.last_export: list[Path] = []
         self.live_updates = 0  # iterations of a re-run drawn while it ran
         self.load(run)
 
@@ -291,10 +289,11 @@ class Viewer:
         self.field_box.selected_index = FIELDS.index(self.view.field)
         self.axis_box.selected_index = "xyz".index(self.view.axis)
         self.color_box.selected_index = COLOR_BY.index(self.view.color_by)
-        self._iter_range = surface_range(run, self.view.color_by) if run.has_iterations else None
         self.poses = [None, None, None]
         show_material(self.scenes[0].scene, run)
         show_context(self.scenes[1].scene, run)
+        prepare(self.scenes[2].scene)
+        self._draw_colorbar()
         self.draw_material()
         self.draw_iteration()
         self.draw_frame()
@@ -313,16 +312,26 @@ class Viewer:
             elif i == 2 and self.run.has_animation:
                 self.poses[i] = frame_box(*animation_box(self.run), a)
             else:
-                V = self.run.exterior.V
-                self.poses[i] = frame_box(V.min(axis=0), V.max(axis=0), a)
+                self.poses[i] = frame_box(*scene_box(self.run), a)
             f = self.scenes[i].frame
             apply_camera(self.scenes[i].scene.camera, self.poses[i], max(f.width, 1), max(f.height, 1))
         return self.poses[i]
 
-    def draw_material(self) -> None:
-        self._slice_range = rng = set_slice(self.scenes[0].scene, self.run, self.view)
+    @property
+    def cfg(self) -> dict:
+        """The config of the run on screen (the side panel's starting values)."""
+        return self.run.config
+
+    @property
+    def _iter_range(self) -> tuple[float, float] | None:
+        return self.run.surface_range(self.view.color_by) if self.run.has_iterations else None
+
+    def _draw_colorbar(self) -> None:
         bar = annotate.colorbar_strip(FIELD_CMAPS[self.view.field], 200, 12)
         self.bar_image.update_image(o3d.geometry.Image(bar))
+
+    def draw_material(self) -> None:
+        self._slice_range = rng = set_slice(self.scenes[0].scene, self.run, self.view)
         self.bar_low.text = f"{rng[0]:.3g}"
         self.bar_high.text = f"{rng[1]:.3g} ({self.view.field})"
         self._pose(0)
@@ -347,10 +356,9 @@ class Viewer:
 
     def draw_frame(self) -> None:
         if self.run.has_animation:
-            show_frame(self.scenes[2].scene, self.run, self.view)
+            set_frame(self.scenes[2].scene, self.run, self.view)
             self.frame_label.text = f"frame {self.view.frame + 1} / {self.run.n_frames}, {len(self.run.piece_faces)} pieces"
         else:
-            prepare(self.scenes[2].scene)
             self.frame_label.text = "no animation in this run (stopped before the animate stage)"
         self._pose(2)
         self.scenes[2].force_redraw()
@@ -359,6 +367,7 @@ class Viewer:
 
     def set_field(self, name: str) -> None:
         self.view = replace(self.view, field=name)
+        self._draw_colorbar()
         self.draw_material()
 
     def set_axis(self, axis: str) -> None:
@@ -386,8 +395,6 @@ class Viewer:
 
     def set_color_by(self, name: str) -> None:
         self.view = replace(self.view, color_by=name)
-        if self.run.has_iterations:
-            self._iter_range = surface_range(self.run, name)
         self.draw_iteration()
 
     def set_frame(self, t: int) -> None:
@@ -465,18 +472,10 @@ class Viewer:
 
     def checked_config(self) -> tuple[dict, str]:
         """The side panel's config, validated as ``fracref run`` would read it, and its YAML."""
-        import tempfile
+        from fracture.config import check_config, dump_config
 
-        from fracture.config import dump_config, load_config
-
-        text = dump_config(self.edited_config())
-        with tempfile.TemporaryDirectory() as tmp:
-            path = Path(tmp) / "viewer.yaml"
-            path.write_text(text, encoding="utf-8")
-            try:
-                return load_config(path), text
-            except ConfigError as exc:
-                raise ConfigError("the viewer's parameters", exc.key, exc.problem) from None
+        cfg = check_config(self.edited_config(), "the viewer's parameters")
+        return cfg, dump_config(cfg)
 
     def save_config(self, path: str | Path | None = None) -> Path | None:
         """Write the on-screen parameters as YAML (checked by loading it back); returns the file."""
@@ -536,7 +535,7 @@ class Viewer:
                     with self._live_lock:
                         self._live = data
                 elif event == "done":
-                    self.app.post_to_main_thread(self.window, lambda: self._rerun_done(out, cfg))
+                    self.app.post_to_main_thread(self.window, lambda: self._rerun_done(out))
                     break
                 elif event == "error":
                     self.app.post_to_main_thread(self.window, lambda e=data: self.report_error(
@@ -547,10 +546,9 @@ class Viewer:
         self._worker = threading.Thread(target=work, name="rerun", daemon=True)
         self._worker.start()
 
-    def _rerun_done(self, out: Path, cfg: dict) -> None:
+    def _rerun_done(self, out: Path) -> None:
         with self._live_lock:
             self._live = None
-        self.cfg = cfg
         self.rerun_dirs.append(out)
         self.load(RunData(out))
         self.window.title = f"fracref: {self.run.name} ({out.name})"
@@ -566,8 +564,6 @@ class Viewer:
     # -- export ------------------------------------------------------------------------------------
 
     def _export_size(self) -> tuple[int, int]:
-        from viewer.render import check_size
-
         w, h = int(self.export_w.int_value), int(self.export_h.int_value)
         check_size(w, h, "export")
         return w, h
@@ -616,7 +612,6 @@ class Viewer:
             self.report_error("screenshot failed", exc)
             return None
         self.status.text = f"saved {path}"
-        self.last_export = [path]
         return path
 
     def export_video(self, what: str, path: str | Path | None = None) -> None:
@@ -649,10 +644,14 @@ class Viewer:
             except BaseException:
                 video.abort()
                 raise
-            video.close()
-            self.view = keep
-            self.status.text = f"saved {path}"
-            self.last_export = [path]
+            else:
+                video.close()
+                self.status.text = f"saved {path}"
+            finally:  # the panel and its slider back where they were
+                if what == "iterations":
+                    self.set_iteration(keep.iteration)
+                else:
+                    self.set_frame(keep.frame)
 
         self._job = job()
 

@@ -45,7 +45,7 @@ class RunData:
             self.manifest = json.loads(manifest.read_text(encoding="utf-8"))
         except json.JSONDecodeError as exc:
             raise InputError(f"{manifest}: not valid JSON ({exc})") from None
-        self._fields: dict = {}
+        self._memo: dict = {}
 
     def _path(self, rel: str) -> Path:
         return self.dir / rel
@@ -93,23 +93,32 @@ class RunData:
         if name not in FIELDS:
             raise InputError(f"field must be one of {', '.join(FIELDS)}, got {name!r}")
         level = level if name == "psi" else 0
-        if (name, level) not in self._fields:
+        if (name, level) not in self._memo:
             if level:
                 if not 0 <= level < self.pyramid_levels:
                     raise InputError(f"pyramid level must be in 0..{self.pyramid_levels - 1}, got {level}")
                 values = np.asarray(self._pyramid[level])
             else:
                 values = np.load(self._require(f"fields/{name}.npy", f"the {name} field"))
-            self._fields[name, level] = values
-        return self._fields[name, level]
+            self._memo[name, level] = values
+        return self._memo[name, level]
+
+    def surface_range(self, color_by: str) -> tuple[float, float]:
+        """Colour range of psi or speed over all iterations (so colours compare across iterations), computed once."""
+        key = ("surface range", color_by)
+        if key not in self._memo:
+            v = np.concatenate([it[color_by] for it in self.iterations])
+            lo, hi = np.percentile(v, [1, 99]) if color_by == "psi" else (0.0, np.percentile(v, 99))
+            self._memo[key] = (float(lo), float(hi) if hi > lo else float(lo) + 1.0)
+        return self._memo[key]
 
     def field_range(self, name: str, level: int = 0) -> tuple[float, float]:
         """Colour range of a field: its 1st to 99th percentile over the grid (fixed while slicing through it)."""
         key = ("range", name, level if name == "psi" else 0)
-        if key not in self._fields:
+        if key not in self._memo:
             lo, hi = np.percentile(self.field(name, level)[::2, ::2, ::2], [1, 99])
-            self._fields[key] = (float(lo), float(hi) if hi > lo else float(lo) + 1.0)
-        return self._fields[key]
+            self._memo[key] = (float(lo), float(hi) if hi > lo else float(lo) + 1.0)
+        return self._memo[key]
 
     # -- coarse input -----------------------------------------------------------------------
 
@@ -182,8 +191,7 @@ class RunData:
         if not 0 <= k < len(its):
             raise InputError(f"iteration must be in 0..{len(its) - 1}, got {k}")
         s = its[k]
-        return Surface(s["positions"].astype(np.float64), s["faces"].astype(np.int64),
-                       {"psi": s["psi"], "speed": s["speed"]})
+        return Surface(s["positions"], s["faces"], {"psi": s["psi"], "speed": s["speed"]})
 
     # -- animation --------------------------------------------------------------------------
 

@@ -19,7 +19,7 @@ from open3d.visualization import rendering
 from fields.colormap import colormap
 from fields.slices import axis_slice
 from fracture.errors import InputError
-from fracture.topology import face_frames
+from fracture.topology import face_frames, unique_edges
 from viewer.data import FIELDS, RunData, Surface
 
 BACKGROUND = (1.0, 1.0, 1.0, 1.0)
@@ -54,7 +54,7 @@ class View:
             raise InputError(f"slice offset must be in [0, 1], got {self.offset}")
         if self.color_by not in COLOR_BY:
             raise InputError(f"colour must be one of {', '.join(COLOR_BY)}, got {self.color_by!r}")
-        if not 0 <= self.level < max(run.pyramid_levels, 1):
+        if not 0 <= self.level < run.pyramid_levels:
             raise InputError(f"pyramid level must be in 0..{run.pyramid_levels - 1}, got {self.level}")
         v = View(**asdict(self))
         if run.has_iterations and v.iteration < 0:
@@ -80,15 +80,14 @@ def triangle_mesh(V: np.ndarray, F: np.ndarray, colors: np.ndarray | None = None
 
 
 def wireframe(V: np.ndarray, F: np.ndarray) -> o3d.geometry.LineSet:
-    E = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
-    E = np.unique(E, axis=0)
+    E, _ = unique_edges(F)
     return o3d.geometry.LineSet(o3d.utility.Vector3dVector(np.asarray(V, np.float64)),
                                 o3d.utility.Vector2iVector(E.astype(np.int32)))
 
 
 def slice_plane(run: RunData, view: View) -> tuple[o3d.geometry.TriangleMesh, tuple[float, float]]:
     """The field slice as a flat coloured mesh in material space, and its value range."""
-    values = run.field(view.field, view.level if view.field == "psi" else 0)
+    values = run.field(view.field, view.level)
     plane, info = axis_slice(run.grid, values, view.axis, view.offset)
     vmin, vmax = run.field_range(view.field, view.level)
     nu, nv = plane.shape
@@ -103,11 +102,6 @@ def slice_plane(run: RunData, view: View) -> tuple[o3d.geometry.TriangleMesh, tu
     return triangle_mesh(P, F, colormap(plane.ravel(), FIELD_CMAPS[view.field], vmin, vmax)), (vmin, vmax)
 
 
-def surface_range(run: RunData, color_by: str) -> tuple[float, float]:
-    """Colour range of psi or speed over all iterations (so colours compare across iterations)."""
-    v = np.concatenate([it[color_by] for it in run.iterations])
-    lo, hi = np.percentile(v, [1, 99]) if color_by == "psi" else (0.0, np.percentile(v, 99))
-    return float(lo), float(hi) if hi > lo else float(lo) + 1.0
 
 
 # -- materials ----------------------------------------------------------------------------------
@@ -162,7 +156,7 @@ def _replace(scene: rendering.Open3DScene, name: str, geometry, material) -> Non
     scene.add_geometry(name, geometry, material)
 
 
-@lru_cache(maxsize=4)
+@lru_cache(maxsize=1)  # the run on screen; an old run is let go
 def exterior_mesh(run: RunData) -> o3d.geometry.TriangleMesh:
     """B as an Open3D mesh, built once per run (every panel shows it)."""
     return triangle_mesh(run.exterior.V, run.exterior.F, flat=True)
@@ -210,14 +204,17 @@ def iteration_caption(run: RunData, k: int) -> str:
             + (f", E = {e:.4g}" if e is not None else ""))
 
 
-def show_frame(scene: rendering.Open3DScene, run: RunData, view: View) -> None:
-    """Panel 3: the high-resolution pieces at frame ``view.frame``, optionally with the coarse pieces as wireframes."""
-    prepare(scene)
+def set_frame(scene: rendering.Open3DScene, run: RunData, view: View) -> None:
+    """Panel 3 (after :func:`prepare`): the high-resolution pieces at frame ``view.frame``, replacing the
+    previous frame's, and the coarse pieces as wireframes while ``view.overlay_coarse`` is on."""
     for c, p in enumerate(run.pieces_at(view.frame)):
-        scene.add_geometry(f"piece_{c}", triangle_mesh(p.V, p.F, flat=True), lit((*piece_color(c), 1.0)))
-    if view.overlay_coarse:
-        for c, p in enumerate(run.coarse_pieces(view.frame)):
-            scene.add_geometry(f"coarse_{c}", wireframe(p.V, p.F), lines((0.15, 0.15, 0.15, 1.0), 1.0))
+        _replace(scene, f"piece_{c}", triangle_mesh(p.V, p.F, flat=True), lit((*piece_color(c), 1.0)))
+    coarse = run.coarse_pieces(view.frame) if view.overlay_coarse else []
+    for c, p in enumerate(coarse):
+        _replace(scene, f"coarse_{c}", wireframe(p.V, p.F), lines((0.15, 0.15, 0.15, 1.0), 1.0))
+    for c in range(len(coarse), len(run.coarse_parts)):
+        if scene.has_geometry(f"coarse_{c}"):
+            scene.remove_geometry(f"coarse_{c}")
 
 
 def piece_color(c: int) -> tuple[float, float, float]:
@@ -325,7 +322,7 @@ def scene_box(run: RunData) -> tuple[np.ndarray, np.ndarray]:
 def animation_box(run: RunData) -> tuple[np.ndarray, np.ndarray]:
     """The box holding every piece in every frame (the camera does not chase the pieces)."""
     V = run.exterior.V
-    lo, hi = V.min(axis=0), V.max(axis=0)
+    lo, hi = scene_box(run)
     for c, (used, _) in enumerate(run.coarse_parts):
         if len(used):
             P = run.coarse_animation.trajectories(c, V[used])

@@ -32,7 +32,7 @@ from viewer import annotate  # noqa: E402
 from viewer.data import RunData  # noqa: E402
 from viewer.looks import (  # noqa: E402
     FIELD_CMAPS, SURFACE_CMAPS, View, animation_box, apply_camera, frame_box, iteration_caption, iteration_pose,
-    set_slice, set_surface, show_context, show_frame, show_material, slice_pose, slice_title, surface_range,
+    prepare, set_frame, set_slice, set_surface, show_context, show_material, slice_pose, slice_title,
 )
 
 WHAT = ("slices", "iterations", "animation")
@@ -50,13 +50,13 @@ def check_size(width: int, height: int, where: str = "render") -> None:
 class Renderer:
     """One offscreen renderer of a fixed size, reused for every image."""
 
-    def __init__(self, width: int, height: int, post_processing: bool = True):
+    def __init__(self, width: int, height: int):
         from open3d.visualization import rendering
 
         check_size(width, height)
         self.width, self.height = width, height
         self.r = rendering.OffscreenRenderer(width, height)
-        self.r.scene.view.set_post_processing(post_processing)
+        self.r.scene.view.set_post_processing(True)
 
     @property
     def scene(self):
@@ -88,13 +88,11 @@ class Video:
                                                   pix_fmt_in="rgb24", pix_fmt_out="yuv420p", quality=8,
                                                   macro_block_size=2, ffmpeg_log_level="error")
         self.writer.send(None)
-        self.frames = 0
 
     def add(self, image: np.ndarray) -> None:
         if image.shape[:2] != (self.size[1], self.size[0]):
             raise ValueError(f"frame of size {image.shape[1]}x{image.shape[0]}, video is {self.size[0]}x{self.size[1]}")
         self.writer.send(np.ascontiguousarray(image, np.uint8))
-        self.frames += 1
 
     def close(self) -> None:
         self.writer.close()
@@ -145,7 +143,7 @@ def slice_images(run: RunData, view: View, renderer: Renderer, offsets):
 
 def iteration_images(run: RunData, view: View, renderer: Renderer):
     pose = iteration_pose(run, BAR_ROOM * renderer.width / renderer.height)
-    rng = surface_range(run, view.color_by)
+    rng = run.surface_range(view.color_by)
     show_context(renderer.scene, run)
     for k in range(len(run.iterations)):
         set_surface(renderer.scene, run.iteration(k), view.color_by, rng)
@@ -179,9 +177,10 @@ def render(run_dir: str | Path, what: str, out: str | Path | None = None, width:
         raise InputError(f"{run.dir}: no animation to render (the run stopped before the animate stage)")
     pose = frame_box(*animation_box(run), width / height)
     n = run.n_frames
+    prepare(renderer.scene)
 
     def frames():
         for t in range(n):
-            show_frame(renderer.scene, run, replace(view, frame=t))
+            set_frame(renderer.scene, run, replace(view, frame=t))
             yield annotate.caption(renderer.image(pose), f"frame {t + 1} / {n}")
     return _write_sequence(frames(), out, "animation", width, height, fps, n, quiet)
