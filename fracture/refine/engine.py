@@ -108,12 +108,32 @@ class Refiner:
         self.dt = 0.0
         self.velocity = np.zeros_like(mesh.V)  # of the last step, per vertex (for snapshots)
         self.hold = np.zeros(len(mesh.V), np.int64)  # iterations a stopped vertex stays stopped
-        self.psi = pyramid.value(mesh.V)  # unshifted psi at the vertices, after the last iteration
+        # psi (unshifted) and grad psi at the vertices, for the positions in _field_V: a vertex is
+        # evaluated again only when it moved or is new (see vertex_field)
+        self._field_V = np.zeros((0, 3))
+        self._psi, self._grad = np.zeros(0), np.zeros((0, 3))
         self.boundary = np.zeros(0, np.int64)  # boundary vertices of the last iteration
 
     def field(self, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         psi, grad = self.pyramid.value_and_gradient(P)
         return psi + self.offset, grad
+
+    def vertex_field(self) -> tuple[np.ndarray, np.ndarray]:
+        """psi (unshifted) and grad psi at the mesh's vertices, evaluated only where a vertex moved or is new."""
+        V, old = self.mesh.V, self._field_V
+        k = min(len(old), len(V))
+        todo = np.r_[np.flatnonzero((V[:k] != old[:k]).any(axis=1)), np.arange(k, len(V))]
+        if len(V) != len(old):
+            self._psi, self._grad = np.resize(self._psi, len(V)), np.resize(self._grad, (len(V), 3))
+        if len(todo):
+            self._psi[todo], self._grad[todo] = self.pyramid.value_and_gradient(V[todo])
+        self._field_V = V.copy()
+        return self._psi, self._grad
+
+    @property
+    def psi(self) -> np.ndarray:
+        """Unshifted psi at the current vertices."""
+        return self.vertex_field()[0]
 
     # -- topology ---------------------------------------------------------------------------
     def edges(self) -> EdgeTable:
@@ -148,7 +168,8 @@ class Refiner:
         Returns the velocity, the shifted psi at the vertices and the boundary vertices.
         """
         m = self.mesh
-        psi, grad = self.field(m.V)
+        psi, grad = self.vertex_field()
+        psi = psi + self.offset
         v = velocity(m.V, m.F, psi, grad)
         # boundary vertices slide on B: drop the part of their velocity that
         # points out of the sheet across its boundary (the area term of an
@@ -291,7 +312,6 @@ class Refiner:
         for it in range(p.iterations):
             move = self.iterate()
             clock = time.perf_counter()
-            self.psi = self.pyramid.value(self.mesh.V)  # unshifted, at the current vertices
             E = energy(self.mesh.V, self.mesh.F, self.psi)
             if self.log.energy and E > self.log.energy[-1]:
                 self.scale *= 0.5
