@@ -93,7 +93,8 @@ SCHEMA: dict[str, Any] = {
         "ply_frames": Param(False, "bool", doc="also write frames/frame_NNNN.ply (all pieces, face property piece)"),
         "check_samples": Param(20000, "int", lo=0, hi=10_000_000,
                                doc="random points for the piece overlap check (0: skip)"),
-        "check_intersections": Param(True, "bool", doc="count self-intersecting triangle pairs of every piece"),
+        "check_intersections": Param(True, "bool", doc="find and resolve self-crossing pieces, and count the "
+                                     "crossing triangle pairs of every piece (off: faster, pieces may cross)"),
     },
     "preview": {
         "axis": Param(None, "str", choices=("x", "y", "z"), nullable=True,

@@ -24,7 +24,7 @@ vertices off the cut and vertices made on B triangles.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 
 import igl
@@ -62,12 +62,12 @@ class Pieces:
     derived : csr (n_fracture - n_surface, n_surface)
         Barycentric weights of the vertices made on S triangles, over the
         corners of the triangle each lies on.
-    resolved : list of int
+    resolved : list of int or None
         Per piece, the crossing triangle pairs the resolution removed.
-    unresolved : list of int
-        Pieces whose resolution was refused (see :func:`resolve_crossings`).
     crossings : list of int or None
-        Per piece, the crossing triangle pairs left (``None`` when not resolved).
+        Per piece, the crossing triangle pairs left: nonzero only where the
+        resolution was refused (see :func:`resolve_crossings`). Both are
+        ``None`` for pieces built without the resolution.
     """
 
     V: np.ndarray
@@ -77,19 +77,24 @@ class Pieces:
     patch_agreement: float
     derived: sp.csr_matrix | None = None
     resolved: list | None = None
-    unresolved: list | None = None
     crossings: list | None = None
+
+    def __post_init__(self):
+        if self.derived is None:
+            self.derived = sp.csr_matrix((0, self.n_fracture))
 
     @property
     def n_surface(self) -> int:
-        return self.n_fracture - (0 if self.derived is None else self.derived.shape[0])
+        return self.n_fracture - self.derived.shape[0]
+
+    @property
+    def unresolved(self) -> list[int]:
+        """Pieces that still cross themselves (their resolution was refused)."""
+        return [c for c, n in enumerate(self.crossings or []) if n]
 
     def fracture_tree(self, tree: sp.csr_matrix) -> sp.csr_matrix:
         """Extend S's barycentric tree map ``tree`` (``n_surface`` rows) to the first ``n_fracture`` vertices."""
-        tree = sp.csr_matrix(tree)
-        if self.derived is None or not self.derived.shape[0]:
-            return tree
-        return sp.vstack([tree, self.derived @ tree], format="csr")
+        return sp.vstack([sp.csr_matrix(tree), self.derived @ tree], format="csr")
 
     @property
     def n_pieces(self) -> int:
@@ -166,8 +171,7 @@ def build_pieces(im: Imprint, mesh: RefineMesh, n_components: int, fallback, res
         keep = ~_cancelling(F, len(V))
         faces.append(F[keep])
         exterior.append(ext[keep])
-    pieces = Pieces(V=V, n_fracture=n_s, faces=faces, exterior=exterior, patch_agreement=agreement,
-                    resolved=[0] * n_components, unresolved=[])
+    pieces = Pieces(V=V, n_fracture=n_s, faces=faces, exterior=exterior, patch_agreement=agreement)
     return _resolve_pieces(pieces) if resolve else pieces
 
 
@@ -175,7 +179,7 @@ def _resolve_pieces(pieces: Pieces) -> Pieces:
     """Resolve every self-crossing piece and renumber the shared vertices (see :class:`Pieces` for the order)."""
     n_s, n_v = pieces.n_fracture, len(pieces.V)
     faces, exterior = list(pieces.faces), list(pieces.exterior)
-    resolved, unresolved, left = [0] * pieces.n_pieces, [], [0] * pieces.n_pieces
+    resolved, left = [0] * pieces.n_pieces, [0] * pieces.n_pieces
     new_pos, new_parents, new_weights, new_on_s = [], [], [], []
     n_new = 0
     for c, (ids, V, F) in enumerate(pieces.parts):
@@ -184,7 +188,6 @@ def _resolve_pieces(pieces: Pieces) -> Pieces:
             continue
         out = resolve_crossings(V, F, pieces.exterior[c])
         if out is None:
-            unresolved.append(c)
             left[c] = int(pairs)
             continue
         FC, ext, source, P, parents, weights, on_s = out
@@ -196,9 +199,7 @@ def _resolve_pieces(pieces: Pieces) -> Pieces:
         new_pos.append(P), new_parents.append(ids[parents]), new_weights.append(weights), new_on_s.append(on_s)
         resolved[c] = int(pairs)
     if not n_new:
-        return Pieces(V=pieces.V, n_fracture=n_s, faces=faces, exterior=exterior,
-                      patch_agreement=pieces.patch_agreement, resolved=resolved, unresolved=unresolved,
-                      crossings=left)
+        return replace(pieces, faces=faces, exterior=exterior, resolved=resolved, crossings=left)
     P, parents, weights, on_s = (np.concatenate(a) for a in (new_pos, new_parents, new_weights, new_on_s))
     # order: S's vertices, new ones on S, B's vertices, new ones on B
     old = np.arange(n_v + n_new)
@@ -209,9 +210,8 @@ def _resolve_pieces(pieces: Pieces) -> Pieces:
     k = int(on_s.sum())
     derived = sp.csr_matrix((weights[on_s].ravel(), (np.repeat(np.arange(k), 3), parents[on_s].ravel())),
                             shape=(k, n_s))
-    return Pieces(V=V, n_fracture=n_s + k, faces=[renumber[F] for F in faces], exterior=exterior,
-                  patch_agreement=pieces.patch_agreement, derived=derived, resolved=resolved,
-                  unresolved=unresolved, crossings=left)
+    return replace(pieces, V=V, n_fracture=n_s + k, faces=[renumber[F] for F in faces], exterior=exterior,
+                   derived=derived, resolved=resolved, crossings=left)
 
 
 def resolve_crossings(V: np.ndarray, F: np.ndarray, exterior: np.ndarray, volume_tolerance: float = 0.5):

@@ -51,7 +51,7 @@ def animate_stage(ctx: RunContext) -> None:
             _, f, _ = igl.point_mesh_squared_distance(centroids, cf.exterior_V, cf.exterior_F)
             return cf.exterior_component[f]
 
-        pieces = build_pieces(im, mesh, cf.n_components, fallback)
+        pieces = build_pieces(im, mesh, cf.n_components, fallback, resolve=opts["check_intersections"])
         transfer = build_transfer(cf, pieces, mesh.tree_matrix())
         bar.update()
         checks = _check(ctx, pieces, BV, BF, opts)
@@ -91,11 +91,8 @@ def animate_stage(ctx: RunContext) -> None:
     if bad:
         ctx.notes.append(f"animate: pieces {bad} are not closed, oriented 2-manifolds")
     if pieces.unresolved:
-        ctx.notes.append(f"animate: the crossings of pieces {pieces.unresolved} could not be resolved")
-    crossing = [c for c, p in enumerate(checks["pieces"]) if p.get("self_intersections")]
-    if crossing:
-        ctx.notes.append(f"animate: pieces {crossing} self-intersect "
-                         f"({sum(checks['pieces'][c]['self_intersections'] for c in crossing)} triangle pairs)")
+        ctx.notes.append(f"animate: pieces {pieces.unresolved} self-intersect and could not be resolved "
+                         f"({sum(pieces.crossings)} triangle pairs)")
 
 
 def _check(ctx: RunContext, pieces, BV, BF, opts) -> dict:
@@ -103,11 +100,9 @@ def _check(ctx: RunContext, pieces, BV, BF, opts) -> dict:
     per_piece = []
     total = 0.0
     for c, (_, V, F) in enumerate(pieces.parts):
-        count = opts["check_intersections"] and pieces.crossings is None  # else counted while resolving
-        ch = mesh_checks(V, F, intersections=count)
-        if opts["check_intersections"] and pieces.crossings is not None:
-            ch["self_intersections"] = pieces.crossings[c]
-        ch["crossings_resolved"] = pieces.resolved[c]
+        ch = mesh_checks(V, F, intersections=False)
+        if pieces.crossings is not None:  # counted (exactly) while resolving
+            ch.update(self_intersections=pieces.crossings[c], crossings_resolved=pieces.resolved[c])
         total += ch["volume"]
         per_piece.append(ch)
     vb = signed_volume(BV, BF)
