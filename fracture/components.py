@@ -70,11 +70,13 @@ def _vote(lookup, samples, n, h, sign, distances=(0.8,), result=None) -> np.ndar
         if not todo.any():
             break
         nrm = sign * n[todo][:, None, :] * np.ones((1, samples.shape[1], 1))
-        lab = lookup(samples[todo] + d * h * nrm, samples[todo], nrm).reshape(int(todo.sum()), -1)
-        for row, labels in zip(np.flatnonzero(todo), lab):
-            labels = labels[labels > 0]
-            if len(labels):
-                result[row] = np.bincount(labels).argmax()
+        lab = np.maximum(lookup(samples[todo] + d * h * nrm, samples[todo], nrm).reshape(int(todo.sum()), -1), 0)
+        # per row, the count of every label (one bincount for all rows); label 0 (none) is not a vote
+        r, k = lab.shape[0], int(lab.max()) + 1 if lab.size else 1
+        counts = np.bincount((np.arange(r)[:, None] * k + lab).ravel(), minlength=r * k).reshape(r, k)[:, 1:]
+        voted = counts.max(axis=1, initial=0) > 0
+        if voted.any():
+            result[np.flatnonzero(todo)[voted]] = counts[voted].argmax(axis=1) + 1
         todo = result == 0
     return result
 

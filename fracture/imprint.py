@@ -434,14 +434,15 @@ def imprint_boundary(BV: np.ndarray, BF: np.ndarray, mesh: RefineMesh, where: st
         cut.update((min(x, y), max(x, y)) for x, y in zip(chain[:-1], chain[1:]))
         chains.append(chain)
 
-    cut_edges, cut_faces, to_fracture = _split_fracture_edges(mesh, E, sface, chains, surf, to_b)
-    return Imprint(V=np.array(surf.V), F=np.array(surf.F, np.int64), to_fracture=to_fracture,
+    BV_cut = np.array(surf.V)
+    cut_edges, cut_faces, to_fracture = _split_fracture_edges(mesh, E, sface, chains, BV_cut, to_b)
+    return Imprint(V=BV_cut, F=np.array(surf.F, np.int64), to_fracture=to_fracture,
                    cut_edges=cut_edges, cut_faces=cut_faces, origin=np.array(surf.origin, np.int64))
 
 
-def _split_fracture_edges(mesh: RefineMesh, E, sface, chains, surf: _Surface, to_b: dict):
+def _split_fracture_edges(mesh: RefineMesh, E, sface, chains, BV_cut: np.ndarray, to_b: dict):
     """Insert the chains' inner vertices into S's boundary edges (each triangle becomes a fan)."""
-    to_fracture = np.full(len(surf.V), -1, np.int64)
+    to_fracture = np.full(len(BV_cut), -1, np.int64)
     for s, b in to_b.items():
         to_fracture[b] = s
     parents, weights = [], []
@@ -449,7 +450,7 @@ def _split_fracture_edges(mesh: RefineMesh, E, sface, chains, surf: _Surface, to
     for (a, b), chain in zip(E.tolist(), chains):
         if len(chain) == 2:
             continue
-        P = np.array([surf.V[v] for v in chain])
+        P = BV_cut[chain]
         arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(P, axis=0), axis=1))])
         t = arc[1:-1] / arc[-1]
         parents.append(np.tile([a, b, a], (len(t), 1)))
@@ -458,7 +459,7 @@ def _split_fracture_edges(mesh: RefineMesh, E, sface, chains, surf: _Surface, to
     if parents:
         ids = mesh._add_vertices(np.concatenate(parents), np.concatenate(weights))
         chain_inner = np.concatenate([np.asarray(c, np.int64) for c in inner])
-        mesh.V[ids] = np.array(surf.V)[chain_inner]
+        mesh.V[ids] = BV_cut[chain_inner]
         to_fracture[chain_inner] = ids
 
     # S's triangles: each boundary edge u -> v of triangle (u, v, w) becomes a

@@ -36,7 +36,7 @@ from fracture.coarse import flood_fill_patches
 from fracture.imprint import Imprint
 from fracture.refine.collide import self_intersections
 from fracture.refine.mesh import RefineMesh
-from fracture.topology import directed_edge_face, directed_edges, signed_volume
+from fracture.topology import barycentric_weights, directed_edge_face, directed_edges, signed_volume
 
 
 @dataclass
@@ -268,11 +268,7 @@ def resolve_crossings(V: np.ndarray, F: np.ndarray, exterior: np.ndarray, volume
     birth = J[corner_f[head]]  # aligned with new (sorted vertex ids)
     parents = np.asarray(F, np.int64)[birth]
     P = VC[new]
-    T = V[parents]
-    bary = igl.barycentric_coordinates(np.ascontiguousarray(P), np.ascontiguousarray(T[:, 0]),
-                                       np.ascontiguousarray(T[:, 1]), np.ascontiguousarray(T[:, 2]))
-    bary = np.clip(np.atleast_2d(bary), 0.0, None)
-    weights = bary / bary.sum(axis=1, keepdims=True)
+    weights = barycentric_weights(P, V[parents])
     return FC, ext, source, P, parents, weights, ~np.asarray(exterior, bool)[birth]
 
 

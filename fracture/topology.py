@@ -6,6 +6,7 @@ triangle has this directed edge, which way does a triangle face" asks it here.
 
 from __future__ import annotations
 
+import igl
 import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
@@ -19,6 +20,16 @@ def directed_edges(F: np.ndarray) -> np.ndarray:
 
 def _keys(E: np.ndarray, n: int) -> np.ndarray:
     return E[:, 0].astype(np.int64) * n + E[:, 1]
+
+
+def barycentric_weights(P: np.ndarray, T: np.ndarray) -> np.ndarray:
+    """Barycentric coordinates ``(k, 3)`` of points ``P`` on triangles ``T (k, 3, 3)`` (libigl), as weights:
+    negative coordinates (rounding, a point just off its triangle) become 0 and each row sums to 1."""
+    c = np.ascontiguousarray
+    bary = igl.barycentric_coordinates(c(P, np.float64), c(T[:, 0], np.float64), c(T[:, 1], np.float64),
+                                       c(T[:, 2], np.float64))
+    bary = np.clip(np.atleast_2d(bary), 0.0, None)
+    return bary / bary.sum(axis=1, keepdims=True)
 
 
 def edge_keys(E: np.ndarray, n: int) -> np.ndarray:

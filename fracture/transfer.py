@@ -40,6 +40,7 @@ from scipy.sparse.csgraph import connected_components
 
 from fracture.coarse import CoarseFracture
 from fracture.pieces import Pieces
+from fracture.topology import barycentric_weights
 
 
 @dataclass
@@ -149,9 +150,7 @@ def _nearest_coarse(cf: CoarseFracture, K: np.ndarray, c: int, X: np.ndarray) ->
                             cf.F[(cf.sides == c).any(axis=1)]]).astype(np.int64)
     _, f, P = igl.point_mesh_squared_distance(np.ascontiguousarray(X), K, faces)
     T = faces[f]
-    bary = igl.barycentric_coordinates(np.ascontiguousarray(P), np.ascontiguousarray(K[T[:, 0]]),
-                                       np.ascontiguousarray(K[T[:, 1]]), np.ascontiguousarray(K[T[:, 2]]))
-    return T, np.clip(bary, 0.0, 1.0) / np.clip(bary, 0.0, 1.0).sum(axis=1, keepdims=True)
+    return T, barycentric_weights(P, K[T])
 
 
 def build_transfer(cf: CoarseFracture, pieces: Pieces, tree: sp.csr_matrix) -> Transfer:
