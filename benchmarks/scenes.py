@@ -19,7 +19,7 @@ def scene_with_fields(name: str, overrides: list[str]):
     from fracture.stages.fields import fields_from_config
 
     cfg = load_config(CONFIGS / f"{name}.yaml", overrides)
-    cf = build_scene(name, cfg["seed"], cfg["input"]["frames"])
+    cf = build_scene(name, cfg["seed"], cfg["input"]["frames"], cfg["input"]["separation"])
     return cfg, cf, fields_from_config(cfg, cf.exterior_V, cf.V, cf.F)
 
 

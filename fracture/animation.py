@@ -12,6 +12,7 @@ twist, bending) and motions fitted to imported per-vertex data.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 import scipy.sparse as sp
@@ -71,6 +72,31 @@ class CoarseAnimation:
         # one interpolation with the frames as channels
         N = np.moveaxis(self.nodes[:, c], 0, 3).reshape(self.nodes.shape[2:5] + (-1,))
         return trilinear(g, N, X).reshape(len(X), self.n_frames, 3).transpose(1, 0, 2)
+
+
+def exterior_points(BV: np.ndarray, BF: np.ndarray, component: np.ndarray, n: int) -> list[np.ndarray]:
+    """Corners of each component's exterior triangles (with repeats), one array per component."""
+    return [BV[BF[component == c]].reshape(-1, 3) for c in range(n)]
+
+
+def lattice_animation(points: list[np.ndarray], motion: Callable[[int, int, np.ndarray], np.ndarray],
+                      frames: int, n: int = 2, shared: bool = False) -> CoarseAnimation:
+    """Sample ``motion(c, t, X) -> x`` on an ``n^3`` lattice around each component's points.
+
+    With ``shared``, every component's lattice spans the whole object, so
+    components that follow the same smooth field are interpolated
+    identically and do not drift apart before they break.
+    """
+    C = len(points)
+    lo, hi = np.empty((C, 3)), np.empty((C, 3))
+    nodes = np.empty((frames, C, n, n, n, 3))
+    everything = lattice_box(np.concatenate(points))
+    for c, X in enumerate(points):
+        lo[c], hi[c] = everything if shared else lattice_box(X)
+        rest = Grid.from_bounds(lo[c], hi[c], (n, n, n)).points()
+        for t in range(frames):
+            nodes[t, c] = motion(c, t, rest).reshape(n, n, n, 3)
+    return CoarseAnimation(lo, hi, nodes)
 
 
 def lattice_box(X: np.ndarray, margin: float = 0.1) -> tuple[np.ndarray, np.ndarray]:

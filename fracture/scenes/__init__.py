@@ -26,8 +26,10 @@ import triangle
 
 from fracture.coarse import CoarseFracture, make_coarse, special_edges
 from fracture.errors import InputError
+from fracture.meshio import check_triangle_mesh
 from fracture.primitives import box, cylinder
-from fracture.scenes.animator import exterior_points, lattice_animation, rigid_bodies, rigid_motion, rotation
+from fracture.animation import exterior_points, lattice_animation
+from fracture.scenes.animator import rigid_bodies, rigid_motion, rotation
 from fracture.scenes.voronoi import VoronoiFracture, seeds_inside, voronoi_fracture
 
 #: Coarse fracture triangles of the paper's examples (Section 6).
@@ -45,7 +47,7 @@ def bunny_mesh() -> tuple[np.ndarray, np.ndarray]:
     if not path.is_file():
         raise InputError(f"the bunny scene needs {path}, which this pymeshlab installation lacks")
     V, F = igl.read_triangle_mesh(str(path))
-    return np.asarray(V, np.float64), np.asarray(F, np.int64)
+    return check_triangle_mesh(V, F, str(path), closed=True)
 
 
 def _decimate(V, F, faces):

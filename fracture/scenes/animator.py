@@ -1,15 +1,16 @@
 """A small, deterministic low-resolution animator for the built-in scenes.
 
 Not a simulator of fracture: the scenes prescribe when and how pieces let go.
-Three kinds of motion, each a map from material points to positions per
+Two kinds of motion, each a map from material points to positions per
 component and frame, sampled on a lattice per component (the
 :class:`~fracture.animation.CoarseAnimation` representation):
 
 * :func:`rigid_bodies`: pieces under gravity with ground contact (restitution,
   Coulomb-like friction, spin damping on contact), integrated with small
   explicit steps; before its release frame every piece follows the object;
-* :func:`lattice_animation`: any smooth deformation field per component
-  (twist, bending, elastic wobble), sampled on an ``n^3`` lattice.
+* :func:`fracture.animation.lattice_animation`: any smooth deformation
+  field per component (twist, bending, elastic wobble), sampled on an
+  ``n^3`` lattice.
 """
 
 from __future__ import annotations
@@ -19,8 +20,7 @@ from typing import Callable
 import numpy as np
 from scipy.spatial import ConvexHull
 
-from fields.grid import Grid
-from fracture.animation import CoarseAnimation, lattice_box, rigid_fit
+from fracture.animation import rigid_fit
 
 GRAVITY = 9.81
 
@@ -31,31 +31,6 @@ def rotation(axis: np.ndarray, angle: float) -> np.ndarray:
     k = axis / max(np.linalg.norm(axis), 1e-300)
     K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
     return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
-
-
-def exterior_points(BV: np.ndarray, BF: np.ndarray, component: np.ndarray, n: int) -> list[np.ndarray]:
-    """Corners of each component's exterior triangles (with repeats), one array per component."""
-    return [BV[BF[component == c]].reshape(-1, 3) for c in range(n)]
-
-
-def lattice_animation(points: list[np.ndarray], motion: Callable[[int, int, np.ndarray], np.ndarray],
-                      frames: int, n: int = 2, shared: bool = False) -> CoarseAnimation:
-    """Sample ``motion(c, t, X) -> x`` on an ``n^3`` lattice around each component's points.
-
-    With ``shared``, every component's lattice spans the whole object, so
-    components that follow the same smooth field are interpolated
-    identically and do not drift apart before they break.
-    """
-    C = len(points)
-    lo, hi = np.empty((C, 3)), np.empty((C, 3))
-    nodes = np.empty((frames, C, n, n, n, 3))
-    everything = lattice_box(np.concatenate(points))
-    for c, X in enumerate(points):
-        lo[c], hi[c] = everything if shared else lattice_box(X)
-        rest = Grid.from_bounds(lo[c], hi[c], (n, n, n)).points()
-        for t in range(frames):
-            nodes[t, c] = motion(c, t, rest).reshape(n, n, n, 3)
-    return CoarseAnimation(lo, hi, nodes)
 
 
 def rigid_bodies(hulls: list[np.ndarray], frames: int, release: np.ndarray, kick: Callable[[int], tuple],

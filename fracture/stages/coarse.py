@@ -19,7 +19,7 @@ def coarse_from_meshes(inp: dict) -> CoarseFracture:
     """
     from fracture.components import label_components
     from fracture.errors import InputError
-    from fracture.scenes.animator import exterior_points, lattice_animation
+    from fracture.animation import exterior_points, lattice_animation
     from fracture.virtual import extend_cuts
 
     missing = [k for k in ("exterior", "fracture") if not inp.get(k)]
@@ -55,7 +55,7 @@ def coarse_stage(ctx: RunContext) -> None:
         BV, BF = read_mesh(inp["exterior"], "input.exterior", closed=True)
     else:
         BV, BF = cf.exterior_V, cf.exterior_F
-    ctx.products.update(coarse=cf, exterior=(BV, BF), coarse_fracture=(cf.V, cf.F))
+    ctx.products.update(coarse=cf, exterior=(BV, BF))
     save_coarse(ctx, cf)
     ctx.counts.update(components=cf.n_components, coarse_fracture_triangles=len(cf.F), frames=cf.n_frames)
     separated = cf.face_fracture_time < cf.n_frames

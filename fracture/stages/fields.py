@@ -35,9 +35,9 @@ def fields_from_config(cfg: dict, BV: np.ndarray, SV: np.ndarray, SF: np.ndarray
 @stage("fields")
 def fields_stage(ctx: RunContext) -> None:
     cfg = ctx.cfg
-    (BV, BF), (SV, SF) = ctx.products["exterior"], ctx.products["coarse_fracture"]
+    (BV, BF), cf = ctx.products["exterior"], ctx.products["coarse"]
     with ctx.bar(3, "fields") as bar:
-        fs = fields_from_config(cfg, BV, SV, SF, step=lambda name: (bar.set_postfix_str(name), bar.update()))
+        fs = fields_from_config(cfg, BV, cf.V, cf.F, step=lambda name: (bar.set_postfix_str(name), bar.update()))
     ctx.products["fields"] = fs
 
     ctx.save_json("fields/grid.json", fs.grid.to_dict())
