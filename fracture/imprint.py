@@ -378,14 +378,9 @@ def split_bridge_edges(mesh: RefineMesh, exterior: Exterior, depth: float = BRID
                               & (table.row_count > 1))
         if not len(rows):
             break
-        eid = table.eid[rows]
-        lowest = np.full(len(mesh.F), np.iinfo(np.int64).max)
-        np.minimum.at(lowest, rows // 3, eid)
-        first = np.ones(len(table.count), bool)
-        np.logical_and.at(first, eid, lowest[rows // 3] == eid)
-        chosen = np.unique(eid[first[eid]])
-        on = np.flatnonzero(np.isin(table.eid, chosen))
-        which = np.searchsorted(chosen, table.eid[on])
+        bridges = np.unique(table.eid[rows])
+        chosen = bridges[table.independent(bridges)]
+        on, which = table.rows_of(chosen)
         ends = row_edges(mesh.F, on[np.unique(which, return_index=True)[1]])
         mid = 0.5 * (mesh.V[ends[:, 0]] + mesh.V[ends[:, 1]])
         target = depth * np.linalg.norm(mesh.V[ends[:, 1]] - mesh.V[ends[:, 0]], axis=1)

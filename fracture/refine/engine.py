@@ -38,7 +38,7 @@ from fracture.exterior import Exterior
 from fracture.refine.collide import stop_collisions
 from fracture.refine.flips import flip_edges
 from fracture.refine.flow import energy, sample_displacement, velocity
-from fracture.refine.kernels import EdgeTable, edge_table, face_geometry, limit_moves, row_edges
+from fracture.refine.kernels import EdgeTable, edge_table, face_geometry, first_per_group, limit_moves, row_edges
 from fracture.refine.mesh import RefineMesh
 from fracture.topology import boundary_conormals
 
@@ -74,25 +74,12 @@ class IterationLog:
         return now
 
 
-def _first_per_group(key: np.ndarray, rank: np.ndarray) -> np.ndarray:
-    """Mask of the lowest-``rank`` entry of each ``key`` group."""
-    if not len(key):
-        return np.zeros(0, bool)
-    order = np.lexsort((rank, key))
-    first = np.r_[True, key[order][1:] != key[order][:-1]]
-    mask = np.zeros(len(key), bool)
-    mask[order[first]] = True
-    return mask
-
-
 class Refiner:
     """Evolves and refines a fracture surface toward low psi."""
 
     def __init__(self, mesh: RefineMesh, pyramid, BV: np.ndarray, BF: np.ndarray, params: RefineParams,
                  rng: np.random.Generator):
         self.mesh, self.pyramid, self.params, self.rng = mesh, pyramid, params, rng
-        self.BV = np.ascontiguousarray(BV, np.float64)
-        self.BF = np.ascontiguousarray(BF, np.int64)
         self.h = float(np.min(pyramid.grid.spacing))
         self.log = IterationLog()
         # A negative psi would reward area: the flow would wrinkle without
@@ -101,7 +88,7 @@ class Refiner:
         values = pyramid.levels[0]
         self.offset = params.tension * float(np.ptp(values)) - float(values.min())
         self.scale = 1.0  # halved when an iteration raises the energy (overshoot), regrown after
-        self.B = Exterior(self.BV, self.BF)  # trees built once: every iteration queries them
+        self.B = Exterior(BV, BF)  # trees built once: every iteration queries them
         # speeds below this (psi changing by 1 % of its range per grid cell)
         # count as at rest: dt stops growing, the moves shrink, the loop ends
         self.slow = 0.01 * float(np.ptp(values)) / self.h
@@ -140,22 +127,14 @@ class Refiner:
         """The edge table of the current triangles (O(m), compiled)."""
         return edge_table(self.mesh.F, len(self.mesh.V))
 
-    def boundary_vertices(self, table: EdgeTable | None = None) -> np.ndarray:
-        table = self.edges() if table is None else table
-        return np.unique(row_edges(self.mesh.F, table.boundary_rows))
-
-    def unique_edges(self, table: EdgeTable) -> np.ndarray:
-        return row_edges(self.mesh.F, table.first)
+    def boundary_vertices(self) -> np.ndarray:
+        return np.unique(row_edges(self.mesh.F, self.edges().boundary_rows))
 
     # -- constraints -----------------------------------------------------------------------
-    def project_to_exterior(self, ids: np.ndarray, V: np.ndarray | None = None) -> float:
-        """Put vertices ``ids`` (of ``V``, by default the mesh's) on B; returns the largest distance they had."""
-        V = self.mesh.V if V is None else V
-        if not len(ids):
-            return 0.0
-        d2, _, C = self.B.closest(V[ids])
-        V[ids] = C
-        return float(np.sqrt(d2.max()))
+    def project_to_exterior(self, ids: np.ndarray, V: np.ndarray) -> None:
+        """Put vertices ``ids`` of positions ``V`` on B (in place)."""
+        if len(ids):
+            V[ids] = self.B.closest(V[ids])[2]
 
     def boundary_error(self, ids: np.ndarray | None = None) -> float:
         """Largest distance of the boundary vertices (or of ``ids``) from B."""
@@ -238,27 +217,18 @@ class Refiner:
         # edge splits: one per edge (a random one of its triangles' samples) ...
         ef = np.flatnonzero(want & has_edge)
         eid = table.eid[3 * ef + k_edge[ef]]
-        keep = _first_per_group(eid, self.rng.random(len(ef)))
+        keep = first_per_group(eid, self.rng.random(len(ef)))
         ef, eid = ef[keep], eid[keep]
         # ... and a triangle takes part in one split at most: of two chosen
         # edges on a triangle, the later one is dropped everywhere
-        slot = np.full(len(table.count), -1)
-        slot[eid] = np.arange(len(eid))
-        which = slot[table.eid]
-        on = np.flatnonzero(which >= 0)
-        ok = _first_per_group(on // 3, which[on])
-        good = np.ones(len(eid), bool)
-        good[which[on][~ok]] = False
+        good = table.independent(eid)
         good &= np.cumsum(good) <= budget
         ef, eid = ef[good], eid[good]
-        slot[:] = -1
-        slot[eid] = np.arange(len(eid))
-        which = slot[table.eid]
-        on = np.flatnonzero(which >= 0)
+        on, which = table.rows_of(eid)
         busy = np.zeros(len(m.F), bool)
         busy[on // 3] = True
         E = np.stack([m.F[ef, k_edge[ef]], m.F[ef, (k_edge[ef] + 1) % 3]], 1)
-        new_edge = m.split_edges(E, t[ef], rows=on, which=which[on]) if len(ef) else np.zeros(0, np.int64)
+        new_edge = m.split_edges(E, t[ef], rows=on, which=which) if len(ef) else np.zeros(0, np.int64)
         # 1-to-3 splits of the others
         tf = np.flatnonzero(want & ~has_edge & ~busy)[: max(0, budget - len(ef))]
         if len(tf):
@@ -293,7 +263,7 @@ class Refiner:
         self.boundary = boundary  # flips keep the boundary: valid until the next splits
         self.project_to_exterior(boundary, X1)
         clock = log.tick("boundary", clock)
-        stopped, _ = stop_collisions(m.V, X1, m.F, self.unique_edges(table), p.thickness * self.h)
+        stopped, _ = stop_collisions(m.V, X1, m.F, row_edges(m.F, table.first), p.thickness * self.h)
         self.hold[stopped] = p.hold
         clock = log.tick("collisions", clock)
         moved = np.linalg.norm(X1 - m.V, axis=1)

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from fracture.refine.collide import faces_intersecting
+from fracture.refine.collide import _cross, _dot, _pt, _sub, faces_intersecting
 from fracture.refine.kernels import _edge_table, _find_edge
 
 
@@ -32,14 +32,8 @@ def _angle(V, a, b, c):
 
 @numba.njit(cache=True)
 def _normal(V, a, b, c):
-    ux, uy, uz = V[b, 0] - V[a, 0], V[b, 1] - V[a, 1], V[b, 2] - V[a, 2]
-    vx, vy, vz = V[c, 0] - V[a, 0], V[c, 1] - V[a, 1], V[c, 2] - V[a, 2]
-    return uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
-
-
-@numba.njit(cache=True)
-def _dot(p, q):
-    return p[0] * q[0] + p[1] * q[1] + p[2] * q[2]
+    A = _pt(V, a)
+    return _cross(_sub(_pt(V, b), A), _sub(_pt(V, c), A))
 
 
 @numba.njit(cache=True)

@@ -11,7 +11,7 @@ is one pass:
 * :func:`energy_gradient` is dE/dx of Eq. 3 and the vertex areas in one loop
   over triangles (the scatter-add NumPy needs bincounts for);
 * :func:`limit_moves` caps each move by its shortest incident edge;
-* :func:`sample_deviation` moves one sample per triangle by Eq. 3 with the
+* :func:`sample_displacement` moves one sample per triangle by Eq. 3 with the
   triangle as its neighbourhood and measures how far it leaves the triangle.
 """
 
@@ -123,6 +123,34 @@ class EdgeTable:
         """Edge ids of vertex pairs ``E (k, 2)`` (-1 where there is no such edge)."""
         E = np.ascontiguousarray(E, np.int64).reshape(-1, 2)
         return _find_edges(self._start, self._hi, self._row, self.eid, E)
+
+    def rows_of(self, eids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The directed triangle edges (rows ``3 f + k``) on the edges ``eids``, and each row's index into ``eids``."""
+        slot = np.full(len(self.count), -1)
+        slot[eids] = np.arange(len(eids))
+        which = slot[self.eid]
+        rows = np.flatnonzero(which >= 0)
+        return rows, which[rows]
+
+    def independent(self, eids: np.ndarray) -> np.ndarray:
+        """Mask over the edges ``eids`` (in order of priority) of those that come first on every triangle
+        they are on: a set of edges no triangle carries two of, as :meth:`RefineMesh.split_edges` needs."""
+        rows, which = self.rows_of(eids)
+        first = first_per_group(rows // 3, which)
+        keep = np.ones(len(eids), bool)
+        keep[which[~first]] = False
+        return keep
+
+
+def first_per_group(key: np.ndarray, rank: np.ndarray) -> np.ndarray:
+    """Mask of the lowest-``rank`` entry of each ``key`` group."""
+    if not len(key):
+        return np.zeros(0, bool)
+    order = np.lexsort((rank, key))
+    first = np.r_[True, key[order][1:] != key[order][:-1]]
+    mask = np.zeros(len(key), bool)
+    mask[order[first]] = True
+    return mask
 
 
 def row_edges(F: np.ndarray, rows: np.ndarray) -> np.ndarray:

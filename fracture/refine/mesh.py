@@ -87,11 +87,7 @@ class RefineMesh:
             ids = table.find(edges)
             if (ids < 0).any():
                 raise ValueError(f"edge {edges[np.argmax(ids < 0)].tolist()} is not an edge of the surface")
-            slot = np.full(len(table.count), -1)
-            slot[ids] = np.arange(len(edges))
-            which = slot[table.eid]
-            rows = np.flatnonzero(which >= 0)
-            which = which[rows]
+            rows, which = table.rows_of(ids)
         parents = np.column_stack([edges, edges[:, 0]])
         p = self._add_vertices(parents, np.column_stack([1 - t, t, np.zeros_like(t)]))
         face, k = rows // 3, rows % 3
