@@ -155,8 +155,10 @@ class _Surface:
             a, b = tri[(k + 1) % 3], tri[(k + 2) % 3]
             out.append((f, a, b))
             f = self.he[(v, b)]
-            if f == start or len(out) > 1000:
+            if f == start:
                 return out
+            if len(out) > len(self.F):  # a closed, oriented B always comes back round
+                raise AssertionError(f"the triangles around vertex {v} of B do not close")
 
     # -- queries --------------------------------------------------------------------------
 
