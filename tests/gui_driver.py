@@ -45,6 +45,11 @@ def main() -> None:
         return str(out / f"{name}.png")
 
     if scenario == "panels":
+        # each camera against one fitted afresh to its panel's shape now (before the first layout, the
+        # panels had no size and the cameras were fitted to a square)
+        shown = list(v.poses)
+        v.poses = [None, None, None]
+        result["camera_refit"] = [[a.eye.tolist(), v._pose(i).eye.tolist()] for i, a in enumerate(shown)]
         result["initial"] = [shot(i, f"panel{i}") for i in range(3)]
         v.set_iteration(1)
         result["iteration1"] = shot(1, "iteration1")

@@ -110,6 +110,8 @@ def _window(scenario: str, run_dir: Path, out: Path) -> dict:
 
 def test_the_window_shows_three_panels_that_follow_their_controls(run_dir, tmp_path):
     res = _window("panels", run_dir, tmp_path)
+    for shown, refit in res["camera_refit"]:
+        assert shown == pytest.approx(refit, rel=1e-6, abs=1e-9)
     assert res["errors"] == []
     panels = [read(p) for p in res["initial"]]
     for img in panels:

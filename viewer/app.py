@@ -106,6 +106,7 @@ class Viewer:
         self.side = self._side_panel()
         self.window.add_child(self.side)
         self.poses: list[CameraPose | None] = [None, None, None]
+        self._fitted = [False, False, False]  # whether each pose was fitted to its panel's real shape
         self.playing = {"iterations": False, "animation": False}
         self._last_step = 0.0
         self._sync_from: int | None = None
@@ -129,6 +130,10 @@ class Viewer:
             sw.frame = gui.Rect(r.x + i * pw, r.y, pw, r.height - ctrl_h)
             c.frame = gui.Rect(r.x + i * pw, r.y + r.height - ctrl_h, pw, ctrl_h)
         self.side.frame = gui.Rect(r.x + 3 * pw, r.y, r.width - 3 * pw, r.height)
+        for i in range(len(self.scenes)):  # cameras fitted before the panels had a size: fit them now
+            if self.poses[i] is not None and not self._fitted[i]:
+                self.poses[i] = None
+                self._pose(i)
 
     def _material_controls(self) -> gui.Widget:
         em = self.em
@@ -314,6 +319,7 @@ class Viewer:
             else:
                 self.poses[i] = frame_box(*scene_box(self.run), a)
             f = self.scenes[i].frame
+            self._fitted[i] = f.width > 0
             apply_camera(self.scenes[i].scene.camera, self.poses[i], max(f.width, 1), max(f.height, 1))
         return self.poses[i]
 
