@@ -10,15 +10,15 @@ every colliding pair are stopped (``X1 = X0``) and the test repeats until no
 pair collides: a surface that does not intersect itself at ``X0`` does not
 at ``X1``.
 
-Broad phase: a hierarchical grid hashed into a table of buckets (a counting
-sort, no Python loop). Every triangle and edge goes into the cells its swept
-box covers, on the level where that is at most 2 x 2 x 2 cells; a pair is
-tested once, in the cell holding the lower corner of the intersection of the
-two boxes. Pairs further apart than their relative move are dropped before
-the cubic. libigl and pymeshlab answer static questions
-only (``pymeshlab`` selects self-intersecting faces of one mesh state), so
-the moving test is written here, and the static count :func:`self_intersections`
-shares its grid (the tests check it against an all-pairs search).
+Broad phase: the swept boxes of the vertices and triangles go into one
+hierarchical spatial hash, those of the edges into another
+(:mod:`fracture.refine.hashgrid`), which list every overlapping pair once;
+pairs that share a vertex are left out there. Pairs further apart than their
+relative move are dropped before the cubic. libigl and pymeshlab answer
+static questions only (``pymeshlab`` selects self-intersecting faces of one
+mesh state), so the moving test is written here, and the static count
+:func:`self_intersections` uses the same hash (the tests check it against an
+all-pairs search).
 """
 
 from __future__ import annotations
@@ -26,113 +26,9 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-_P1, _P2, _P3, _P4 = 73856093, 19349663, 83492791, 2654435761
+from fracture.refine import hashgrid
+
 _EPS = 1e-10  # relative tolerance of the static tests
-
-
-@numba.njit(cache=True, inline="always")
-def _hash(ix, iy, iz, level, mask):
-    return ((ix * _P1) ^ (iy * _P2) ^ (iz * _P3) ^ (level * _P4)) & mask
-
-
-@numba.njit(cache=True, inline="always")
-def _cell(x, inv):
-    return np.int64(np.floor(x * inv))
-
-
-@numba.njit(cache=True)
-def _level(lo, hi, inv):
-    """The level at which a box spans at most two cells per axis (cells double per level)."""
-    extent = max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]) * inv
-    level = 0
-    while extent > 1.0 and level < 40:
-        extent *= 0.5
-        level += 1
-    return level
-
-
-@numba.njit(cache=True)
-def _build_grid(lo, hi, inv, mask):
-    """Bucket boxes ``lo, hi (k, 3)`` into a hierarchical hashed grid.
-
-    Every box goes to the level where it covers at most 2 x 2 x 2 cells (cell
-    size ``2^level / inv``), so large and small elements cost the same.
-    Returns ``(start, items, level, slot_box, slot_level)``: buckets as a CSR
-    table of element ids, each element's level, and per slot a copy of its
-    element's box (``(s, 6)``, lower then upper corner) and level, so a query
-    scans its buckets' boxes in order instead of looking each element up.
-    """
-    k = lo.shape[0]
-    level = np.empty(k, np.int64)
-    start = np.zeros(mask + 2, np.int64)
-    for e in range(k):
-        level[e] = L = _level(lo[e], hi[e], inv)
-        s = inv / 2.0 ** L
-        for ix in range(_cell(lo[e, 0], s), _cell(hi[e, 0], s) + 1):
-            for iy in range(_cell(lo[e, 1], s), _cell(hi[e, 1], s) + 1):
-                for iz in range(_cell(lo[e, 2], s), _cell(hi[e, 2], s) + 1):
-                    start[_hash(ix, iy, iz, L, mask) + 1] += 1
-    for b in range(mask + 1):
-        start[b + 1] += start[b]
-    fill = start[:-1].copy()
-    items = np.empty(start[-1], np.int64)
-    slot_box = np.empty((start[-1], 6))
-    slot_level = np.empty(start[-1], np.int64)
-    for e in range(k):
-        L = level[e]
-        s = inv / 2.0 ** L
-        for ix in range(_cell(lo[e, 0], s), _cell(hi[e, 0], s) + 1):
-            for iy in range(_cell(lo[e, 1], s), _cell(hi[e, 1], s) + 1):
-                for iz in range(_cell(lo[e, 2], s), _cell(hi[e, 2], s) + 1):
-                    h = _hash(ix, iy, iz, L, mask)
-                    p = fill[h]
-                    items[p] = e
-                    for c in range(3):
-                        slot_box[p, c] = lo[e, c]
-                        slot_box[p, 3 + c] = hi[e, c]
-                    slot_level[p] = L
-                    fill[h] += 1
-    return start, items, level, slot_box, slot_level
-
-
-@numba.njit(cache=True)
-def _gather(qlo, qhi, min_level, grid, inv, mask, buf):
-    """Elements of ``grid`` whose boxes overlap the box ``qlo, qhi``, each once, into ``buf``.
-
-    Levels below ``min_level`` are skipped. An element is reported from the
-    cell (at its own level) holding the lower corner of the two boxes'
-    intersection. Returns (buf, count); ``buf`` grows when full.
-    """
-    start, items, level, max_level, box, slot_level = grid
-    count = 0
-    for L in range(min_level, max_level + 1):
-        s = inv / 2.0 ** L
-        for ix in range(_cell(qlo[0], s), _cell(qhi[0], s) + 1):
-            for iy in range(_cell(qlo[1], s), _cell(qhi[1], s) + 1):
-                for iz in range(_cell(qlo[2], s), _cell(qhi[2], s) + 1):
-                    h = _hash(ix, iy, iz, L, mask)
-                    for p in range(start[h], start[h + 1]):
-                        if slot_level[p] != L:
-                            continue
-                        if not (qlo[0] <= box[p, 3] and box[p, 0] <= qhi[0] and qlo[1] <= box[p, 4]
-                                and box[p, 1] <= qhi[1] and qlo[2] <= box[p, 5] and box[p, 2] <= qhi[2]):
-                            continue
-                        if (_cell(max(qlo[0], box[p, 0]), s) != ix or _cell(max(qlo[1], box[p, 1]), s) != iy
-                                or _cell(max(qlo[2], box[p, 2]), s) != iz):
-                            continue
-                        if count == buf.shape[0]:
-                            bigger = np.empty(2 * buf.shape[0], np.int64)
-                            bigger[:count] = buf
-                            buf = bigger
-                        buf[count] = items[p]
-                        count += 1
-    return buf, count
-
-
-@numba.njit(cache=True)
-def _grid(lo, hi, inv, mask):
-    start, items, level, slot_box, slot_level = _build_grid(lo, hi, inv, mask)
-    return start, items, level, (level.max() if level.shape[0] else 0), slot_box, slot_level
 
 
 # -- geometry ------------------------------------------------------------------------------
@@ -384,10 +280,6 @@ def _swept_boxes(X0, X1, elems, pad):
     return lo, hi
 
 
-def _table_size(k):
-    return max(1 << 10, 1 << int(np.ceil(np.log2(2 * k + 1))))
-
-
 @numba.njit(cache=True)
 def _vertex_triangle_pair(X0, X1, F, v, f, eta2, times, stop):
     """Test vertex v against triangle f (not one of its corners); marks a colliding pair in ``stop``."""
@@ -402,59 +294,62 @@ def _vertex_triangle_pair(X0, X1, F, v, f, eta2, times, stop):
 
 
 @numba.njit(cache=True)
-def _vertex_triangle_pairs(X0, X1, F, query, by_vertex, vlo, vhi, tlo, thi, grid, inv, mask, eta2, stop):
-    """Vertex-triangle pairs of the elements ``query``: vertices against the triangle grid
-    (``by_vertex``), or triangles against the vertex grid; marks colliding pairs in ``stop``."""
+def _vertex_triangle_tests(X0, X1, F, pairs, eta2, stop):
+    """Test the (vertex, triangle) ``pairs``; marks the vertices of colliding ones in ``stop``."""
     times = np.empty(4)
-    buf = np.empty(256, np.int64)
     hits = 0
-    for q in query:
-        if by_vertex:
-            buf, k = _gather(vlo[q], vhi[q], 0, grid, inv, mask, buf)
-            for i in range(k):
-                hits += _vertex_triangle_pair(X0, X1, F, q, buf[i], eta2, times, stop)
-        else:
-            buf, k = _gather(tlo[q], thi[q], 0, grid, inv, mask, buf)
-            for i in range(k):
-                hits += _vertex_triangle_pair(X0, X1, F, buf[i], q, eta2, times, stop)
+    for i in range(pairs.shape[0]):
+        hits += _vertex_triangle_pair(X0, X1, F, pairs[i, 0], pairs[i, 1], eta2, times, stop)
     return hits
 
 
 @numba.njit(cache=True)
-def _edge_edge_pairs(X0, X1, E, qe, elo, ehi, grid, inv, mask, eta2, all_pairs, stop):
-    """Query edges ``qe`` against the edge grid.
-
-    With ``all_pairs`` (``qe`` is every edge) each pair is tested once: an
-    edge looks at its own level and the coarser ones only, and of two edges on
-    one level the lower index asks.
-    """
+def _edge_edge_tests(X0, X1, E, pairs, eta2, stop):
+    """Test the (edge, edge) ``pairs``; marks the vertices of colliding ones in ``stop``."""
     times = np.empty(4)
-    buf = np.empty(256, np.int64)
-    level = grid[2]
     hits = 0
-    for e in qe:
-        p, q = E[e, 0], E[e, 1]
-        buf, k = _gather(elo[e], ehi[e], level[e] if all_pairs else 0, grid, inv, mask, buf)
-        for i in range(k):
-            g = buf[i]
-            if g == e or (all_pairs and level[g] == level[e] and g < e):
-                continue
-            r, s = E[g, 0], E[g, 1]
-            if p == r or p == s or q == r or q == s:
-                continue
-            if _edge_edge_hit(_pt(X0, p), _pt(X1, p), _pt(X0, q), _pt(X1, q),
-                              _pt(X0, r), _pt(X1, r), _pt(X0, s), _pt(X1, s), eta2, times):
-                hits += 1
-                stop[p] = stop[q] = stop[r] = stop[s] = True
+    for i in range(pairs.shape[0]):
+        p, q = E[pairs[i, 0], 0], E[pairs[i, 0], 1]
+        r, s = E[pairs[i, 1], 0], E[pairs[i, 1], 1]
+        if p == r or p == s or q == r or q == s:
+            continue
+        if _edge_edge_hit(_pt(X0, p), _pt(X1, p), _pt(X0, q), _pt(X1, q),
+                          _pt(X0, r), _pt(X1, r), _pt(X0, s), _pt(X1, s), eta2, times):
+            hits += 1
+            stop[p] = stop[q] = stop[r] = stop[s] = True
     return hits
 
 
-def _cell_size(X, E):
+@numba.njit(cache=True)
+def _query_pairs(grid, lo, hi, query, first, last, shift, flip):
+    """Pairs of each element ``q`` of ``query`` (box ``lo[q], hi[q]``) with the grid's elements in
+    ``[first, last)``, as ``(q, g - shift)`` (``(g - shift, q)`` with ``flip``).
+
+    Pairs of an element with itself may be listed: the tests reject pairs that share a vertex."""
+    buf = np.empty(256, np.int64)
+    out = np.empty((max(16, 8 * query.shape[0]), 2), np.int64)
+    count = 0
+    for q in query:
+        buf, k = hashgrid.gather(grid, lo[q], hi[q], buf)
+        for i in range(k):
+            g = buf[i]
+            if g < first or g >= last:
+                continue
+            if count == out.shape[0]:
+                bigger = np.empty((2 * out.shape[0], 2), np.int64)
+                bigger[:count] = out
+                out = bigger
+            out[count, 0], out[count, 1] = (g - shift, q) if flip else (q, g - shift)
+            count += 1
+    return out[:count]
+
+
+def _typical_cell(X, E):
     """Twice the median length of edges ``E``: cells about the size of the elements' boxes."""
     if not len(E):
         return 1.0
     e = X[E[:, 1]] - X[E[:, 0]]
-    return max(2.0 * float(np.sqrt(np.median(np.einsum("ij,ij->i", e, e)))), 1e-12)
+    return 2.0 * float(np.sqrt(np.median(np.einsum("ij,ij->i", e, e))))
 
 
 def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, E: np.ndarray, eta: float,
@@ -489,33 +384,35 @@ def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, E: np.ndarray
     stopped = np.zeros(n, bool)
     if not len(E) and not len(F):
         return stopped, 0
-    inv = 1.0 / _cell_size(X0, E if len(E) else F[:, :2])
-    mask = _table_size(len(E) + len(F)) - 1
     eta2 = float(eta) ** 2
-    vlo, vhi = _swept_boxes(X0, X1, np.arange(n).reshape(-1, 1), eta)
+    ids = np.arange(n).reshape(-1, 1)
+    vlo, vhi = _swept_boxes(X0, X1, ids, eta)
     tlo, thi = _swept_boxes(X0, X1, F, eta)
     elo, ehi = _swept_boxes(X0, X1, E, eta)
-    tgrid = _grid(tlo, thi, inv, mask)
-    egrid = _grid(elo, ehi, inv, mask)
-    vgrid = None
-    qv, qt, qe = np.arange(n), np.zeros(0, np.int64), np.arange(len(E))
+    # vertices (ids below n) and triangles in one grid, edges in another
+    lo, hi = np.concatenate([vlo, tlo]), np.concatenate([vhi, thi])
+    inv = 1.0 / hashgrid.cell_size(lo, hi, _typical_cell(X0, E if len(E) else F[:, :2]))
+    vt = hashgrid.build(lo, hi, inv, np.concatenate([np.column_stack([ids, ids, ids]), F]))
+    eg = hashgrid.build(elo, ehi, inv, E)
+    vf = hashgrid.pairs(vt, n, True)
+    ee = hashgrid.pairs(eg, -1, True)
     first = None
     for _ in range(max_rounds):
         stop = np.zeros(n, bool)
-        pairs = _vertex_triangle_pairs(X0, X1, F, qv, True, vlo, vhi, tlo, thi, tgrid, inv, mask, eta2, stop)
-        if len(qt):
-            vgrid = _grid(vlo, vhi, inv, mask) if vgrid is None else vgrid
-            pairs += _vertex_triangle_pairs(X0, X1, F, qt, False, vlo, vhi, tlo, thi, vgrid, inv, mask, eta2, stop)
-        pairs += _edge_edge_pairs(X0, X1, E, qe, elo, ehi, egrid, inv, mask, eta2, first is None, stop)
+        pairs = _vertex_triangle_tests(X0, X1, F, vf, eta2, stop) + _edge_edge_tests(X0, X1, E, ee, eta2, stop)
         first = pairs if first is None else first
         stop &= ~stopped  # pairs of stopped vertices only are at rest: contact they had at X0
         if not stop.any():
             return stopped, first
         X1[stop] = X0[stop]
         stopped |= stop
+        # the elements on the newly stopped vertices, against everything
         qv = np.flatnonzero(stop)
         qt = np.flatnonzero(stop[F].any(axis=1))
         qe = np.flatnonzero(stop[E].any(axis=1))
+        vf = np.concatenate([_query_pairs(vt, lo, hi, qv, n, n + len(F), n, False),
+                             _query_pairs(vt, lo, hi, qt + n, 0, n, 0, True) - [0, n]])
+        ee = _query_pairs(eg, elo, ehi, qe, 0, len(E), 0, False)
     # still colliding: nothing moves, and the state at X0 is intersection-free
     X1[:] = X0
     stopped[:] = True
@@ -586,67 +483,22 @@ def _triangles_intersect(X, F, f, g, eps):
 
 
 @numba.njit(cache=True)
-def _intersections(X, F, query, all_pairs, inv, mask, eps, first):
-    """Static triangle-triangle intersections of the triangles ``query`` with all others.
-
-    With ``all_pairs`` (``query`` is every triangle) each pair is counted once
-    (a triangle looks at its own level and coarser ones; of two on one level
-    the lower index asks). Returns the pair count and a mask over ``query`` of
-    the triangles that meet another; the first ``len(first)`` pairs are written
-    to ``first``.
-    """
-    lo, hi = _swept_boxes(X, X, F, 0.0)
-    grid = _grid(lo, hi, inv, mask)
-    level = grid[2]
-    buf = np.empty(256, np.int64)
+def _pair_tests(X, F, pairs, eps, first):
+    """Which of the triangle ``pairs`` intersect: the count, a mask over the pairs; the first
+    ``len(first)`` intersecting pairs are written to ``first``."""
     count = 0
-    hit = np.zeros(query.shape[0], np.bool_)
-    for i in range(query.shape[0]):
-        f = query[i]
-        buf, k = _gather(lo[f], hi[f], level[f] if all_pairs else 0, grid, inv, mask, buf)
-        for j in range(k):
-            g = buf[j]
-            if g == f or (all_pairs and level[g] == level[f] and g < f):
-                continue
-            if _triangles_intersect(X, F, f, g, eps):
-                if count < first.shape[0]:
-                    first[count, 0], first[count, 1] = f, g
-                count += 1
-                hit[i] = True
+    hit = np.zeros(pairs.shape[0], np.bool_)
+    for i in range(pairs.shape[0]):
+        if _triangles_intersect(X, F, pairs[i, 0], pairs[i, 1], eps):
+            if count < first.shape[0]:
+                first[count, 0], first[count, 1] = pairs[i, 0], pairs[i, 1]
+            count += 1
+            hit[i] = True
     return count, hit
 
 
-@numba.njit(cache=True)
-def _query_hits(X, F, query, inv, mask, eps):
-    """Mask over ``query`` of the triangles that meet another triangle of ``F``.
-
-    The grid holds only the query triangles and every triangle looks itself
-    up in it: for a few queries (the flips of one pass) that is a scan of the
-    triangles' boxes instead of a grid of all of them.
-    """
-    lo, hi = _swept_boxes(X, X, F, 0.0)
-    grid = _grid(lo[query], hi[query], inv, mask)
-    buf = np.empty(256, np.int64)
-    hit = np.zeros(query.shape[0], np.bool_)
-    for g in range(F.shape[0]):
-        buf, k = _gather(lo[g], hi[g], 0, grid, inv, mask, buf)
-        for j in range(k):
-            i = buf[j]
-            f = query[i]
-            if f != g and not hit[i] and _triangles_intersect(X, F, f, g, eps):
-                hit[i] = True
-    return hit
-
-
-def _static(V, F, query, all_pairs, report=0):
-    V = np.ascontiguousarray(V, np.float64)
-    F = np.ascontiguousarray(F, np.int64)
-    first = np.zeros((report, 2), np.int64)
-    if len(F) < 2 or not len(query):
-        return 0, np.zeros(len(query), bool), first[:0]
-    count, hit = _intersections(V, F, np.ascontiguousarray(query, np.int64), all_pairs,
-                                1.0 / _cell_size(V, F[:, :2]), _table_size(len(F)) - 1, _EPS, first)
-    return int(count), hit, first[:min(count, report)]
+def _triangle_grid(V, F, lo, hi, faces):
+    return hashgrid.build(lo, hi, 1.0 / hashgrid.cell_size(lo, hi, _typical_cell(V, F[:, :2])), F[faces])
 
 
 def self_intersections(V: np.ndarray, F: np.ndarray, report: int = 0) -> int | tuple[int, np.ndarray]:
@@ -654,8 +506,14 @@ def self_intersections(V: np.ndarray, F: np.ndarray, report: int = 0) -> int | t
 
     With ``report > 0`` also returns up to that many of the pairs, ``(k, 2)``.
     """
-    count, _, pairs = _static(V, F, np.arange(len(F)), True, report)
-    return (count, pairs) if report else count
+    V = np.ascontiguousarray(V, np.float64)
+    F = np.ascontiguousarray(F, np.int64)
+    first = np.zeros((report, 2), np.int64)
+    count = 0
+    if len(F) >= 2:
+        lo, hi = _swept_boxes(V, V, F, 0.0)
+        count, _ = _pair_tests(V, F, hashgrid.pairs(_triangle_grid(V, F, lo, hi, slice(None)), -1, False), _EPS, first)
+    return (int(count), first[:min(count, report)]) if report else int(count)
 
 
 def faces_intersecting(V: np.ndarray, F: np.ndarray, query: np.ndarray) -> np.ndarray:
@@ -665,6 +523,16 @@ def faces_intersecting(V: np.ndarray, F: np.ndarray, query: np.ndarray) -> np.nd
     query = np.ascontiguousarray(query, np.int64)
     if len(F) < 2 or not len(query):
         return np.zeros(len(query), bool)
+    lo, hi = _swept_boxes(V, V, F, 0.0)
     if 8 * len(query) > len(F):
-        return _static(V, F, query, False)[1]
-    return _query_hits(V, F, query, 1.0 / _cell_size(V, F[:, :2]), _table_size(len(query)) - 1, _EPS)
+        # many queries: a grid of all triangles, looked up by the queries
+        pairs = _query_pairs(_triangle_grid(V, F, lo, hi, slice(None)), lo, hi, query, 0, len(F), 0, False)
+        hit_pairs = _pair_tests(V, F, pairs, _EPS, np.zeros((0, 2), np.int64))[1]
+        return np.isin(query, pairs[hit_pairs, 0])
+    # a few queries (the flips of one pass): a grid of the queries only, and
+    # every triangle looks itself up in it (a scan instead of a grid of all)
+    grid = _triangle_grid(V, F, lo[query], hi[query], query)
+    pairs = _query_pairs(grid, lo, hi, np.arange(len(F)), 0, len(query), 0, True)
+    pairs[:, 0] = query[pairs[:, 0]]
+    hit_pairs = _pair_tests(V, F, pairs, _EPS, np.zeros((0, 2), np.int64))[1]
+    return np.isin(query, pairs[hit_pairs, 0])

@@ -1,0 +1,282 @@
+"""A hierarchical spatial hash of axis-aligned boxes: all overlapping pairs, and box queries (numba).
+
+Every box goes to the level where it covers at most 2 x 2 x 2 cells (cells
+double per level, level 0 has cells of size ``1 / inv``), so large and small
+elements cost the same. Each level has its own hash table, sized to what it
+holds: the coarse levels, where few long elements live, stay small and in
+cache. Every slot (an element in one cell) keeps a copy of its element's box
+and the packed coordinates of its cell, so a scan reads its bucket in order
+and hash collisions are told apart without looking anything up.
+
+Overlapping pairs are enumerated without queries: two elements on one level
+meet in a cell they share, so the pairs inside every bucket are tried (the
+buckets are contiguous: this is a scan of memory in order); a pair on two
+levels is found by the finer element, which looks up the few coarse cells
+its box covers. A pair is reported once, from the cell (on the coarser of
+its two levels) holding the lower corner of the intersection of the boxes.
+
+libigl's AABB tree and scipy's cKDTree answer point queries; the moving
+surfaces of the refinement need all pairs of overlapping swept boxes of
+hundreds of thousands of elements every iteration, which this does in one
+pass over the buckets.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+_P1, _P2, _P3 = 73856093, 19349663, 83492791
+_BITS = 21  # bits per packed cell coordinate
+_OFF = 1 << (_BITS - 1)
+_SPAN = float(1 << (_BITS - 2))  # boxes span at most this many level-0 cells (see cell_size)
+
+
+@numba.njit(cache=True, inline="always")
+def _hash(ix, iy, iz, mask):
+    return ((ix * _P1) ^ (iy * _P2) ^ (iz * _P3)) & mask
+
+
+@numba.njit(cache=True, inline="always")
+def _key(ix, iy, iz):
+    return ((ix + _OFF) << (2 * _BITS)) | ((iy + _OFF) << _BITS) | (iz + _OFF)
+
+
+@numba.njit(cache=True, inline="always")
+def _cell(x, s):
+    return np.int64(np.floor(x * s))
+
+
+@numba.njit(cache=True)
+def _level(lo, hi, inv):
+    """The level at which a box spans at most two cells per axis."""
+    extent = max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]) * inv
+    level = 0
+    while extent > 1.0 and level < 40:
+        extent *= 0.5
+        level += 1
+    return level
+
+
+@numba.njit(cache=True)
+def _scales(inv, levels):
+    """``inv / 2^L`` for every level (a power is slow inside the loops)."""
+    s = np.empty(levels)
+    s[0] = inv
+    for L in range(1, levels):
+        s[L] = 0.5 * s[L - 1]
+    return s
+
+
+@numba.njit(cache=True)
+def build(lo, hi, inv, verts):
+    """Hash the boxes ``lo, hi (k, 3)`` of elements with vertices ``verts (k, w)``, ``w <= 3``
+    (negative entries are no vertex).
+
+    Returns the grid as a tuple ``(scale, level, toff, tmask, start, items, key, box, sv)``:
+    per level the inverse cell size; each element's level; per level the
+    offset of its table in ``start`` and its mask (tables are powers of two,
+    ``-1`` mask for an empty level); the buckets as CSR ranges
+    ``start[b]:start[b + 1]`` of slots; per slot its element, its cell's
+    packed coordinates, its element's box (lower then upper corner) and
+    vertices (padded with -1).
+    """
+    k = lo.shape[0]
+    level = np.empty(k, np.int64)
+    per_level = np.zeros(41, np.int64)
+    scale = _scales(inv, 41)
+    for e in range(k):
+        level[e] = L = _level(lo[e], hi[e], inv)
+        s = scale[L]
+        per_level[L] += ((_cell(hi[e, 0], s) - _cell(lo[e, 0], s) + 1) * (_cell(hi[e, 1], s) - _cell(lo[e, 1], s) + 1)
+                         * (_cell(hi[e, 2], s) - _cell(lo[e, 2], s) + 1))
+    top = 0
+    for L in range(41):
+        if per_level[L]:
+            top = L
+    toff = np.zeros(top + 2, np.int64)
+    tmask = np.full(top + 1, -1, np.int64)
+    for L in range(top + 1):
+        size = 0
+        if per_level[L]:
+            size = 16
+            while 2 * size < per_level[L]:
+                size *= 2
+            tmask[L] = size - 1
+        toff[L + 1] = toff[L] + size
+    start = np.zeros(toff[-1] + 1, np.int64)
+    for e in range(k):
+        L = level[e]
+        s = scale[L]
+        for ix in range(_cell(lo[e, 0], s), _cell(hi[e, 0], s) + 1):
+            for iy in range(_cell(lo[e, 1], s), _cell(hi[e, 1], s) + 1):
+                for iz in range(_cell(lo[e, 2], s), _cell(hi[e, 2], s) + 1):
+                    start[toff[L] + _hash(ix, iy, iz, tmask[L]) + 1] += 1
+    for b in range(toff[-1]):
+        start[b + 1] += start[b]
+    fill = start[:-1].copy()
+    slots = start[-1]
+    items = np.empty(slots, np.int64)
+    key = np.empty(slots, np.int64)
+    box = np.empty((slots, 6))
+    sv = np.full((slots, 3), -1, np.int64)
+    w = verts.shape[1]
+    for e in range(k):
+        L = level[e]
+        s = scale[L]
+        for ix in range(_cell(lo[e, 0], s), _cell(hi[e, 0], s) + 1):
+            for iy in range(_cell(lo[e, 1], s), _cell(hi[e, 1], s) + 1):
+                for iz in range(_cell(lo[e, 2], s), _cell(hi[e, 2], s) + 1):
+                    b = toff[L] + _hash(ix, iy, iz, tmask[L])
+                    p = fill[b]
+                    fill[b] += 1
+                    items[p] = e
+                    key[p] = _key(ix, iy, iz)
+                    for c in range(3):
+                        box[p, c] = lo[e, c]
+                        box[p, 3 + c] = hi[e, c]
+                    for c in range(w):
+                        sv[p, c] = verts[e, c]
+    return scale[: top + 1], level, toff, tmask, start, items, key, box, sv
+
+
+@numba.njit(cache=True, inline="always")
+def _overlap(box, p, lo, hi):
+    return (lo[0] <= box[p, 3] and box[p, 0] <= hi[0] and lo[1] <= box[p, 4] and box[p, 1] <= hi[1]
+            and lo[2] <= box[p, 5] and box[p, 2] <= hi[2])
+
+
+@numba.njit(cache=True, inline="always")
+def _corner_key(box, p, q, s):
+    """Packed cell (at scale ``s``) of the lower corner of the intersection of the boxes of slots p and q."""
+    return _key(_cell(max(box[p, 0], box[q, 0]), s), _cell(max(box[p, 1], box[q, 1]), s),
+                _cell(max(box[p, 2], box[q, 2]), s))
+
+
+@numba.njit(cache=True, inline="always")
+def _share_vertex(sv, p, q):
+    for i in range(3):
+        if sv[p, i] >= 0 and (sv[p, i] == sv[q, 0] or sv[p, i] == sv[q, 1] or sv[p, i] == sv[q, 2]):
+            return True
+    return False
+
+
+@numba.njit(cache=True, inline="always")
+def _push(out, count, e, g, n_first):
+    """Append the pair of elements e and g: lower index first, or the first kind first (its id shifted)."""
+    if n_first < 0:
+        a, b = min(e, g), max(e, g)
+    elif e < n_first:
+        a, b = e, g - n_first
+    else:
+        a, b = g, e - n_first
+    if count == out.shape[0]:
+        bigger = np.empty((2 * out.shape[0], 2), np.int64)
+        bigger[:count] = out
+        out = bigger
+    out[count, 0] = a
+    out[count, 1] = b
+    return out, count + 1
+
+
+@numba.njit(cache=True)
+def pairs(grid, n_first, skip_shared):
+    """Every pair of elements whose boxes overlap, once.
+
+    With ``n_first < 0`` the pairs ``(e, g), e < g`` among all elements; else
+    the pairs ``(a, b)`` of an element ``a < n_first`` and an element
+    ``b >= n_first`` (reported as ``(a, b - n_first)``), e.g. points and
+    triangles hashed into one grid. With ``skip_shared``, pairs whose
+    elements share a vertex are left out.
+    Returns an ``(c, 2)`` array.
+    """
+    scale, level, toff, tmask, start, items, key, box, sv = grid
+    out = np.empty((max(1024, items.shape[0] // 4), 2), np.int64)
+    count = 0
+    top = tmask.shape[0] - 1
+    # pairs on one level: within a bucket, same cell
+    for L in range(top + 1):
+        s = scale[L]
+        for b in range(toff[L], toff[L + 1]):
+            for p in range(start[b], start[b + 1]):
+                e = items[p]
+                for q in range(p + 1, start[b + 1]):
+                    if key[q] != key[p]:
+                        continue
+                    g = items[q]
+                    if n_first >= 0 and (e < n_first) == (g < n_first):
+                        continue
+                    if not (box[p, 0] <= box[q, 3] and box[q, 0] <= box[p, 3] and box[p, 1] <= box[q, 4]
+                            and box[q, 1] <= box[p, 4] and box[p, 2] <= box[q, 5] and box[q, 2] <= box[p, 5]):
+                        continue
+                    if _corner_key(box, p, q, s) != key[p] or (skip_shared and _share_vertex(sv, p, q)):
+                        continue
+                    out, count = _push(out, count, e, g, n_first)
+    # pairs on two levels: the finer element looks up the coarser levels
+    buf = np.empty(256, np.int64)
+    for L in range(top):
+        for p in range(start[toff[L]], start[toff[L + 1]]):
+            if _corner_key(box, p, p, scale[L]) != key[p]:
+                continue  # one slot per element: the one of its lower corner
+            e = items[p]
+            buf, k = _slots(grid, box[p, :3], box[p, 3:], L + 1, buf)
+            for i in range(k):
+                q = buf[i]
+                g = items[q]
+                if n_first >= 0 and (e < n_first) == (g < n_first):
+                    continue
+                if not (skip_shared and _share_vertex(sv, p, q)):
+                    out, count = _push(out, count, e, g, n_first)
+    return out[:count]
+
+
+@numba.njit(cache=True)
+def _slots(grid, qlo, qhi, min_level, buf):
+    """Slots, on levels from ``min_level`` up, of the elements whose boxes overlap the box ``qlo, qhi``,
+    one per element (the cell holding the lower corner of the intersection), into ``buf``; returns
+    (buf, count). ``buf`` grows when full."""
+    scale, level, toff, tmask, start, items, key, box, sv = grid
+    count = 0
+    for L in range(min_level, tmask.shape[0]):
+        if tmask[L] < 0:
+            continue
+        s = scale[L]
+        for ix in range(_cell(qlo[0], s), _cell(qhi[0], s) + 1):
+            for iy in range(_cell(qlo[1], s), _cell(qhi[1], s) + 1):
+                for iz in range(_cell(qlo[2], s), _cell(qhi[2], s) + 1):
+                    here = _key(ix, iy, iz)
+                    b = toff[L] + _hash(ix, iy, iz, tmask[L])
+                    for p in range(start[b], start[b + 1]):
+                        if key[p] != here or not _overlap(box, p, qlo, qhi):
+                            continue
+                        if _key(_cell(max(qlo[0], box[p, 0]), s), _cell(max(qlo[1], box[p, 1]), s),
+                                _cell(max(qlo[2], box[p, 2]), s)) != here:
+                            continue
+                        if count == buf.shape[0]:
+                            bigger = np.empty(2 * buf.shape[0], np.int64)
+                            bigger[:count] = buf
+                            buf = bigger
+                        buf[count] = p
+                        count += 1
+    return buf, count
+
+
+@numba.njit(cache=True)
+def gather(grid, qlo, qhi, buf):
+    """Elements whose boxes overlap the box ``qlo, qhi``, each once, into ``buf``; returns (buf, count).
+
+    ``buf`` grows when full.
+    """
+    buf, count = _slots(grid, qlo, qhi, 0, buf)
+    items = grid[5]
+    for i in range(count):
+        buf[i] = items[buf[i]]
+    return buf, count
+
+
+def cell_size(lo: np.ndarray, hi: np.ndarray, typical: float) -> float:
+    """A level-0 cell of size ``typical``, enlarged where the boxes' extent would overflow the packed cells."""
+    if not len(lo):
+        return max(typical, 1e-12)
+    reach = float(max(np.abs(lo).max(), np.abs(hi).max()))
+    return max(typical, reach / _SPAN, 1e-12)

@@ -1,0 +1,58 @@
+"""The hierarchical spatial hash lists every pair of overlapping boxes exactly once."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from fracture.refine import hashgrid
+
+
+def _boxes(k, seed):
+    """Boxes of sizes over four orders of magnitude (several levels), some of them flat or points."""
+    rng = np.random.default_rng(seed)
+    lo = rng.uniform(-1.0, 1.0, (k, 3))
+    size = 10.0 ** rng.uniform(-3.0, 0.0, (k, 1)) * rng.uniform(0.0, 1.0, (k, 3))
+    size[rng.random(k) < 0.1] = 0.0
+    size[rng.random(k) < 0.2, 2] = 0.0
+    return lo, lo + size
+
+
+def _overlapping(lo, hi, a, b):
+    return bool(np.all(lo[a] <= hi[b]) and np.all(lo[b] <= hi[a]))
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_all_pairs_match_a_brute_force_search(seed):
+    lo, hi = _boxes(400, seed)
+    verts = np.random.default_rng(seed).integers(0, 300, (400, 2))
+    grid = hashgrid.build(lo, hi, 1.0 / hashgrid.cell_size(lo, hi, 0.01), verts)
+    assert len(np.unique(grid[1])) >= 4  # the boxes do spread over levels
+    found = hashgrid.pairs(grid, -1, False)
+    assert (found[:, 0] < found[:, 1]).all()
+    assert len({tuple(p) for p in found.tolist()}) == len(found)  # none twice
+    brute = {(a, b) for a in range(400) for b in range(a + 1, 400) if _overlapping(lo, hi, a, b)}
+    assert {tuple(p) for p in found.tolist()} == brute
+    # pairs sharing a vertex are left out on request
+    apart = hashgrid.pairs(grid, -1, True)
+    assert {tuple(p) for p in apart.tolist()} == {(a, b) for a, b in brute if not set(verts[a]) & set(verts[b])}
+
+
+def test_pairs_of_two_kinds_and_queries_match_a_brute_force_search():
+    lo, hi = _boxes(500, 2)
+    n_first = 200  # e.g. points first, then triangles
+    grid = hashgrid.build(lo, hi, 1.0 / hashgrid.cell_size(lo, hi, 0.02), -np.ones((500, 1), np.int64))
+    found = hashgrid.pairs(grid, n_first, False)
+    brute = {(a, b - n_first) for a in range(n_first) for b in range(n_first, 500) if _overlapping(lo, hi, a, b)}
+    assert len(found) == len(brute) and {tuple(p) for p in found.tolist()} == brute
+    buf = np.empty(4, np.int64)  # grows as needed
+    for q in range(0, 500, 7):
+        buf, k = hashgrid.gather(grid, lo[q], hi[q], buf)
+        assert sorted(buf[:k].tolist()) == [g for g in range(500) if _overlapping(lo, hi, q, g)]
+
+
+def test_far_coordinates_do_not_overflow_the_packed_cells():
+    lo = np.array([[0.0, 0.0, 0.0], [1e9, 0.0, 0.0], [1e9 + 0.5, 0.0, 0.0]])
+    hi = lo + 1.0
+    inv = 1.0 / hashgrid.cell_size(lo, hi, 1e-3)
+    found = hashgrid.pairs(hashgrid.build(lo, hi, inv, np.zeros((3, 0), np.int64)), -1, False)
+    assert found.tolist() == [[1, 2]]
