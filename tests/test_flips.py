@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import Delaunay
 
+from fracture.refine.collide import self_intersections
 from fracture.refine.flips import flip_edges
 from fracture.topology import unique_edges
 
@@ -62,3 +63,20 @@ def test_safe_flips_flip_like_plain_ones_when_nothing_intersects():
     assert n > 0
     assert flip_edges(V, safe, sides, max_passes=3, safe=True) == n
     assert np.array_equal(plain, safe)
+
+
+def test_a_safe_flip_that_would_cut_another_sheet_is_refused():
+    # a ridge u-v over the valley w-x: the flip to w-x passes through a small
+    # vertical sheet under the ridge, which the ridge itself does not touch
+    V = np.array([[-1, 0, 0.5], [1, 0, 0.5], [0, -0.3, 0], [0, 0.3, 0],
+                  [-0.05, 0, 0.1], [0.05, 0, 0.1], [0, 0, -0.5]], float)
+    F = np.array([[0, 1, 2], [1, 0, 3], [4, 5, 6]], np.int64)
+    sides = np.array([[0, 1], [0, 1], [1, 2]])
+    assert self_intersections(V, F) == 0
+    plain = F.copy()
+    assert flip_edges(V, plain, sides) == 1 and self_intersections(V, plain) > 0
+    safe = F.copy()
+    assert flip_edges(V, safe, sides, safe=True) == 0 and np.array_equal(safe, F)
+    far = V.copy()
+    far[4:, 0] += 5.0  # the sheet elsewhere: the flip goes ahead
+    assert flip_edges(far, F.copy(), sides, safe=True) == 1

@@ -353,7 +353,7 @@ def _typical_cell(X, E):
 
 
 def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, E: np.ndarray, eta: float,
-                    max_rounds: int = 32) -> tuple[np.ndarray, int]:
+                    max_rounds: int = 32, return_grid: bool = False):
     """Stop the vertices of colliding pairs, in place in ``X1``, until the step is collision-free.
 
     The first round tests every pair; stopping a vertex changes only the
@@ -376,6 +376,11 @@ def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, E: np.ndarray
         Vertices held at ``X0``.
     pairs : int
         Colliding pairs found in the first round.
+    grid : (tuple, int)
+        With ``return_grid``: the :mod:`~fracture.refine.hashgrid` of the
+        swept boxes of the vertices and then the triangles (triangle ``f`` is
+        element ``n + f``), and ``n``. Its boxes contain the triangles at
+        ``X1`` too.
     """
     X0 = np.ascontiguousarray(X0, np.float64)
     F = np.ascontiguousarray(F, np.int64)
@@ -383,7 +388,7 @@ def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, E: np.ndarray
     n = len(X0)
     stopped = np.zeros(n, bool)
     if not len(E) and not len(F):
-        return stopped, 0
+        return (stopped, 0, None) if return_grid else (stopped, 0)
     eta2 = float(eta) ** 2
     ids = np.arange(n).reshape(-1, 1)
     vlo, vhi = _swept_boxes(X0, X1, ids, eta)
@@ -403,7 +408,7 @@ def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, E: np.ndarray
         first = pairs if first is None else first
         stop &= ~stopped  # pairs of stopped vertices only are at rest: contact they had at X0
         if not stop.any():
-            return stopped, first
+            return (stopped, first, (vt, n)) if return_grid else (stopped, first)
         X1[stop] = X0[stop]
         stopped |= stop
         # the elements on the newly stopped vertices, against everything
@@ -416,7 +421,7 @@ def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, E: np.ndarray
     # still colliding: nothing moves, and the state at X0 is intersection-free
     X1[:] = X0
     stopped[:] = True
-    return stopped, first
+    return (stopped, first, (vt, n)) if return_grid else (stopped, first)
 
 
 # -- static self-intersections ---------------------------------------------------------------
@@ -484,21 +489,20 @@ def _triangles_intersect(X, F, f, g, eps):
 
 @numba.njit(cache=True)
 def _pair_tests(X, F, pairs, eps, first):
-    """Which of the triangle ``pairs`` intersect: the count, a mask over the pairs; the first
-    ``len(first)`` intersecting pairs are written to ``first``."""
+    """How many of the triangle ``pairs`` intersect; the first ``len(first)`` of them are written to ``first``."""
     count = 0
-    hit = np.zeros(pairs.shape[0], np.bool_)
     for i in range(pairs.shape[0]):
         if _triangles_intersect(X, F, pairs[i, 0], pairs[i, 1], eps):
             if count < first.shape[0]:
                 first[count, 0], first[count, 1] = pairs[i, 0], pairs[i, 1]
             count += 1
-            hit[i] = True
-    return count, hit
+    return count
 
 
-def _triangle_grid(V, F, lo, hi, faces):
-    return hashgrid.build(lo, hi, 1.0 / hashgrid.cell_size(lo, hi, _typical_cell(V, F[:, :2])), F[faces])
+def triangle_grid(V: np.ndarray, F: np.ndarray) -> tuple:
+    """A :mod:`~fracture.refine.hashgrid` of the triangles' bounding boxes."""
+    lo, hi = _swept_boxes(V, V, F, 0.0)
+    return hashgrid.build(lo, hi, 1.0 / hashgrid.cell_size(lo, hi, _typical_cell(V, F[:, :2])), F)
 
 
 def self_intersections(V: np.ndarray, F: np.ndarray, report: int = 0) -> int | tuple[int, np.ndarray]:
@@ -511,28 +515,5 @@ def self_intersections(V: np.ndarray, F: np.ndarray, report: int = 0) -> int | t
     first = np.zeros((report, 2), np.int64)
     count = 0
     if len(F) >= 2:
-        lo, hi = _swept_boxes(V, V, F, 0.0)
-        count, _ = _pair_tests(V, F, hashgrid.pairs(_triangle_grid(V, F, lo, hi, slice(None)), -1, False), _EPS, first)
+        count = _pair_tests(V, F, hashgrid.pairs(triangle_grid(V, F), -1, False), _EPS, first)
     return (int(count), first[:min(count, report)]) if report else int(count)
-
-
-def faces_intersecting(V: np.ndarray, F: np.ndarray, query: np.ndarray) -> np.ndarray:
-    """Which of the triangles ``query`` meet another triangle of ``F`` (other than at shared vertices or edges)."""
-    V = np.ascontiguousarray(V, np.float64)
-    F = np.ascontiguousarray(F, np.int64)
-    query = np.ascontiguousarray(query, np.int64)
-    if len(F) < 2 or not len(query):
-        return np.zeros(len(query), bool)
-    lo, hi = _swept_boxes(V, V, F, 0.0)
-    if 8 * len(query) > len(F):
-        # many queries: a grid of all triangles, looked up by the queries
-        pairs = _query_pairs(_triangle_grid(V, F, lo, hi, slice(None)), lo, hi, query, 0, len(F), 0, False)
-        hit_pairs = _pair_tests(V, F, pairs, _EPS, np.zeros((0, 2), np.int64))[1]
-        return np.isin(query, pairs[hit_pairs, 0])
-    # a few queries (the flips of one pass): a grid of the queries only, and
-    # every triangle looks itself up in it (a scan instead of a grid of all)
-    grid = _triangle_grid(V, F, lo[query], hi[query], query)
-    pairs = _query_pairs(grid, lo, hi, np.arange(len(F)), 0, len(query), 0, True)
-    pairs[:, 0] = query[pairs[:, 0]]
-    hit_pairs = _pair_tests(V, F, pairs, _EPS, np.zeros((0, 2), np.int64))[1]
-    return np.isin(query, pairs[hit_pairs, 0])

@@ -263,12 +263,13 @@ class Refiner:
         self.boundary = boundary  # flips keep the boundary: valid until the next splits
         self.project_to_exterior(boundary, X1)
         clock = log.tick("boundary", clock)
-        stopped, _ = stop_collisions(m.V, X1, m.F, row_edges(m.F, table.first), p.thickness * self.h)
+        stopped, _, grid = stop_collisions(m.V, X1, m.F, row_edges(m.F, table.first), p.thickness * self.h,
+                                           return_grid=True)
         self.hold[stopped] = p.hold
         clock = log.tick("collisions", clock)
         moved = np.linalg.norm(X1 - m.V, axis=1)
         m.V = X1
-        flip_edges(m.V, m.F, m.sides, max_passes=3, safe=True)
+        flip_edges(m.V, m.F, m.sides, max_passes=3, safe=True, grid=grid)
         clock = log.tick("flips", clock)
         log.stopped.append(int(stopped.sum()))
         return float(moved[used].mean() / self.h) if used.any() else 0.0

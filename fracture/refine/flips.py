@@ -13,21 +13,19 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from fracture.refine.collide import _cross, _dot, _pt, _sub, faces_intersecting
+from fracture.refine import hashgrid
+from fracture.refine.collide import _EPS, _cross, _dot, _pt, _sub, _triangles_intersect, triangle_grid
 from fracture.refine.kernels import _edge_table, _find_edge
 
 
-@numba.njit(cache=True)
-def _angle(V, a, b, c):
-    """Angle at vertex ``a`` of triangle (a, b, c) (scalar code: no temporary arrays)."""
+@numba.njit(cache=True, inline="always")
+def _cot(V, a, b, c):
+    """Cotangent of the angle at vertex ``a`` of triangle (a, b, c), +inf for a degenerate triangle."""
     ux, uy, uz = V[b, 0] - V[a, 0], V[b, 1] - V[a, 1], V[b, 2] - V[a, 2]
     vx, vy, vz = V[c, 0] - V[a, 0], V[c, 1] - V[a, 1], V[c, 2] - V[a, 2]
-    nu = np.sqrt(ux * ux + uy * uy + uz * uz)
-    nv = np.sqrt(vx * vx + vy * vy + vz * vz)
-    if nu == 0.0 or nv == 0.0:
-        return 0.0
-    x = (ux * vx + uy * vy + uz * vz) / (nu * nv)
-    return np.arccos(min(1.0, max(-1.0, x)))
+    nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+    sine = np.sqrt(nx * nx + ny * ny + nz * nz)
+    return (ux * vx + uy * vy + uz * vz) / sine if sine > 0.0 else np.inf
 
 
 @numba.njit(cache=True)
@@ -59,7 +57,9 @@ def _flip_pass(V, F, sides, eid, count, first, second, start, hi, row, pairs, do
         x = F[g, (kb + 2) % 3]
         if w == x:
             continue
-        if _angle(V, w, u, v) + _angle(V, x, v, u) <= np.pi + 1e-12:
+        # the angles opposite the edge add up to more than pi: cot a + cot b < 0
+        # (sin(a + b) = sin a sin b (cot a + cot b), with both angles in (0, pi))
+        if _cot(V, w, u, v) + _cot(V, x, v, u) >= -1e-12:
             continue
         pair = (min(w, x), max(w, x))
         if _find_edge(start, hi, row, eid, w, x) >= 0 or pair in new_edges:
@@ -97,14 +97,84 @@ def _pair_buffer(m: int, passes: int) -> np.ndarray:
     return np.empty((passes * (m // 2 + 1), 2), np.int64)
 
 
+@numba.njit(cache=True)
+def _join(nxt, root, f, g):
+    """Merge the clusters of triangles f and g: circular member lists ``nxt``, union-find ``root``."""
+    while root[f] != f:
+        root[f] = root[root[f]]
+        f = root[f]
+    while root[g] != g:
+        root[g] = root[root[g]]
+        g = root[g]
+    if f != g:
+        root[g] = f
+        nxt[f], nxt[g] = nxt[g], nxt[f]  # splices the two cycles into one
+
+
+@numba.njit(cache=True, inline="always")
+def _boxes_apart(V, F, f, c):
+    """The bounding boxes of triangles f and c do not overlap."""
+    for k in range(3):
+        if (max(V[F[f, 0], k], V[F[f, 1], k], V[F[f, 2], k]) < min(V[F[c, 0], k], V[F[c, 1], k], V[F[c, 2], k])
+                or max(V[F[c, 0], k], V[F[c, 1], k], V[F[c, 2], k]) < min(V[F[f, 0], k], V[F[f, 1], k], V[F[f, 2], k])):
+            return True
+    return False
+
+
+@numba.njit(cache=True, inline="always")
+def _meet(V, F, f, c, eps):
+    return not _boxes_apart(V, F, f, c) and _triangles_intersect(V, F, f, c, eps)
+
+
+@numba.njit(cache=True)
+def _unsafe(V, F, grid, first, pairs, nxt, eps):
+    """Which flipped ``pairs`` meet another triangle of the surface.
+
+    ``grid`` holds boxes that contained the triangles before the flips
+    (triangle ``f`` as element ``first + f``; elements below ``first`` are
+    not triangles). A flipped triangle lies inside the boxes of the triangles
+    it was flipped with (its cluster, linked by ``nxt``), so every triangle
+    near a new pair is found through some member of its cluster, and the
+    whole cluster is tested.
+    """
+    buf = np.empty(256, np.int64)
+    lo = np.empty(3)
+    hi = np.empty(3)
+    bad = np.zeros(pairs.shape[0], np.bool_)
+    for i in range(pairs.shape[0]):
+        f, g = pairs[i, 0], pairs[i, 1]
+        for c in range(3):
+            lo[c] = min(V[F[f, 0], c], V[F[f, 1], c], V[F[f, 2], c], V[F[g, 0], c], V[F[g, 1], c], V[F[g, 2], c])
+            hi[c] = max(V[F[f, 0], c], V[F[f, 1], c], V[F[f, 2], c], V[F[g, 0], c], V[F[g, 1], c], V[F[g, 2], c])
+        buf, k = hashgrid.gather(grid, lo, hi, buf)
+        for j in range(k):
+            if buf[j] < first:
+                continue
+            c = start = buf[j] - first
+            while True:
+                if c != f and c != g and (_meet(V, F, f, c, eps) or _meet(V, F, g, c, eps)):
+                    bad[i] = True
+                    break
+                c = nxt[c]
+                if c == start:
+                    break
+            if bad[i]:
+                break
+    return bad
+
+
 def flip_edges(V: np.ndarray, F: np.ndarray, sides: np.ndarray, max_passes: int = 8,
-               safe: bool = False) -> int:
+               safe: bool = False, grid: tuple | None = None) -> int:
     """Flip non-Delaunay edges of ``F`` in place (see the module notes); returns the number of flips.
 
     ``F`` must be a C-contiguous int64 array (it is edited in place). A flip
     replaces the two triangles of a non-planar quad by the other two: with
     ``safe``, flips whose new triangles meet the rest of the surface are
-    undone (a static test of the flipped triangles only).
+    undone, and the flips kept are tested again until none meets anything
+    (a static test of the flipped triangles against their surroundings).
+    ``grid`` may give a :mod:`~fracture.refine.hashgrid` of boxes that
+    contain the triangles, as ``(grid, first)`` with triangle ``f`` its
+    element ``first + f`` (the collision step's); else one is built.
     """
     if F.dtype != np.int64 or not F.flags.c_contiguous:
         raise TypeError("F must be a C-contiguous int64 array")
@@ -114,16 +184,25 @@ def flip_edges(V: np.ndarray, F: np.ndarray, sides: np.ndarray, max_passes: int 
         return int(_flip(V, F, sides, int(max_passes), _pair_buffer(len(F), max_passes)))
     total = 0
     pairs = _pair_buffer(len(F), 1)
+    grid = None
+    nxt, root = np.arange(len(F)), np.arange(len(F))
     for _ in range(max_passes):  # one pass at a time: a triangle takes part in one flip per pass
         before = F.copy()
         flipped = int(_flip(V, F, sides, 1, pairs))
         if not flipped:
             break
-        done = pairs[:flipped]
-        faces = np.unique(done)
-        bad = faces[faces_intersecting(V, F, faces)]
-        undo = np.isin(done, bad).any(axis=1)
-        back = done[undo].ravel()
-        F[back] = before[back]
-        total += flipped - int(undo.sum())
+        if grid is None:  # the boxes from before the first flip
+            grid = triangle_grid(V, before), 0
+        done = pairs[:flipped].copy()
+        for f, g in done:
+            _join(nxt, root, f, g)
+        kept = np.ones(flipped, bool)
+        while True:
+            bad = np.flatnonzero(kept)[_unsafe(V, F, grid[0], grid[1], done[kept], nxt, _EPS)]
+            if not len(bad):
+                break
+            back = done[bad].ravel()
+            F[back] = before[back]
+            kept[bad] = False
+        total += int(kept.sum())
     return total
