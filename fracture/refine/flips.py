@@ -98,17 +98,19 @@ def _pair_buffer(m: int, passes: int) -> np.ndarray:
 
 
 @numba.njit(cache=True)
-def _join(nxt, root, f, g):
-    """Merge the clusters of triangles f and g: circular member lists ``nxt``, union-find ``root``."""
-    while root[f] != f:
-        root[f] = root[root[f]]
-        f = root[f]
-    while root[g] != g:
-        root[g] = root[root[g]]
-        g = root[g]
-    if f != g:
-        root[g] = f
-        nxt[f], nxt[g] = nxt[g], nxt[f]  # splices the two cycles into one
+def _join(nxt, root, pairs):
+    """Merge the clusters of the triangles of each flipped pair: circular member lists ``nxt``, union-find ``root``."""
+    for i in range(pairs.shape[0]):
+        f, g = pairs[i, 0], pairs[i, 1]
+        while root[f] != f:
+            root[f] = root[root[f]]
+            f = root[f]
+        while root[g] != g:
+            root[g] = root[root[g]]
+            g = root[g]
+        if f != g:
+            root[g] = f
+            nxt[f], nxt[g] = nxt[g], nxt[f]  # splices the two cycles into one
 
 
 @numba.njit(cache=True, inline="always")
@@ -194,8 +196,7 @@ def flip_edges(V: np.ndarray, F: np.ndarray, sides: np.ndarray, max_passes: int 
         if grid is None:  # the boxes from before the first flip
             grid = triangle_grid(V, before), 0
         done = pairs[:flipped].copy()
-        for f, g in done:
-            _join(nxt, root, f, g)
+        _join(nxt, root, done)
         kept = np.ones(flipped, bool)
         while True:
             bad = np.flatnonzero(kept)[_unsafe(V, F, grid[0], grid[1], done[kept], nxt, _EPS)]
