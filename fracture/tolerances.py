@@ -53,3 +53,9 @@ tol.report = 1e-5
 # the edge is on a crack front; the bisection locating where an extended cut
 # crosses B stops when its bracket is shorter than this (then projects onto B).
 tol.on_surface = 1e-5
+
+# Refinement: a boundary vertex farther than this from B (relative to the
+# finest grid cell) is off B; the loop does not end while one is (a vertex
+# split from a boundary edge starts on the chord and reaches B the iteration
+# after, unless a collision stops its projection).
+tol.on_b = 1e-9

@@ -23,6 +23,10 @@ One iteration:
    surface never passes through itself;
 6. edge flips remove slim triangles (:mod:`fracture.refine.flips`).
 
+The loop ends when the mean move falls below ``tolerance``, or once the
+triangle budget is spent and an iteration raises the energy (see
+:meth:`Refiner.run`), but not while a boundary vertex is off B.
+
 The per-element work is compiled (:mod:`fracture.refine.kernels`); what is
 left in NumPy is O(m) array arithmetic and small sorts of the split candidates.
 """
@@ -40,6 +44,7 @@ from fracture.refine.flips import flip_edges
 from fracture.refine.flow import energy, sample_displacement, velocity
 from fracture.refine.kernels import EdgeTable, edge_table, face_geometry, first_per_group, limit_moves, row_edges
 from fracture.refine.mesh import RefineMesh
+from fracture.tolerances import tol
 from fracture.topology import boundary_conormals
 
 
@@ -67,6 +72,7 @@ class IterationLog:
     boundary_error: list = field(default_factory=list)
     stopped: list = field(default_factory=list)  # vertices stopped by collisions
     seconds: dict = field(default_factory=dict)  # time per phase, summed over iterations
+    stop: str = ""  # why the iterations ended
 
     def tick(self, phase: str, since: float) -> float:
         now = time.perf_counter()
@@ -100,6 +106,7 @@ class Refiner:
         self._field_V = np.zeros((0, 3))
         self._psi, self._grad = np.zeros(0), np.zeros((0, 3))
         self.boundary = np.zeros(0, np.int64)  # boundary vertices of the last iteration
+        self.full = False  # the triangle budget has stopped a wanted split
 
     def field(self, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         psi, grad = self.pyramid.value_and_gradient(P)
@@ -177,6 +184,7 @@ class Refiner:
         """
         m, p = self.mesh, self.params
         if len(m.F) >= p.max_triangles:
+            self.full = True
             return 0
         row_count = table.row_count
         special = (row_count != 2).reshape(-1, 3)  # boundary or junction edges of every triangle
@@ -222,6 +230,7 @@ class Refiner:
         # ... and a triangle takes part in one split at most: of two chosen
         # edges on a triangle, the later one is dropped everywhere
         good = table.independent(eid)
+        self.full |= int(good.sum()) > budget
         good &= np.cumsum(good) <= budget
         ef, eid = ef[good], eid[good]
         on, which = table.rows_of(eid)
@@ -230,7 +239,9 @@ class Refiner:
         E = np.stack([m.F[ef, k_edge[ef]], m.F[ef, (k_edge[ef] + 1) % 3]], 1)
         new_edge = m.split_edges(E, t[ef], rows=on, which=which) if len(ef) else np.zeros(0, np.int64)
         # 1-to-3 splits of the others
-        tf = np.flatnonzero(want & ~has_edge & ~busy)[: max(0, budget - len(ef))]
+        tf = np.flatnonzero(want & ~has_edge & ~busy)
+        self.full |= len(tf) > budget - len(ef)
+        tf = tf[: max(0, budget - len(ef))]
         if len(tf):
             m.split_triangles(tf, bary[tf])
         return len(new_edge) + len(tf)
@@ -275,16 +286,26 @@ class Refiner:
         return float(moved[used].mean() / self.h) if used.any() else 0.0
 
     def run(self, callback=None) -> IterationLog:
-        """Iterate until the mean move is below ``tolerance`` or ``iterations`` are done.
+        """Iterate until the surface settles or ``iterations`` are done.
 
-        ``callback(it, refiner)`` is called after every iteration.
+        The surface has settled when the mean move is below ``tolerance``, or
+        when the triangle budget is spent and an iteration raised the energy:
+        the flow then oscillates about the minimum it can reach with these
+        triangles (steps on the finest triangles overshoot), and further
+        iterations with smaller steps only wander about it. Neither ends the
+        loop while a boundary vertex is off B (a new vertex on a boundary edge
+        whose first projection a collision stopped).
+        ``callback(it, refiner)`` is called after every iteration; the reason
+        for stopping is ``log.stop``.
         """
         p = self.params
+        self.log.stop = "iterations"
         for it in range(p.iterations):
             move = self.iterate()
             clock = time.perf_counter()
             E = energy(self.mesh.V, self.mesh.F, self.psi)
-            if self.log.energy and E > self.log.energy[-1]:
+            rose = bool(self.log.energy) and E > self.log.energy[-1]
+            if rose:
                 self.scale *= 0.5
             else:
                 self.scale = min(1.0, 1.2 * self.scale)
@@ -295,6 +316,12 @@ class Refiner:
             self.log.tick("bookkeeping", clock)
             if callback is not None:
                 callback(it, self)
+            if self.log.boundary_error[-1] > tol.on_b * self.h:
+                continue  # a boundary vertex is off B: project it first
             if move < p.tolerance:
+                self.log.stop = "moves below tolerance"
+                break
+            if self.full and rose:
+                self.log.stop = "triangle budget spent and the energy rose"
                 break
         return self.log

@@ -186,7 +186,6 @@ def flip_edges(V: np.ndarray, F: np.ndarray, sides: np.ndarray, max_passes: int 
         return int(_flip(V, F, sides, int(max_passes), _pair_buffer(len(F), max_passes)))
     total = 0
     pairs = _pair_buffer(len(F), 1)
-    grid = None
     nxt, root = np.arange(len(F)), np.arange(len(F))
     for _ in range(max_passes):  # one pass at a time: a triangle takes part in one flip per pass
         before = F.copy()

@@ -76,6 +76,7 @@ def refine_stage(ctx: RunContext) -> None:
     ctx.counts.update(refined_fracture_triangles=int(len(mesh.F)), refined_fracture_vertices=int(len(mesh.V)),
                       iterations=len(log.energy))
     ctx.stats["refine"] = {
+        "stopped_because": log.stop,
         "energy": [float(e) for e in log.energy],
         "mean_move_cells": [float(m) for m in log.mean_move],
         "triangles": [int(t) for t in log.triangles],
