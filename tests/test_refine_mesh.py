@@ -6,6 +6,8 @@ import numpy as np
 import pytest
 
 from fracture.topology import face_frames
+from fracture.primitives import sheet
+from fracture.refine.kernels import spatial_order
 from fracture.refine.mesh import RefineMesh
 from fracture.topology import unique_edges
 
@@ -71,3 +73,42 @@ def test_tree_reproduces_every_vertex_from_the_coarse_ones():
         e, _ = unique_edges(still.F)
         still.split_edges(e[:1], np.array([0.3]))
     assert np.allclose(still.tree_matrix() @ still.V[: still.n_coarse], still.V)
+
+
+def test_renumbering_keeps_the_surface_and_the_tree():
+    """Splits between renumberings: the tree still gives every vertex, and creation order comes back."""
+    rng = np.random.default_rng(1)
+    m, ref = junction(), junction()  # the same splits on a mesh that is never renumbered
+    for _ in range(5):
+        f = rng.choice(len(m.F), size=2, replace=False)
+        w = rng.dirichlet([1, 1, 1], size=2)
+        g = [int(np.flatnonzero((ref.F == m.label[m.F[i]]).all(axis=1))[0]) for i in f]
+        ref.split_triangles(g, w)
+        m.split_triangles(f, w)
+        m.reorder(rng.permutation(len(m.V)), rng.permutation(len(m.F)))
+    assert sorted(m.label) == list(range(len(m.V)))
+    # the tree maps the coarse vertices (creation order) to every vertex in the current order
+    coarse = m.V[np.argsort(m.label)[: m.n_coarse]]
+    assert np.allclose(m.tree_matrix() @ coarse, m.V)
+    new = m.in_creation_order()
+    assert (m.label == np.arange(len(m.V))).all() and len(new) == len(m.V)
+    assert np.array_equal(m.V, ref.V)
+    assert {tuple(t) for t in m.F.tolist()} == {tuple(t) for t in ref.F.tolist()}  # same corners, same order
+    assert (m.tree_matrix() != ref.tree_matrix()).nnz == 0
+    assert np.allclose(np.concatenate(m.created), m.V[m.n_coarse:])
+
+
+def test_spatial_order_puts_neighbours_near_in_memory():
+    V, F = sheet(lambda u, v: np.stack([u, v, 0.1 * np.sin(3 * u)], 1), (0, 1), (0, 1), 60, 60)
+    rng = np.random.default_rng(0)
+    shuffle = rng.permutation(len(V))
+    m = RefineMesh.from_coarse(V[shuffle], np.argsort(shuffle)[F], np.tile([0, 1], (len(F), 1)))
+    m.F = m.F[rng.permutation(len(F))]
+    spread = lambda: np.abs(np.diff(m.F[:, [0, 1, 2, 0]], axis=1)).mean()  # noqa: E731
+    shuffled = spread()
+    vorder, forder = spatial_order(m.V, m.F)
+    assert sorted(vorder) == list(range(len(V))) and sorted(forder) == list(range(len(F)))
+    m.reorder(vorder, forder)
+    assert spread() < 0.1 * shuffled  # edges join vertices close in the numbering
+    lowest = m.F.min(axis=1)
+    assert (np.diff(lowest) >= 0).all()  # triangles by their first vertex

@@ -42,7 +42,8 @@ from fracture.exterior import Exterior
 from fracture.refine.collide import stop_collisions
 from fracture.refine.flips import flip_edges
 from fracture.refine.flow import energy, sample_displacement, velocity
-from fracture.refine.kernels import EdgeTable, edge_table, face_geometry, first_per_group, limit_moves, row_edges
+from fracture.refine.kernels import (EdgeTable, edge_table, face_geometry, first_per_group, limit_moves, row_edges,
+                                     spatial_order)
 from fracture.refine.mesh import RefineMesh
 from fracture.tolerances import tol
 from fracture.topology import boundary_conormals
@@ -107,6 +108,7 @@ class Refiner:
         self._psi, self._grad = np.zeros(0), np.zeros((0, 3))
         self.boundary = np.zeros(0, np.int64)  # boundary vertices of the last iteration
         self.full = False  # the triangle budget has stopped a wanted split
+        self._ordered = 0  # vertex count when the mesh was last put in spatial order
 
     def field(self, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         psi, grad = self.pyramid.value_and_gradient(P)
@@ -128,6 +130,30 @@ class Refiner:
     def psi(self) -> np.ndarray:
         """Unshifted psi at the current vertices."""
         return self.vertex_field()[0]
+
+    # -- memory order -----------------------------------------------------------------------
+    def _renumber(self, vorder: np.ndarray, forder: np.ndarray | None = None) -> None:
+        """Renumber the mesh (:meth:`RefineMesh.reorder`) and the per-vertex state with it."""
+        new = self.mesh.reorder(vorder, forder)
+        k = len(self._field_V)  # vertices with cached psi: the first k before the renumbering
+        cached = np.zeros(len(vorder), bool)
+        cached[:k] = True
+        if not cached[vorder].all():  # new vertices are spread out: evaluate them afresh
+            self._field_V, self._psi, self._grad = np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3))
+        else:
+            self._field_V, self._psi, self._grad = self._field_V[vorder], self._psi[vorder], self._grad[vorder]
+        self.hold = self.hold[vorder] if len(self.hold) == len(vorder) else np.zeros(len(vorder), np.int64)
+        if len(self.velocity) == len(vorder):
+            self.velocity = self.velocity[vorder]
+        self.boundary = new[self.boundary]
+
+    def put_in_spatial_order(self) -> None:
+        """Number vertices along a Morton curve and triangles by their first vertex
+        (:func:`~fracture.refine.kernels.spatial_order`): the iterations' loops then read
+        neighbours from nearby memory. Done when the mesh grew by a fifth since the last time."""
+        if len(self.mesh.V) > 1.2 * self._ordered:
+            self._renumber(*spatial_order(self.mesh.V, self.mesh.F))
+            self._ordered = len(self.mesh.V)
 
     # -- topology ---------------------------------------------------------------------------
     def edges(self) -> EdgeTable:
@@ -250,6 +276,8 @@ class Refiner:
         """One iteration (module notes); returns the mean move in grid cells."""
         m, p, log = self.mesh, self.params, self.log
         clock = time.perf_counter()
+        self.put_in_spatial_order()
+        clock = log.tick("order", clock)
         table = self.edges()
         v, psi, boundary = self._velocity(table)
         used = np.bincount(m.F.ravel(), minlength=len(m.V)) > 0
@@ -295,8 +323,9 @@ class Refiner:
         iterations with smaller steps only wander about it. Neither ends the
         loop while a boundary vertex is off B (a new vertex on a boundary edge
         whose first projection a collision stopped).
-        ``callback(it, refiner)`` is called after every iteration; the reason
-        for stopping is ``log.stop``.
+        ``callback(it, refiner)`` is called after every iteration (the mesh
+        may be numbered in spatial order then); the reason for stopping is
+        ``log.stop``. The mesh ends numbered in creation order.
         """
         p = self.params
         self.log.stop = "iterations"
@@ -324,4 +353,5 @@ class Refiner:
             if self.full and rose:
                 self.log.stop = "triangle budget spent and the energy rose"
                 break
+        self._renumber(np.argsort(self.mesh.label))  # creation order: the tree's, coarse vertices first
         return self.log

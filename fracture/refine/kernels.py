@@ -12,7 +12,9 @@ is one pass:
   over triangles (the scatter-add NumPy needs bincounts for);
 * :func:`limit_moves` caps each move by its shortest incident edge;
 * :func:`sample_displacement` moves one sample per triangle by Eq. 3 with the
-  triangle as its neighbourhood and measures how far it leaves the triangle.
+  triangle as its neighbourhood and measures how far it leaves the triangle;
+* :func:`spatial_order` numbers vertices along a Morton curve and triangles
+  by their first vertex, so that neighbours are near in memory.
 """
 
 from __future__ import annotations
@@ -272,3 +274,62 @@ def sample_displacement(P, T, psi_p, grad_p, psi_T, dt):
         if area > 0.0:
             out[s, 0], out[s, 1], out[s, 2] = -dt * gx / area, -dt * gy / area, -dt * gz / area
     return out
+
+
+@numba.njit(cache=True, inline="always")
+def _spread(x):
+    """The low 21 bits of ``x`` spread to every third bit."""
+    x &= 0x1FFFFF
+    x = (x | (x << 32)) & 0x1F00000000FFFF
+    x = (x | (x << 16)) & 0x1F0000FF0000FF
+    x = (x | (x << 8)) & 0x100F00F00F00F00F
+    x = (x | (x << 4)) & 0x10C30C30C30C30C3
+    x = (x | (x << 2)) & 0x1249249249249249
+    return x
+
+
+@numba.njit(cache=True)
+def _morton(V):
+    lo = np.empty(3)
+    size = 0.0
+    for c in range(3):
+        lo[c] = V[:, c].min()
+        size = max(size, V[:, c].max() - lo[c])
+    s = (2**21 - 1) / size if size > 0.0 else 0.0
+    code = np.empty(V.shape[0], np.int64)
+    for i in range(V.shape[0]):
+        code[i] = (_spread(np.int64((V[i, 0] - lo[0]) * s)) | (_spread(np.int64((V[i, 1] - lo[1]) * s)) << 1)
+                   | (_spread(np.int64((V[i, 2] - lo[2]) * s)) << 2))
+    return code
+
+
+@numba.njit(cache=True)
+def _faces_by_first_vertex(F, new, n):
+    """Triangles renumbered by ``new`` (old vertex -> new) and ordered by their lowest new vertex (counting sort)."""
+    m = F.shape[0]
+    start = np.zeros(n + 1, np.int64)
+    for f in range(m):
+        start[min(new[F[f, 0]], new[F[f, 1]], new[F[f, 2]]) + 1] += 1
+    for v in range(n):
+        start[v + 1] += start[v]
+    order = np.empty(m, np.int64)
+    for f in range(m):
+        k = min(new[F[f, 0]], new[F[f, 1]], new[F[f, 2]])
+        order[start[k]] = f
+        start[k] += 1
+    return order
+
+
+def spatial_order(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Vertex and triangle orders that keep neighbours near in memory.
+
+    Vertices go along a Morton (Z-order) curve through their bounding box,
+    triangles by their lowest vertex in that order. Returns ``(vorder,
+    forder)``: new vertex ``i`` is old vertex ``vorder[i]``, new triangle
+    ``j`` old triangle ``forder[j]``.
+    """
+    V = np.ascontiguousarray(V, np.float64)
+    vorder = np.argsort(_morton(V), kind="stable") if len(V) else np.zeros(0, np.int64)
+    new = np.empty(len(V), np.int64)
+    new[vorder] = np.arange(len(V))
+    return vorder, _faces_by_first_vertex(np.ascontiguousarray(F, np.int64), new, len(V))

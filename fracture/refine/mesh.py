@@ -8,6 +8,11 @@ vertices and weights at the moment it was made. :meth:`RefineMesh.tree_matrix`
 composes the tree into one sparse map from the coarse vertices to every
 vertex (rows sum to 1), which Section 5 uses to carry the coarse animation's
 deformation to the refined surface.
+
+The refinement renumbers vertices and triangles now and then so that
+neighbours stay near in memory (:meth:`RefineMesh.reorder`); the tree speaks
+of vertices by creation order (``label``), and
+:meth:`RefineMesh.in_creation_order` restores that order.
 """
 
 from __future__ import annotations
@@ -30,12 +35,16 @@ class RefineMesh:
     F : (m, 3) int
     sides : (m, 2) int
     n_coarse : int
-        The first ``n_coarse`` vertices are the coarse surface's.
+        The coarse surface's vertices are the first ``n_coarse`` in creation order.
     parents, weights : list of (k, 3) arrays
-        Per batch of new vertices (in creation order), their parents and
-        barycentric weights (an edge split has a zero third weight).
+        Per batch of new vertices (in creation order), their parents (by
+        creation order) and barycentric weights (an edge split has a zero
+        third weight).
     created : list of (k, 3) arrays
         Positions of the new vertices when they were made (for checks).
+    label : (n,) int
+        Creation order of every vertex (a permutation of ``0..n-1``; the
+        identity unless :meth:`reorder` was called).
     """
 
     V: np.ndarray
@@ -45,17 +54,40 @@ class RefineMesh:
     parents: list = field(default_factory=list)
     weights: list = field(default_factory=list)
     created: list = field(default_factory=list)
+    label: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.label is None:
+            self.label = np.arange(len(self.V))
 
     @classmethod
     def from_coarse(cls, V, F, sides) -> RefineMesh:
         V = np.array(V, np.float64)
         return cls(V, np.array(F, np.int64), np.array(sides, np.int64), n_coarse=len(V))
 
+    def reorder(self, vorder: np.ndarray, forder: np.ndarray | None = None) -> np.ndarray:
+        """Renumber the vertices (new vertex ``i`` is old ``vorder[i]``) and the triangles
+        (new triangle ``j`` is old ``forder[j]``); returns the old-to-new vertex map."""
+        vorder = np.asarray(vorder, np.int64)
+        new = np.empty(len(vorder), np.int64)
+        new[vorder] = np.arange(len(vorder))
+        self.V, self.label = self.V[vorder], self.label[vorder]
+        F = new[self.F]
+        if forder is not None:
+            F, self.sides = F[forder], self.sides[forder]
+        self.F = np.ascontiguousarray(F)
+        return new
+
+    def in_creation_order(self) -> np.ndarray:
+        """Number the vertices in creation order again (coarse ones first); returns the old-to-new map."""
+        return self.reorder(np.argsort(self.label))
+
     def _add_vertices(self, parents: np.ndarray, weights: np.ndarray) -> np.ndarray:
         P = np.einsum("kj,kjc->kc", weights, self.V[parents])
         ids = np.arange(len(self.V), len(self.V) + len(P))
         self.V = np.concatenate([self.V, P])
-        self.parents.append(parents.astype(np.int64))
+        self.label = np.concatenate([self.label, ids])  # vertices are never removed: the next in creation order
+        self.parents.append(self.label[parents].astype(np.int64))
         self.weights.append(weights.astype(np.float64))
         self.created.append(P.copy())
         return ids
@@ -104,7 +136,8 @@ class RefineMesh:
         return p
 
     def tree_matrix(self) -> sp.csr_matrix:
-        """Sparse ``(n, n_coarse)`` map from coarse vertices to every vertex (rows sum to 1)."""
+        """Sparse ``(n, n_coarse)`` map from the coarse vertices (in creation order) to every vertex
+        (in the current order); rows sum to 1."""
         W = sp.identity(self.n_coarse, format="csr")
         for parents, weights in zip(self.parents, self.weights):
             k = len(parents)
@@ -112,4 +145,6 @@ class RefineMesh:
                               shape=(k, W.shape[0]))
             W = sp.vstack([W, P @ W], format="csr")
         W.eliminate_zeros()
+        if not np.array_equal(self.label, np.arange(len(self.label))):
+            W = W[self.label]
         return W
