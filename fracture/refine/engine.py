@@ -12,11 +12,15 @@ One iteration:
    leaves the triangle by more than ``split_distance`` of the step, it becomes
    a vertex (1-to-3 split, or an edge split through every triangle on the
    edge). Samples closer than ``min_edge`` grid cells to a corner are skipped;
-3. the moves: explicit steps are stable because no vertex moves more than
-   ``max_move`` of its shortest edge nor more than a grid cell (no vertex can
-   overtake its neighbours); an iteration that raises the energy halves the
-   following steps (overshoot at the bottom of a valley of psi), and they grow
-   back by 20 % per iteration that lowers it;
+3. the moves: no vertex moves more than ``max_move`` of its shortest edge nor
+   more than a grid cell (no vertex can overtake its neighbours), and each
+   vertex scales its move by its own gain: a vertex whose velocity turns back
+   from the last iteration's (it stepped over the bottom of its valley of psi,
+   or the area term of its small triangles overshot) halves its gain, the
+   others regrow theirs by 20 % up to 1. On the finest triangles the area
+   term is too stiff for any one step size (stable steps scale with the
+   squared edge length); the gains damp the vertices that oscillate and leave
+   the others at full speed;
 4. boundary vertices are projected onto the exterior B (libigl's AABB tree);
 5. continuous collision detection from the old to the new positions stops the
    vertices of every colliding pair (:mod:`fracture.refine.collide`), so the
@@ -94,13 +98,13 @@ class Refiner:
         # a constant surface tension and leaves grad psi unchanged.
         values = pyramid.levels[0]
         self.offset = params.tension * float(np.ptp(values)) - float(values.min())
-        self.scale = 1.0  # halved when an iteration raises the energy (overshoot), regrown after
         self.B = Exterior(BV, BF)  # trees built once: every iteration queries them
         # speeds below this (psi changing by 1 % of its range per grid cell)
         # count as at rest: dt stops growing, the moves shrink, the loop ends
         self.slow = 0.01 * float(np.ptp(values)) / self.h
         self.dt = 0.0
         self.velocity = np.zeros_like(mesh.V)  # of the last step, per vertex (for snapshots)
+        self.gain = np.ones(len(mesh.V))  # per-vertex step factor (halved when a vertex turns back)
         self.hold = np.zeros(len(mesh.V), np.int64)  # iterations a stopped vertex stays stopped
         # psi (unshifted) and grad psi at the vertices, for the positions in _field_V: a vertex is
         # evaluated again only when it moved or is new (see vertex_field)
@@ -143,6 +147,7 @@ class Refiner:
         else:
             self._field_V, self._psi, self._grad = self._field_V[vorder], self._psi[vorder], self._grad[vorder]
         self.hold = self.hold[vorder] if len(self.hold) == len(vorder) else np.zeros(len(vorder), np.int64)
+        self.gain = self.gain[vorder] if len(self.gain) == len(vorder) else np.ones(len(vorder))
         if len(self.velocity) == len(vorder):
             self.velocity = self.velocity[vorder]
         self.boundary = new[self.boundary]
@@ -201,7 +206,7 @@ class Refiner:
     def _step_size(self, v: np.ndarray, used: np.ndarray) -> float:
         speed = np.linalg.norm(v[used], axis=1)
         typical = max(float(np.median(speed)) if len(speed) else 0.0, self.slow)
-        return self.scale * self.params.step * self.h / typical
+        return self.params.step * self.h / typical
 
     def remesh(self, table: EdgeTable, v: np.ndarray, psi: np.ndarray, dt: float) -> int:
         """One round of sampled splits; returns the number of new vertices.
@@ -286,9 +291,15 @@ class Refiner:
         if self.remesh(table, v, psi, dt):
             clock = log.tick("remesh", clock)
             table = self.edges()
-            v, _, boundary = self._velocity(table)
+            v, psi, boundary = self._velocity(table)
             used = np.r_[used, np.ones(len(m.V) - len(used), bool)]  # new vertices are on triangles
             clock = log.tick("flow", clock)
+        # per-vertex gains (module notes, 3): halved where the velocity turned back
+        prev = self.velocity
+        gain = np.r_[self.gain, np.ones(len(m.V) - len(self.gain))]
+        back = np.einsum("ij,ij->i", prev, v[: len(prev)]) < 0.0
+        gain[: len(prev)] = np.where(back, 0.5 * gain[: len(prev)], np.minimum(1.0, 1.2 * gain[: len(prev)]))
+        self.gain = gain
         self.velocity = v
         d = dt * v
         # vertices stopped by a collision stay stopped for a few iterations:
@@ -298,6 +309,7 @@ class Refiner:
         d[self.hold > 0] = 0.0
         self.hold = np.maximum(self.hold - 1, 0)
         limit_moves(m.V, m.F, d, p.max_move, self.h)
+        d *= gain[:, None]
         X1 = m.V + d
         self.boundary = boundary  # flips keep the boundary: valid until the next splits
         self.project_to_exterior(boundary, X1)
@@ -334,10 +346,6 @@ class Refiner:
             clock = time.perf_counter()
             E = energy(self.mesh.V, self.mesh.F, self.psi)
             rose = bool(self.log.energy) and E > self.log.energy[-1]
-            if rose:
-                self.scale *= 0.5
-            else:
-                self.scale = min(1.0, 1.2 * self.scale)
             self.log.energy.append(E)
             self.log.mean_move.append(move)
             self.log.triangles.append(len(self.mesh.F))
