@@ -1,0 +1,40 @@
+"""The refinement of the fracture surface (Sections 4.3, 4.4).
+
+numba caches each compiled function beside its source and checks only that
+file's time stamp, but the kernels here call each other across modules
+(flips and collisions use the hash grid): a change in one module would leave
+stale machine code in the others' caches. On import, the cache is cleared
+when the package's sources differ from those it was compiled from.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+
+def clear_stale_numba_cache(package: Path) -> bool:
+    """Delete numba's cache files in ``package/__pycache__`` unless they were made from the
+    current ``package/*.py`` sources; returns whether anything was deleted."""
+    digest = hashlib.sha1(b"".join(p.read_bytes() for p in sorted(package.glob("*.py")))).hexdigest()
+    cache = package / "__pycache__"
+    stamp = cache / "numba-sources.sha1"
+    try:
+        if stamp.read_text() == digest:
+            return False
+    except OSError:
+        pass
+    try:
+        stale = list(cache.glob("*.nb[ic]"))
+        for f in stale:
+            f.unlink(missing_ok=True)
+        cache.mkdir(exist_ok=True)
+        tmp = stamp.with_suffix(".tmp")
+        tmp.write_text(digest)
+        tmp.replace(stamp)
+    except OSError:  # a read-only install: numba caches elsewhere or not at all
+        return False
+    return bool(stale)
+
+
+clear_stale_numba_cache(Path(__file__).parent)

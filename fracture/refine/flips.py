@@ -129,6 +129,18 @@ def _meet(V, F, f, c, eps):
 
 
 @numba.njit(cache=True)
+def _near(V, F, pairs, faces):
+    """Which triangle ``pairs`` have a triangle whose box overlaps the box of one of ``faces``."""
+    out = np.zeros(pairs.shape[0], np.bool_)
+    for i in range(pairs.shape[0]):
+        for c in faces:
+            if not _boxes_apart(V, F, pairs[i, 0], c) or not _boxes_apart(V, F, pairs[i, 1], c):
+                out[i] = True
+                break
+    return out
+
+
+@numba.njit(cache=True)
 def _unsafe(V, F, grid, first, pairs, nxt, eps):
     """Which flipped ``pairs`` meet another triangle of the surface.
 
@@ -197,12 +209,18 @@ def flip_edges(V: np.ndarray, F: np.ndarray, sides: np.ndarray, max_passes: int 
         done = pairs[:flipped].copy()
         _join(nxt, root, done)
         kept = np.ones(flipped, bool)
-        while True:
-            bad = np.flatnonzero(kept)[_unsafe(V, F, grid[0], grid[1], done[kept], nxt, _EPS)]
+        test = np.arange(flipped)
+        while len(test):
+            bad = test[_unsafe(V, F, grid[0], grid[1], done[test], nxt, _EPS)]
             if not len(bad):
                 break
             back = done[bad].ravel()
             F[back] = before[back]
             kept[bad] = False
+            # undoing flips changes only the undone triangles: test again the kept
+            # pairs whose boxes overlap one of them (the others' tests stand)
+            test = np.flatnonzero(kept)
+            if len(back) <= 512:
+                test = test[_near(V, F, done[test], back)]
         total += int(kept.sum())
     return total

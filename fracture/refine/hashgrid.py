@@ -26,7 +26,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-_P1, _P2, _P3 = 73856093, 19349663, 83492791
+from fracture.refine.kernels import _spread
+
 _BITS = 21  # bits per packed cell coordinate
 _OFF = 1 << (_BITS - 1)
 _SPAN = float(1 << (_BITS - 2))  # boxes span at most this many level-0 cells (see cell_size)
@@ -34,7 +35,9 @@ _SPAN = float(1 << (_BITS - 2))  # boxes span at most this many level-0 cells (s
 
 @numba.njit(cache=True, inline="always")
 def _hash(ix, iy, iz, mask):
-    return ((ix * _P1) ^ (iy * _P2) ^ (iz * _P3)) & mask
+    """The cell's Morton code, cut to the table: cells near each other share cache lines
+    (the elements come in Morton order too, see :func:`~fracture.refine.kernels.spatial_order`)."""
+    return (_spread(ix) | (_spread(iy) << 1) | (_spread(iz) << 2)) & mask
 
 
 @numba.njit(cache=True, inline="always")
