@@ -75,9 +75,11 @@ SCHEMA: dict[str, Any] = {
     "refine": {
         "iterations": Param(40, "int", lo=0, hi=10000, doc="largest number of iterations of the flow"),
         "tolerance": Param(0.01, lo=0.0, hi=10.0,
-                           doc="stop when the mean vertex move of an iteration is below this (grid cells)"),
+                           doc="stop when the mean vertex move of an iteration is below this (grid cells); "
+                               "the loop also stops once max_triangles is spent and an iteration raises the energy"),
         "step": Param(0.25, lo=1e-4, hi=1.0, doc="move of a vertex of median speed per iteration (grid cells)"),
-        "max_move": Param(0.3, lo=1e-3, hi=0.5, doc="largest move of a vertex, as a fraction of its shortest edge"),
+        "max_move": Param(0.3, lo=1e-3, hi=0.5, doc="largest move of a vertex, as a fraction of its shortest edge "
+                          "(before its own gain, halved whenever its velocity turns back)"),
         "split_distance": Param(0.02, lo=0.0, hi=10.0,
                                 doc="split where a sample leaves its triangle by this fraction of the step"),
         "tension": Param(0.05, lo=1e-4, hi=10.0,

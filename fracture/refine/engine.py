@@ -58,8 +58,8 @@ class RefineParams:
     """Thresholds of the loop; lengths are in grid cells of the finest pyramid level."""
 
     iterations: int = 40
-    tolerance: float = 0.01  # stop when the mean vertex move is below this
-    step: float = 0.25  # a vertex of median speed moves this far per iteration
+    tolerance: float = 0.01  # stop when the mean vertex move is below this (see Refiner.run)
+    step: float = 0.25  # a vertex of median speed moves this far per iteration (grid cells)
     max_move: float = 0.3  # ... and no vertex more than this fraction of its shortest edge
     split_distance: float = 0.02  # split when a sample leaves its triangle by this fraction of the step
     tension: float = 0.05  # psi is shifted so its minimum is this fraction of its range
