@@ -85,7 +85,8 @@ def test_a_safe_flip_that_would_cut_another_sheet_is_refused():
 def test_numba_caches_of_changed_sources_are_cleared(tmp_path):
     from fracture.refine import clear_stale_numba_cache
 
-    (tmp_path / "a.py").write_text("x = 1\n")
+    (tmp_path / "a.py").write_text("import numba\nx = 1\n")
+    (tmp_path / "b.py").write_text("y = 1\n")  # no numba: its changes leave the cache alone
     (tmp_path / "__pycache__").mkdir()
     old = tmp_path / "__pycache__" / "a.f-1.py311.nbi"
     old.write_bytes(b"stale")
@@ -93,5 +94,7 @@ def test_numba_caches_of_changed_sources_are_cleared(tmp_path):
     fresh = tmp_path / "__pycache__" / "a.f-1.py311.1.nbc"
     fresh.write_bytes(b"compiled from x = 1")
     assert not clear_stale_numba_cache(tmp_path) and fresh.exists()  # same sources: kept
-    (tmp_path / "a.py").write_text("x = 2\n")
+    (tmp_path / "b.py").write_text("y = 2\n")
+    assert not clear_stale_numba_cache(tmp_path) and fresh.exists()
+    (tmp_path / "a.py").write_text("import numba\nx = 2\n")
     assert clear_stale_numba_cache(tmp_path) and not fresh.exists()

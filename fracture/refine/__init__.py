@@ -15,8 +15,9 @@ from pathlib import Path
 
 def clear_stale_numba_cache(package: Path) -> bool:
     """Delete numba's cache files in ``package/__pycache__`` unless they were made from the
-    current ``package/*.py`` sources; returns whether anything was deleted."""
-    digest = hashlib.sha1(b"".join(p.read_bytes() for p in sorted(package.glob("*.py")))).hexdigest()
+    current sources of the ``package/*.py`` modules that use numba; returns whether anything was deleted."""
+    sources = (p.read_bytes() for p in sorted(package.glob("*.py")))
+    digest = hashlib.sha1(b"".join(s for s in sources if b"import numba" in s)).hexdigest()
     cache = package / "__pycache__"
     stamp = cache / "numba-sources.sha1"
     try:

@@ -139,17 +139,16 @@ class Refiner:
     def _renumber(self, vorder: np.ndarray, forder: np.ndarray | None = None) -> None:
         """Renumber the mesh (:meth:`RefineMesh.reorder`) and the per-vertex state with it."""
         new = self.mesh.reorder(vorder, forder)
-        k = len(self._field_V)  # vertices with cached psi: the first k before the renumbering
-        cached = np.zeros(len(vorder), bool)
-        cached[:k] = True
-        if not cached[vorder].all():  # new vertices are spread out: evaluate them afresh
-            self._field_V, self._psi, self._grad = np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3))
-        else:
-            self._field_V, self._psi, self._grad = self._field_V[vorder], self._psi[vorder], self._grad[vorder]
-        self.hold = self.hold[vorder] if len(self.hold) == len(vorder) else np.zeros(len(vorder), np.int64)
-        self.gain = self.gain[vorder] if len(self.gain) == len(vorder) else np.ones(len(vorder))
-        if len(self.velocity) == len(vorder):
-            self.velocity = self.velocity[vorder]
+
+        def follow(a, fresh):  # per-vertex state that does not cover every vertex starts afresh
+            return a[vorder] if len(a) == len(vorder) else fresh
+
+        empty = np.zeros((0, 3))  # psi cached for no vertex: vertex_field evaluates them all
+        self._field_V, self._psi, self._grad = (follow(self._field_V, empty), follow(self._psi, np.zeros(0)),
+                                                follow(self._grad, empty))
+        self.hold = follow(self.hold, np.zeros(len(vorder), np.int64))
+        self.gain = follow(self.gain, np.ones(len(vorder)))
+        self.velocity = follow(self.velocity, self.velocity)
         self.boundary = new[self.boundary]
 
     def put_in_spatial_order(self) -> None:
