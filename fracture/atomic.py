@@ -23,6 +23,14 @@ def _umask() -> int:
     return mask
 
 
+def png_bytes(image) -> bytes:
+    """An ``(h, w, 3)`` uint8 image encoded as PNG (imageio), for :func:`atomic_write_bytes`."""
+    import imageio.v3 as iio
+    import numpy as np
+
+    return iio.imwrite("<bytes>", np.ascontiguousarray(image), extension=".png")
+
+
 def atomic_write_bytes(path: str | Path, data: bytes) -> None:
     """Write ``data`` to ``path`` through a temporary file and a rename."""
     path = Path(path)

@@ -95,8 +95,9 @@ def _render(args) -> int:
 
     view = View(field=args.field, axis=args.axis, level=args.level, color_by=args.color_by,
                 overlay_coarse=args.overlay_coarse)
-    for what in args.what or WHAT:
-        files = render(args.run_dir, what, args.out, args.width, args.height, args.fps, view, args.quiet)
+    done = render(args.run_dir, tuple(args.what or WHAT), args.out, args.width, args.height, args.fps, view,
+                  args.quiet)
+    for what, files in done.items():
         print(f"{what}: {len(files) - 1} images and {files[-1]}")
     return 0
 

@@ -25,7 +25,7 @@ from typing import Any, Callable
 import numpy as np
 from tqdm.auto import tqdm
 
-from fracture.atomic import staged_directory
+from fracture.atomic import png_bytes, staged_directory
 from fracture.config import dump_config
 from fracture.errors import StageError
 
@@ -106,10 +106,7 @@ class RunContext:
         self.path(rel).write_text(json.dumps(data, indent=2, sort_keys=True) + "\n", encoding="utf-8")
 
     def save_png(self, rel: str, image: np.ndarray) -> None:
-        import imageio.v3 as iio
-
-        buf = iio.imwrite("<bytes>", np.ascontiguousarray(image), extension=".png")
-        self.path(rel).write_bytes(buf)
+        self.path(rel).write_bytes(png_bytes(image))
 
     def bar(self, total: int, desc: str):
         """A progress bar (silent when progress is off)."""

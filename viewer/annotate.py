@@ -57,8 +57,3 @@ def caption(image: np.ndarray, text: str) -> np.ndarray:
     pil = Image.fromarray(image.copy())
     ImageDraw.Draw(pil).text((size, h - size), text, fill=INK, font=_font(size), anchor="lb")
     return np.asarray(pil)
-
-
-def colorbar_strip(cmap: str, length: int, thickness: int) -> np.ndarray:
-    """A horizontal colour bar, low values at the left (for the window's panel)."""
-    return np.ascontiguousarray(colorbar(cmap, length, thickness, vertical=False))

@@ -32,7 +32,8 @@ import numpy as np
 import open3d as o3d
 from open3d.visualization import gui, rendering
 
-from fracture.atomic import atomic_write_bytes, atomic_write_text
+from fields.colormap import colorbar
+from fracture.atomic import atomic_write_bytes, atomic_write_text, png_bytes
 from fracture.errors import ConfigError, InputError, StageError
 from viewer import annotate
 from viewer.data import FIELDS, RunData, Surface
@@ -41,7 +42,7 @@ from viewer.looks import (
     iteration_caption, iteration_pose, prepare, scene_box, set_frame, set_slice, set_surface, show_context,
     show_material, slice_pose, slice_title,
 )
-from viewer.render import Video, check_size, png_bytes
+from viewer.media import Video, check_size
 
 PANELS = ("material", "iterations", "animation")
 SIDE_WIDTH_EM = 20
@@ -333,11 +334,11 @@ class Viewer:
         return self.run.surface_range(self.view.color_by) if self.run.has_iterations else None
 
     def _draw_colorbar(self) -> None:
-        bar = annotate.colorbar_strip(FIELD_CMAPS[self.view.field], 200, 12)
+        bar = colorbar(FIELD_CMAPS[self.view.field], 200, 12, vertical=False)  # low values at the left
         self.bar_image.update_image(o3d.geometry.Image(bar))
 
     def draw_material(self) -> None:
-        self._slice_range = rng = set_slice(self.scenes[0].scene, self.run, self.view)
+        rng = set_slice(self.scenes[0].scene, self.run, self.view)
         self.bar_low.text = f"{rng[0]:.3g}"
         self.bar_high.text = f"{rng[1]:.3g} ({self.view.field})"
         self._pose(0)
@@ -594,7 +595,8 @@ class Viewer:
         finally:
             apply_camera(cam, current, max(f.width, 1), max(f.height, 1))
         if i == 0:
-            img = annotate.with_colorbar(img, FIELD_CMAPS[self.view.field], self._slice_range, slice_title(self.view))
+            img = annotate.with_colorbar(img, FIELD_CMAPS[self.view.field], self.run.field_range(self.view.field, self.view.level),
+                                         slice_title(self.view))
         elif i == 1 and self.run.has_iterations and self._iter_range is not None:
             img = annotate.with_colorbar(img, SURFACE_CMAPS[self.view.color_by], self._iter_range,
                                          self.view.color_by, self.iter_label.text)

@@ -17,6 +17,7 @@ import numpy as np
 
 from fields.grid import Grid
 from fracture.errors import InputError
+from fracture.topology import unique_edges
 
 FIELDS = ("psi", "zeta", "xi")
 
@@ -154,19 +155,20 @@ class RunData:
                                nodes=np.load(self._require("coarse/animation_nodes.npy", "the coarse animation")))
 
     @cached_property
-    def coarse_parts(self) -> list[tuple[np.ndarray, np.ndarray]]:
-        """Per component: the coarse exterior's vertex ids on it and its triangles over them."""
+    def coarse_parts(self) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """Per component: the coarse exterior's vertex ids on it, its triangles and its edges over them."""
         ext = self.exterior
         out = []
         for c in range(self.coarse_animation.n_components):
             used, local = np.unique(ext.F[ext.scalars["component"] == c], return_inverse=True)
-            out.append((used, local.reshape(-1, 3)))
+            F = local.reshape(-1, 3)
+            out.append((used, F, unique_edges(F)[0]))
         return out
 
     def coarse_pieces(self, t: int) -> list[Surface]:
         """The coarse exterior's triangles of each component, moved to frame ``t``."""
         V, anim = self.exterior.V, self.coarse_animation
-        return [Surface(anim.deform(c, t, V[used]), F) for c, (used, F) in enumerate(self.coarse_parts)]
+        return [Surface(anim.deform(c, t, V[used]), F) for c, (used, F, _) in enumerate(self.coarse_parts)]
 
     # -- iterations -------------------------------------------------------------------------
 

@@ -79,8 +79,8 @@ def triangle_mesh(V: np.ndarray, F: np.ndarray, colors: np.ndarray | None = None
     return m
 
 
-def wireframe(V: np.ndarray, F: np.ndarray) -> o3d.geometry.LineSet:
-    E, _ = unique_edges(F)
+def wireframe(V: np.ndarray, E: np.ndarray) -> o3d.geometry.LineSet:
+    """Line set of the edges ``E (k, 2)`` over ``V`` (e.g. ``topology.unique_edges(F)[0]``)."""
     return o3d.geometry.LineSet(o3d.utility.Vector3dVector(np.asarray(V, np.float64)),
                                 o3d.utility.Vector2iVector(E.astype(np.int32)))
 
@@ -166,7 +166,7 @@ def show_material(scene: rendering.Open3DScene, run: RunData) -> None:
     """Panel 1 without its slice: the coarse (wireframe) and refined fracture surfaces and a see-through exterior."""
     prepare(scene)
     cf = run.coarse_fracture
-    scene.add_geometry("coarse", wireframe(cf.V, cf.F), lines((0.1, 0.1, 0.1, 1.0), 2.0))
+    scene.add_geometry("coarse", wireframe(cf.V, unique_edges(cf.F)[0]), lines((0.1, 0.1, 0.1, 1.0), 2.0))
     if run.refined_fracture is not None:
         rf = run.refined_fracture
         scene.add_geometry("refined", triangle_mesh(rf.V, rf.F), lit((0.85, 0.85, 0.82, 1.0)))
@@ -210,8 +210,8 @@ def set_frame(scene: rendering.Open3DScene, run: RunData, view: View) -> None:
     for c, p in enumerate(run.pieces_at(view.frame)):
         _replace(scene, f"piece_{c}", triangle_mesh(p.V, p.F, flat=True), lit((*piece_color(c), 1.0)))
     coarse = run.coarse_pieces(view.frame) if view.overlay_coarse else []
-    for c, p in enumerate(coarse):
-        _replace(scene, f"coarse_{c}", wireframe(p.V, p.F), lines((0.15, 0.15, 0.15, 1.0), 1.0))
+    for c, (p, (_, _, E)) in enumerate(zip(coarse, run.coarse_parts)):  # edges found once per run
+        _replace(scene, f"coarse_{c}", wireframe(p.V, E), lines((0.15, 0.15, 0.15, 1.0), 1.0))
     for c in range(len(coarse), len(run.coarse_parts)):
         if scene.has_geometry(f"coarse_{c}"):
             scene.remove_geometry(f"coarse_{c}")
@@ -323,7 +323,7 @@ def animation_box(run: RunData) -> tuple[np.ndarray, np.ndarray]:
     """The box holding every piece in every frame (the camera does not chase the pieces)."""
     V = run.exterior.V
     lo, hi = scene_box(run)
-    for c, (used, _) in enumerate(run.coarse_parts):
+    for c, (used, _, _) in enumerate(run.coarse_parts):
         if len(used):
             P = run.coarse_animation.trajectories(c, V[used])
             lo, hi = np.minimum(lo, P.min(axis=(0, 1))), np.maximum(hi, P.max(axis=(0, 1)))

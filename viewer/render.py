@@ -26,10 +26,11 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from fracture.atomic import atomic_write_bytes  # noqa: E402
+from fracture.atomic import atomic_write_bytes, png_bytes  # noqa: E402
 from fracture.errors import InputError  # noqa: E402
 from viewer import annotate  # noqa: E402
 from viewer.data import RunData  # noqa: E402
+from viewer.media import Video, check_size  # noqa: E402
 from viewer.looks import (  # noqa: E402
     FIELD_CMAPS, SURFACE_CMAPS, View, animation_box, apply_camera, frame_box, iteration_caption, iteration_pose,
     prepare, set_frame, set_slice, set_surface, show_context, show_material, slice_pose, slice_title,
@@ -40,20 +41,12 @@ WHAT = ("slices", "iterations", "animation")
 BAR_ROOM = 0.8
 
 
-def check_size(width: int, height: int, where: str = "render") -> None:
-    """Image sizes an MP4 (yuv420p) can hold: even, at least 64 pixels, at most 8192."""
-    for name, v in (("width", width), ("height", height)):
-        if not isinstance(v, (int, np.integer)) or not 64 <= v <= 8192 or v % 2:
-            raise InputError(f"{where}: {name} must be an even number of pixels in 64..8192, got {v!r}")
-
-
 class Renderer:
     """One offscreen renderer of a fixed size, reused for every image."""
 
     def __init__(self, width: int, height: int):
         from open3d.visualization import rendering
 
-        check_size(width, height)
         self.width, self.height = width, height
         self.r = rendering.OffscreenRenderer(width, height)
         self.r.scene.view.set_post_processing(True)
@@ -65,44 +58,6 @@ class Renderer:
     def image(self, pose) -> np.ndarray:
         apply_camera(self.r.scene.camera, pose, self.width, self.height)
         return np.asarray(self.r.render_to_image())[..., :3].copy()
-
-
-def png_bytes(image: np.ndarray) -> bytes:
-    import imageio.v3 as iio
-
-    return iio.imwrite("<bytes>", np.ascontiguousarray(image), extension=".png")
-
-
-class Video:
-    """An MP4 (H.264, yuv420p) written frame by frame to a temporary file, renamed into place on close."""
-
-    def __init__(self, path: Path, width: int, height: int, fps: int):
-        import imageio_ffmpeg
-
-        if not 1 <= fps <= 240:
-            raise InputError(f"fps must be in 1..240, got {fps}")
-        self.path = Path(path)
-        self.tmp = self.path.with_name(f".{self.path.stem}.partial.mp4")
-        self.size = (width, height)
-        self.writer = imageio_ffmpeg.write_frames(str(self.tmp), self.size, fps=fps, codec="libx264",
-                                                  pix_fmt_in="rgb24", pix_fmt_out="yuv420p", quality=8,
-                                                  macro_block_size=2, ffmpeg_log_level="error")
-        self.writer.send(None)
-
-    def add(self, image: np.ndarray) -> None:
-        if image.shape[:2] != (self.size[1], self.size[0]):
-            raise ValueError(f"frame of size {image.shape[1]}x{image.shape[0]}, video is {self.size[0]}x{self.size[1]}")
-        self.writer.send(np.ascontiguousarray(image, np.uint8))
-
-    def close(self) -> None:
-        self.writer.close()
-        os.replace(self.tmp, self.path)
-
-    def abort(self) -> None:
-        try:
-            self.writer.close()
-        finally:
-            self.tmp.unlink(missing_ok=True)
 
 
 def _progress(total: int, desc: str, quiet: bool):
@@ -151,19 +106,29 @@ def iteration_images(run: RunData, view: View, renderer: Renderer):
                                      iteration_caption(run, k))
 
 
-def render(run_dir: str | Path, what: str, out: str | Path | None = None, width: int = 1280, height: int = 720,
-           fps: int = 10, view: View | None = None, quiet: bool = False) -> list[Path]:
-    """Render PNGs and an MP4 of one view of a run into ``out`` (default ``RUN_DIR/renders``).
+def render(run_dir: str | Path, what: str | tuple[str, ...] = WHAT, out: str | Path | None = None,
+           width: int = 1280, height: int = 720, fps: int = 10, view: View | None = None,
+           quiet: bool = False) -> dict[str, list[Path]]:
+    """Render PNGs and an MP4 of each view ``what`` of a run into ``out`` (default ``RUN_DIR/renders``),
+    reading the run and making the renderer once.
 
-    Returns the files written.
+    Returns the files written, per view.
     """
-    if what not in WHAT:
-        raise InputError(f"--what must be one of {', '.join(WHAT)}, got {what!r}")
+    whats = (what,) if isinstance(what, str) else tuple(what)
+    for w in whats:
+        if w not in WHAT:
+            raise InputError(f"--what must be one of {', '.join(WHAT)}, got {w!r}")
     check_size(width, height)
     run = RunData(run_dir)
     view = (view or View()).check(run)
     out = Path(out) if out is not None else run.dir / "renders"
     renderer = Renderer(width, height)
+    return {w: _render_one(run, w, view, renderer, out, fps, quiet) for w in whats}
+
+
+def _render_one(run: RunData, what: str, view: View, renderer: Renderer, out: Path, fps: int,
+                quiet: bool) -> list[Path]:
+    width, height = renderer.width, renderer.height
     if what == "slices":
         offsets = np.linspace(0.1, 0.9, 9)
         return _write_sequence(slice_images(run, view, renderer, offsets), out, f"slices_{view.field}_{view.axis}",

@@ -1,0 +1,53 @@
+"""Image sizes and MP4 writing shared by the window's exports and the headless renders.
+
+Kept apart from :mod:`viewer.render`, whose import sets up EGL for rendering
+with no display.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from fracture.errors import InputError
+
+
+def check_size(width: int, height: int, where: str = "render") -> None:
+    """Image sizes an MP4 (yuv420p) can hold: even, at least 64 pixels, at most 8192."""
+    for name, v in (("width", width), ("height", height)):
+        if not isinstance(v, (int, np.integer)) or not 64 <= v <= 8192 or v % 2:
+            raise InputError(f"{where}: {name} must be an even number of pixels in 64..8192, got {v!r}")
+
+
+class Video:
+    """An MP4 (H.264, yuv420p) written frame by frame to a temporary file, renamed into place on close."""
+
+    def __init__(self, path: Path, width: int, height: int, fps: int):
+        import imageio_ffmpeg
+
+        if not 1 <= fps <= 240:
+            raise InputError(f"fps must be in 1..240, got {fps}")
+        self.path = Path(path)
+        self.tmp = self.path.with_name(f".{self.path.stem}.partial.mp4")
+        self.size = (width, height)
+        self.writer = imageio_ffmpeg.write_frames(str(self.tmp), self.size, fps=fps, codec="libx264",
+                                                  pix_fmt_in="rgb24", pix_fmt_out="yuv420p", quality=8,
+                                                  macro_block_size=2, ffmpeg_log_level="error")
+        self.writer.send(None)
+
+    def add(self, image: np.ndarray) -> None:
+        if image.shape[:2] != (self.size[1], self.size[0]):
+            raise ValueError(f"frame of size {image.shape[1]}x{image.shape[0]}, video is {self.size[0]}x{self.size[1]}")
+        self.writer.send(np.ascontiguousarray(image, np.uint8))
+
+    def close(self) -> None:
+        self.writer.close()
+        os.replace(self.tmp, self.path)
+
+    def abort(self) -> None:
+        try:
+            self.writer.close()
+        finally:
+            self.tmp.unlink(missing_ok=True)
