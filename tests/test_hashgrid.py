@@ -56,3 +56,19 @@ def test_far_coordinates_do_not_overflow_the_packed_cells():
     inv = 1.0 / hashgrid.cell_size(lo, hi, 1e-3)
     found = hashgrid.pairs(hashgrid.build(lo, hi, inv, np.zeros((3, 0), np.int64)), -1, False)
     assert found.tolist() == [[1, 2]]
+
+
+def test_few_large_among_many_small_boxes_from_either_side():
+    """A surface's many small triangles and its few long ones: the coarse levels look up the fine cells."""
+    rng = np.random.default_rng(3)
+    lo = rng.uniform(-1.0, 1.0, (3000, 3))
+    size = np.full((3000, 3), 0.02) * rng.uniform(0.2, 1.0, (3000, 3))
+    size[:15] *= rng.uniform(2.0, 12.0, (15, 1))
+    hi = lo + size
+    grid = hashgrid.build(lo, hi, 1.0 / hashgrid.cell_size(lo, hi, 0.03), -np.ones((3000, 1), np.int64))
+    counts = np.bincount(grid[1])
+    assert hashgrid.look_down(counts[0], counts[1], 1)
+    found = hashgrid.pairs(grid, -1, False)
+    i, j = np.triu_indices(3000, 1)
+    hit = np.all(lo[i] <= hi[j], axis=1) & np.all(lo[j] <= hi[i], axis=1)
+    assert sorted(map(tuple, found.tolist())) == sorted(zip(i[hit].tolist(), j[hit].tolist()))

@@ -121,9 +121,6 @@ def build(lo, hi, inv, verts):
     slots = start[-1]
     items = np.empty(slots, np.int64)
     key = np.empty(slots, np.int64)
-    box = np.empty((slots, 6))
-    sv = np.full((slots, 3), -1, np.int64)
-    w = verts.shape[1]
     for e in range(k):
         L = level[e]
         s = scale[L]
@@ -135,11 +132,26 @@ def build(lo, hi, inv, verts):
                     fill[b] += 1
                     items[p] = e
                     key[p] = _key(ix, iy, iz)
-                    for c in range(3):
-                        box[p, c] = lo[e, c]
-                        box[p, 3 + c] = hi[e, c]
-                    for c in range(w):
-                        sv[p, c] = verts[e, c]
+    # every bucket sorted by the boxes' lower x (insertion sort: buckets are
+    # short): scans of a bucket stop at the first box that starts beyond theirs
+    for b in range(toff[-1]):
+        for p in range(start[b] + 1, start[b + 1]):
+            e, c, x = items[p], key[p], lo[items[p], 0]
+            q = p - 1
+            while q >= start[b] and lo[items[q], 0] > x:
+                items[q + 1], key[q + 1] = items[q], key[q]
+                q -= 1
+            items[q + 1], key[q + 1] = e, c
+    box = np.empty((slots, 6))
+    sv = np.full((slots, 3), -1, np.int64)
+    w = verts.shape[1]
+    for p in range(slots):
+        e = items[p]
+        for c in range(3):
+            box[p, c] = lo[e, c]
+            box[p, 3 + c] = hi[e, c]
+        for c in range(w):
+            sv[p, c] = verts[e, c]
     return scale[: top + 1], level, toff, tmask, start, items, key, box, sv
 
 
@@ -197,50 +209,85 @@ def pairs(grid, n_first, skip_shared):
     out = np.empty((max(1024, items.shape[0] // 4), 2), np.int64)
     count = 0
     top = tmask.shape[0] - 1
-    # pairs on one level: within a bucket, same cell
+    # pairs on one level: within a bucket, same cell; the bucket is sorted by
+    # lower x, so the scan for partners of p ends at the first box starting beyond p's
     for L in range(top + 1):
         s = scale[L]
         for b in range(toff[L], toff[L + 1]):
             for p in range(start[b], start[b + 1]):
                 e = items[p]
                 for q in range(p + 1, start[b + 1]):
+                    if box[q, 0] > box[p, 3]:
+                        break
                     if key[q] != key[p]:
                         continue
                     g = items[q]
                     if n_first >= 0 and (e < n_first) == (g < n_first):
                         continue
-                    if not (box[p, 0] <= box[q, 3] and box[q, 0] <= box[p, 3] and box[p, 1] <= box[q, 4]
-                            and box[q, 1] <= box[p, 4] and box[p, 2] <= box[q, 5] and box[q, 2] <= box[p, 5]):
+                    if not (box[p, 1] <= box[q, 4] and box[q, 1] <= box[p, 4]
+                            and box[p, 2] <= box[q, 5] and box[q, 2] <= box[p, 5]):
                         continue
                     if _corner_key(box, p, q, s) != key[p] or (skip_shared and _share_vertex(sv, p, q)):
                         continue
                     out, count = _push(out, count, e, g, n_first)
-    # pairs on two levels: the finer element looks up the coarser levels
+    # pairs on two levels: the elements of one level look up the cells their
+    # boxes cover on the other, from whichever side covers fewer cells (the
+    # many small elements of level 0 looking up every coarse level would
+    # mostly find empty buckets; the few coarse ones cover many fine cells)
+    corners = _corner_slots(grid)
     buf = np.empty(256, np.int64)
-    for L in range(top):
-        for p in range(start[toff[L]], start[toff[L + 1]]):
-            if _corner_key(box, p, p, scale[L]) != key[p]:
-                continue  # one slot per element: the one of its lower corner
-            e = items[p]
-            buf, k = _slots(grid, box[p, :3], box[p, 3:], L + 1, buf)
-            for i in range(k):
-                q = buf[i]
-                g = items[q]
-                if n_first >= 0 and (e < n_first) == (g < n_first):
-                    continue
-                if not (skip_shared and _share_vertex(sv, p, q)):
-                    out, count = _push(out, count, e, g, n_first)
+    for coarse in range(1, top + 1):
+        for fine in range(coarse):
+            n_fine, n_coarse = corners[fine].shape[0], corners[coarse].shape[0]
+            if not n_fine or not n_coarse:
+                continue
+            source, target = (coarse, fine) if look_down(n_fine, n_coarse, coarse - fine) else (fine, coarse)
+            for p in corners[source]:
+                e = items[p]
+                buf, k = _slots(grid, box[p, :3], box[p, 3:], target, target + 1, buf)
+                for i in range(k):
+                    q = buf[i]
+                    g = items[q]
+                    if n_first >= 0 and (e < n_first) == (g < n_first):
+                        continue
+                    if not (skip_shared and _share_vertex(sv, p, q)):
+                        out, count = _push(out, count, e, g, n_first)
     return out[:count]
 
 
 @numba.njit(cache=True)
-def _slots(grid, qlo, qhi, min_level, buf):
-    """Slots, on levels from ``min_level`` up, of the elements whose boxes overlap the box ``qlo, qhi``,
-    one per element (the cell holding the lower corner of the intersection), into ``buf``; returns
-    (buf, count). ``buf`` grows when full."""
+def look_down(n_fine, n_coarse, apart):
+    """Whether the elements of a coarse level look up the cells of a level ``apart`` levels finer
+    (up to ``(2^apart + 1)^3`` each) rather than the fine ones the coarse cells (about 4 each)."""
+    span = (1 << apart) + 1
+    return n_coarse * span * span * span < 4 * n_fine
+
+
+@numba.njit(cache=True)
+def _corner_slots(grid):
+    """Per level, the slot of every element there that holds its box's lower corner (one per element)."""
+    scale, level, toff, tmask, start, items, key, box, sv = grid
+    out = []
+    for L in range(tmask.shape[0]):
+        s = scale[L]
+        here = np.empty(start[toff[L + 1]] - start[toff[L]], np.int64)
+        k = 0
+        for p in range(start[toff[L]], start[toff[L + 1]]):
+            if _corner_key(box, p, p, s) == key[p]:
+                here[k] = p
+                k += 1
+        out.append(here[:k])
+    return out
+
+
+@numba.njit(cache=True)
+def _slots(grid, qlo, qhi, min_level, max_level, buf):
+    """Slots, on levels ``min_level`` to ``max_level - 1``, of the elements whose boxes overlap the box
+    ``qlo, qhi``, one per element (the cell holding the lower corner of the intersection), into ``buf``;
+    returns (buf, count). ``buf`` grows when full."""
     scale, level, toff, tmask, start, items, key, box, sv = grid
     count = 0
-    for L in range(min_level, tmask.shape[0]):
+    for L in range(min_level, min(max_level, tmask.shape[0])):
         if tmask[L] < 0:
             continue
         s = scale[L]
@@ -250,6 +297,8 @@ def _slots(grid, qlo, qhi, min_level, buf):
                     here = _key(ix, iy, iz)
                     b = toff[L] + _hash(ix, iy, iz, tmask[L])
                     for p in range(start[b], start[b + 1]):
+                        if box[p, 0] > qhi[0]:
+                            break  # the bucket is sorted by lower x
                         if key[p] != here or not _overlap(box, p, qlo, qhi):
                             continue
                         if _key(_cell(max(qlo[0], box[p, 0]), s), _cell(max(qlo[1], box[p, 1]), s),
@@ -270,7 +319,7 @@ def gather(grid, qlo, qhi, buf):
 
     ``buf`` grows when full.
     """
-    buf, count = _slots(grid, qlo, qhi, 0, buf)
+    buf, count = _slots(grid, qlo, qhi, 0, 64, buf)
     items = grid[5]
     for i in range(count):
         buf[i] = items[buf[i]]

@@ -166,7 +166,7 @@ def edge_table(F: np.ndarray, n: int) -> EdgeTable:
     return EdgeTable(*_edge_table(np.ascontiguousarray(F, np.int64), int(n)))
 
 
-@numba.njit(cache=True, fastmath=True)
+@numba.njit(cache=True)
 def face_geometry(V, F):
     """Areas ``(m,)`` and unit normals ``(m, 3)`` (zero for degenerate triangles)."""
     m = F.shape[0]
@@ -184,7 +184,7 @@ def face_geometry(V, F):
     return A, N
 
 
-@numba.njit(cache=True, fastmath=True)
+@numba.njit(cache=True)
 def energy_gradient(V, F, psi, grad):
     """dE/dx_i of E = sum_j A_j mean(psi_j) (grad psi at x_i) and barycentric areas; see :mod:`.flow`."""
     n = V.shape[0]
@@ -207,7 +207,7 @@ def energy_gradient(V, F, psi, grad):
     return dE, area
 
 
-@numba.njit(cache=True, fastmath=True)
+@numba.njit(cache=True)
 def energy(V, F, psi):
     """E(S) = sum_j A_j mean(psi at its corners)."""
     A, _ = face_geometry(V, F)
@@ -217,7 +217,7 @@ def energy(V, F, psi):
     return total
 
 
-@numba.njit(cache=True, fastmath=True)
+@numba.njit(cache=True)
 def limit_moves(V, F, d, max_move, cap):
     """Scale each move ``d[i]`` in place to at most ``min(max_move * shortest incident edge, cap)``."""
     n = V.shape[0]
@@ -239,7 +239,7 @@ def limit_moves(V, F, d, max_move, cap):
             d[i, 2] *= s
 
 
-@numba.njit(cache=True, fastmath=True)
+@numba.njit(cache=True)
 def sample_displacement(P, T, psi_p, grad_p, psi_T, dt):
     """Displacement in one step of points ``P`` inside triangles ``T``, each with its triangle as neighbourhood.
 
