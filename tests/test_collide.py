@@ -55,6 +55,22 @@ def test_random_moves_of_two_close_sheets_never_leave_them_intersecting():
     assert crossed >= 10  # the unconstrained moves do make the sheets cross
 
 
+def test_testing_only_the_moving_vertices_stops_the_same_ones():
+    rng = np.random.default_rng(5)
+    V1, F1 = grid_sheet(12, 0.0)
+    V2, F2 = grid_sheet(12, 0.03, 0.013)
+    V = np.vstack([V1, V2]) + rng.normal(0, 0.004, (2 * len(V1), 3))
+    F = np.vstack([F1, F2 + len(V1)])
+    E = unique_edges(F)[0]
+    moving = rng.choice(len(V), 40, replace=False)
+    X1 = V.copy()
+    X1[moving] += rng.normal(0, 0.03, (40, 3))
+    everything, _ = stop_collisions(V, Xa := X1.copy(), F, E, 1e-9)
+    assert everything.any()  # some of them do collide
+    assert np.array_equal(stop_collisions(V, Xb := X1.copy(), F, E, 1e-9, moving=moving)[0][moving], everything[moving])
+    assert np.array_equal(Xa, Xb) and self_intersections(Xb, F) == 0
+
+
 def _brute_force_pairs(V, F):
     from fracture.refine.collide import _EPS, _triangles_intersect
     return {(f, g) for f in range(len(F)) for g in range(f + 1, len(F)) if _triangles_intersect(V, F, f, g, _EPS)}

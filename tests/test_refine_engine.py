@@ -7,7 +7,7 @@ import numpy as np
 from fields.grid import Grid
 from fields.pyramid import StrengthPyramid
 from fracture.primitives import box, sheet
-from fracture.refine.engine import RefineParams, Refiner
+from fracture.refine.engine import RefineParams, Refiner, split_folds
 from fracture.refine.mesh import RefineMesh
 
 
@@ -41,3 +41,32 @@ def test_flat_cut_moves_onto_the_nearer_weak_sheet_and_the_energy_decreases():
     on_b = r.boundary_vertices()
     P = mesh.V[on_b]
     assert (np.abs(np.minimum(np.abs(P), np.abs(P - 1)).min(axis=1)) < 1e-9).all()
+
+
+def test_a_boundary_split_that_its_projection_would_fold_is_recognised():
+    """A boundary edge across a crease of B: its midpoint projects 0.05 onto a face of the box."""
+    a, b = np.array([0.5, 0.0, 0.1]), np.array([0.5, 0.1, 0.0])
+    mid, Q = 0.5 * (a + b), np.array([0.5, 0.0, 0.05])
+    wide = np.array([0.5, 0.4, 0.4])  # apex far from the edge: its children tilt a little
+    needle = mid - 0.01 * np.array([0.0, 1.0, 1.0])  # apex between the edge and the crease: one turns over
+    T = np.array([[a, b, wide], [a, b, needle], [needle, a, b]])
+    N = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
+    N /= np.linalg.norm(N, axis=1)[:, None]
+    k = np.array([0, 0, 1])  # the edge a-b in each
+    assert split_folds(T, k, np.tile(Q, (3, 1)), N).tolist() == [False, True, True]
+    # staying on the chord tilts nothing
+    assert not split_folds(T, k, np.tile(mid, (3, 1)), N).any()
+
+
+def test_settle_boundary_moves_only_the_vertices_off_b_onto_it():
+    pyramid = two_weak_sheets()
+    BV, BF = box([0, 0, 0], [1, 1, 1], (8, 8, 8))
+    mesh = flat_cut()
+    r = Refiner(mesh, pyramid, BV, BF, RefineParams(), np.random.default_rng(0))
+    r.boundary = r.boundary_vertices()
+    before = mesh.V.copy()
+    off = r.boundary[np.argmin(mesh.V[r.boundary, 1])]  # a vertex on the face y = 0
+    mesh.V[off, 1] = -0.03
+    assert r.boundary_error() > 0.029
+    assert r.settle_boundary() < 1e-12
+    assert np.allclose(mesh.V, before, atol=1e-15)  # back on y = 0; nothing else moved

@@ -353,13 +353,15 @@ def _typical_cell(X, E):
 
 
 def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, E: np.ndarray, eta: float,
-                    max_rounds: int = 32, return_grid: bool = False):
+                    max_rounds: int = 32, return_grid: bool = False, moving: np.ndarray | None = None):
     """Stop the vertices of colliding pairs, in place in ``X1``, until the step is collision-free.
 
     The first round tests every pair; stopping a vertex changes only the
     paths of the elements on it, so each later round tests just those
     elements (against everything), on the same grids (the boxes of the full
-    step contain the shortened paths).
+    step contain the shortened paths). With ``moving`` (vertex ids; every
+    other vertex has ``X1 == X0``) the first round too tests only the
+    elements on them: two elements at rest cannot collide.
 
     Parameters
     ----------
@@ -399,8 +401,19 @@ def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, E: np.ndarray
     inv = 1.0 / hashgrid.cell_size(lo, hi, _typical_cell(X0, E if len(E) else F[:, :2]))
     vt = hashgrid.build(lo, hi, inv, np.concatenate([np.column_stack([ids, ids, ids]), F]))
     eg = hashgrid.build(elo, ehi, inv, E)
-    vf = hashgrid.pairs(vt, n, True)
-    ee = hashgrid.pairs(eg, -1, True)
+
+    def pairs_on(on):  # the pairs of the elements on vertices ``on`` (mask), against everything
+        qv, qt, qe = np.flatnonzero(on), np.flatnonzero(on[F].any(axis=1)), np.flatnonzero(on[E].any(axis=1))
+        vf = np.concatenate([_query_pairs(vt, lo, hi, qv, n, n + len(F), n, False),
+                             _query_pairs(vt, lo, hi, qt + n, 0, n, 0, True) - [0, n]])
+        return vf, _query_pairs(eg, elo, ehi, qe, 0, len(E), 0, False)
+
+    if moving is None:
+        vf, ee = hashgrid.pairs(vt, n, True), hashgrid.pairs(eg, -1, True)
+    else:
+        on = np.zeros(n, bool)
+        on[moving] = True
+        vf, ee = pairs_on(on)
     first = None
     for _ in range(max_rounds):
         stop = np.zeros(n, bool)
@@ -411,13 +424,7 @@ def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, E: np.ndarray
             return (stopped, first, (vt, n)) if return_grid else (stopped, first)
         X1[stop] = X0[stop]
         stopped |= stop
-        # the elements on the newly stopped vertices, against everything
-        qv = np.flatnonzero(stop)
-        qt = np.flatnonzero(stop[F].any(axis=1))
-        qe = np.flatnonzero(stop[E].any(axis=1))
-        vf = np.concatenate([_query_pairs(vt, lo, hi, qv, n, n + len(F), n, False),
-                             _query_pairs(vt, lo, hi, qt + n, 0, n, 0, True) - [0, n]])
-        ee = _query_pairs(eg, elo, ehi, qe, 0, len(E), 0, False)
+        vf, ee = pairs_on(stop)
     # still colliding: nothing moves, and the state at X0 is intersection-free
     X1[:] = X0
     stopped[:] = True
