@@ -98,3 +98,26 @@ def test_numba_caches_of_changed_sources_are_cleared(tmp_path):
     assert not clear_stale_numba_cache(tmp_path) and fresh.exists()
     (tmp_path / "a.py").write_text("import numba\nx = 2\n")
     assert clear_stale_numba_cache(tmp_path) and not fresh.exists()
+
+
+def test_testing_the_flips_of_a_pass_at_once_or_one_by_one_agrees():
+    from fracture.refine.collide import _EPS, triangle_grid
+    from fracture.refine.flips import _flip, _join, _pair_buffer, _unsafe, _unsafe_all
+    rng = np.random.default_rng(4)
+    P = rng.random((400, 2))
+    F = Delaunay(P * [1.0, 6.0]).simplices.astype(np.int64)  # poor: many flips
+    F = np.where((np.cross(np.c_[P[F[:, 1]] - P[F[:, 0]], np.zeros(len(F))],
+                           np.c_[P[F[:, 2]] - P[F[:, 0]], np.zeros(len(F))])[:, 2] < 0)[:, None], F[:, ::-1], F)
+    # two crumpled copies of the sheet, close enough that some flips cut the other one
+    V = np.vstack([np.c_[P, 0.02 * rng.standard_normal(len(P))], np.c_[P, 0.02 + 0.02 * rng.standard_normal(len(P))]])
+    F = np.vstack([F, F + len(P)])
+    sides = np.repeat([[0, 1], [1, 2]], len(F) // 2, axis=0)
+    grid = triangle_grid(V, F)
+    pairs = _pair_buffer(len(F), 1)
+    flipped = _flip(V, F, sides, 1, pairs)
+    done = pairs[:flipped].copy()
+    nxt, root = np.arange(len(F)), np.arange(len(F))
+    _join(nxt, root, done)
+    one_by_one = _unsafe(V, F, grid, 0, done, nxt, _EPS)
+    assert 0 < one_by_one.sum() < flipped
+    assert np.array_equal(_unsafe_all(V, F, done), one_by_one)

@@ -177,6 +177,35 @@ def _unsafe(V, F, grid, first, pairs, nxt, eps):
     return bad
 
 
+@numba.njit(cache=True)
+def _meeting_flips(V, F, pairs, flip_of, eps, bad):
+    """Mark in ``bad`` the flips (``flip_of`` each triangle, -1 for none) with a triangle in one of the
+    overlapping triangle ``pairs`` that meet."""
+    for i in range(pairs.shape[0]):
+        a, b = pairs[i, 0], pairs[i, 1]
+        fa, fb = flip_of[a], flip_of[b]
+        if fa == fb:
+            continue  # neither flipped, or the two triangles of one flip (they share their edge)
+        if (fa < 0 or bad[fa]) and (fb < 0 or bad[fb]):
+            continue  # decides nothing new
+        if _triangles_intersect(V, F, a, b, eps):
+            if fa >= 0:
+                bad[fa] = True
+            if fb >= 0:
+                bad[fb] = True
+
+
+def _unsafe_all(V: np.ndarray, F: np.ndarray, done: np.ndarray) -> np.ndarray:
+    """:func:`_unsafe` for many flipped pairs ``done`` at once: one hash of all the triangles as they
+    are now lists the overlapping pairs, and those with a triangle of ``done`` are tested. When a
+    pass flips many edges this costs less than a look-up in the grid per flip."""
+    flip_of = np.full(len(F), -1, np.int64)
+    flip_of[done[:, 0]] = flip_of[done[:, 1]] = np.arange(len(done))
+    bad = np.zeros(len(done), bool)
+    _meeting_flips(V, F, hashgrid.pairs(triangle_grid(V, F), -1, False), flip_of, _EPS, bad)
+    return bad
+
+
 def flip_edges(V: np.ndarray, F: np.ndarray, sides: np.ndarray, max_passes: int = 8,
                safe: bool = False, grid: tuple | None = None) -> int:
     """Flip non-Delaunay edges of ``F`` in place (see the module notes); returns the number of flips.
@@ -211,7 +240,10 @@ def flip_edges(V: np.ndarray, F: np.ndarray, sides: np.ndarray, max_passes: int 
         kept = np.ones(flipped, bool)
         test = np.arange(flipped)
         while len(test):
-            bad = test[_unsafe(V, F, grid[0], grid[1], done[test], nxt, _EPS)]
+            if len(test) > len(F) // 5:  # many: all at once (about 1.5 us per triangle, not 7 per flip)
+                bad = test[_unsafe_all(V, F, done[test])]
+            else:
+                bad = test[_unsafe(V, F, grid[0], grid[1], done[test], nxt, _EPS)]
             if not len(bad):
                 break
             back = done[bad].ravel()
