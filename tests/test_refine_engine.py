@@ -70,3 +70,24 @@ def test_settle_boundary_moves_only_the_vertices_off_b_onto_it():
     assert r.boundary_error() > 0.029
     assert r.settle_boundary() < 1e-12
     assert np.allclose(mesh.V, before, atol=1e-15)  # back on y = 0; nothing else moved
+
+
+def test_a_sample_asks_for_a_split_when_it_leaves_its_triangle():
+    from fracture.refine.kernels import split_wanted
+    T = np.array([[[0.0, 0, 0], [1, 0, 0], [0, 1, 0]]] * 6)
+    T[5, 2] = [0.5, 0.01, 0.0]  # a needle
+    bary = np.tile([0.4, 0.3, 0.3], (6, 1))
+    bary[3] = [0.999, 0.0005, 0.0005]  # by a corner
+    bary[4] = [0.5, 0.5, 0.0]  # on the edge 0-1
+    P = np.einsum("fk,fkc->fc", bary, T)
+    d = np.array([[0, 0, 0.2], [0.2, 0.2, 0], [0, 0, 0.05], [0, 0, 0.2], [0.3, 0.2, 0], [0, 0, 0.2]])
+    has_edge = np.array([False, False, False, False, True, False])
+    F = np.arange(18).reshape(6, 3)
+    v = np.zeros((18, 3))
+    want, N = split_wanted(T, P, bary, d, v, F, 1.0, np.zeros(6, np.int64), has_edge, 0.01**2, 0.1, 0.2)
+    # off the plane; in the plane (the triangle's own move); too little; at a corner; across its edge; a needle
+    assert want.tolist() == [True, False, False, False, True, False]
+    assert np.allclose(N, [0, 0, 1])
+    # the corners' own move is subtracted: a sample moving with its triangle stays in it
+    v[:, 2] = 0.2
+    assert not split_wanted(T, P, bary, d, v, F, 1.0, np.zeros(6, np.int64), has_edge, 0.01**2, 0.1, 0.2)[0][0]

@@ -46,8 +46,8 @@ from fracture.exterior import Exterior
 from fracture.refine.collide import stop_collisions
 from fracture.refine.flips import flip_edges
 from fracture.refine.flow import energy, sample_displacement, velocity
-from fracture.refine.kernels import (EdgeTable, edge_table, face_geometry, first_per_group, limit_moves, row_edges,
-                                     spatial_order)
+from fracture.refine.kernels import (EdgeTable, edge_table, first_per_group, limit_moves, row_edges, spatial_order,
+                                     split_wanted)
 from fracture.refine.mesh import RefineMesh
 from fracture.tolerances import tol
 from fracture.topology import boundary_conormals
@@ -265,26 +265,14 @@ class Refiner:
         bary[rows, k_edge[rows]] = 1.0 - t[rows]
         bary[rows, (k_edge[rows] + 1) % 3] = t[rows]
         P = np.einsum("fk,fkc->fc", bary, T)
-        # too close to a corner: skip
-        near = np.einsum("fkc,fkc->fk", T - P[:, None], T - P[:, None]).min(axis=1) < (p.min_edge * self.h) ** 2
         psi_P, grad_P = self.field(P)
-        psi_T = psi[m.F]
-        # how far the sample leaves its triangle: its own move minus the move
-        # the triangle's corners give it by linear interpolation
-        d = sample_displacement(P, T, psi_P, grad_P, psi_T, dt)
-        d -= np.einsum("fk,fkc->fc", bary, dt * v[m.F])
-        A, N = face_geometry(m.V, m.F)
-        off = np.abs(np.einsum("ij,ij->i", d, N))
-        # needles are not split inside (their children would be needles too):
-        # the flips improve them first (quality 1 for an equilateral triangle)
-        quality = 4.0 * np.sqrt(3.0) * A / np.maximum(np.einsum("fkc,fkc->f", T - np.roll(T, 1, axis=1),
-                                                                T - np.roll(T, 1, axis=1)), 1e-300)
-        ar = np.arange(len(m.F))
-        e = T[ar, (k_edge + 1) % 3] - T[ar, k_edge]
-        e /= np.maximum(np.linalg.norm(e, axis=1), 1e-300)[:, None]
-        across = np.linalg.norm(d - np.einsum("ij,ij->i", d, e)[:, None] * e, axis=1)
-        far = np.where(has_edge, across, off) > p.split_distance * p.step * self.h
-        want = far & ~near & (has_edge | (quality > 0.2))
+        # how far the sample leaves its triangle (its own move minus the move the
+        # corners give it); samples too close to a corner are skipped, and needles
+        # are not split inside (their children would be needles too): the flips
+        # improve them first
+        d = sample_displacement(P, T, psi_P, grad_P, psi[m.F], dt)
+        want, N = split_wanted(T, P, bary, d, v, m.F, dt, k_edge, has_edge, (p.min_edge * self.h) ** 2,
+                               p.split_distance * p.step * self.h, 0.2)
         self._keep_unfolded(want, table, P, T, N, k_edge)
         budget = max(0, (p.max_triangles - len(m.F)) // 2)
         # edge splits: one per edge (a random one of its triangles' samples) ...

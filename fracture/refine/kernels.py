@@ -276,6 +276,58 @@ def sample_displacement(P, T, psi_p, grad_p, psi_T, dt):
     return out
 
 
+@numba.njit(cache=True)
+def split_wanted(T, P, bary, d, v, F, dt, k_edge, has_edge, near2, far, min_quality):
+    """Which samples ask for a split (see :meth:`~fracture.refine.engine.Refiner.remesh`), and the unit
+    normals of the triangles ``T (m, 3, 3)``.
+
+    A sample ``P[f] = bary[f] . T[f]`` moving by ``d[f]`` leaves its triangle by its move minus the
+    move its corners (velocities ``v``, step ``dt``) give it: across the triangle's plane, or for a
+    sample on edge ``k_edge[f]`` (``has_edge``) across that edge. It asks for a split when that is
+    more than ``far``, it is not within ``sqrt(near2)`` of a corner, and a sample inside a triangle
+    lies in one of quality above ``min_quality`` (1 for an equilateral triangle).
+    """
+    m = T.shape[0]
+    want = np.zeros(m, np.bool_)
+    N = np.zeros((m, 3))
+    q = 4.0 * np.sqrt(3.0)
+    for f in range(m):
+        near = np.inf
+        for k in range(3):
+            x, y, z = T[f, k, 0] - P[f, 0], T[f, k, 1] - P[f, 1], T[f, k, 2] - P[f, 2]
+            near = min(near, x * x + y * y + z * z)
+        ux, uy, uz = T[f, 1, 0] - T[f, 0, 0], T[f, 1, 1] - T[f, 0, 1], T[f, 1, 2] - T[f, 0, 2]
+        wx, wy, wz = T[f, 2, 0] - T[f, 0, 0], T[f, 2, 1] - T[f, 0, 1], T[f, 2, 2] - T[f, 0, 2]
+        nx, ny, nz = uy * wz - uz * wy, uz * wx - ux * wz, ux * wy - uy * wx
+        t = np.sqrt(nx * nx + ny * ny + nz * nz)
+        if t > 0.0:
+            N[f, 0], N[f, 1], N[f, 2] = nx / t, ny / t, nz / t
+        if near < near2:
+            continue
+        a, b, c = F[f, 0], F[f, 1], F[f, 2]
+        dx = d[f, 0] - (bary[f, 0] * (dt * v[a, 0]) + bary[f, 1] * (dt * v[b, 0]) + bary[f, 2] * (dt * v[c, 0]))
+        dy = d[f, 1] - (bary[f, 0] * (dt * v[a, 1]) + bary[f, 1] * (dt * v[b, 1]) + bary[f, 2] * (dt * v[c, 1]))
+        dz = d[f, 2] - (bary[f, 0] * (dt * v[a, 2]) + bary[f, 1] * (dt * v[b, 2]) + bary[f, 2] * (dt * v[c, 2]))
+        if has_edge[f]:
+            k = k_edge[f]
+            j = (k + 1) % 3
+            ex, ey, ez = T[f, j, 0] - T[f, k, 0], T[f, j, 1] - T[f, k, 1], T[f, j, 2] - T[f, k, 2]
+            length = max(np.sqrt(ex * ex + ey * ey + ez * ez), 1e-300)
+            ex, ey, ez = ex / length, ey / length, ez / length
+            along = dx * ex + dy * ey + dz * ez
+            ax, ay, az = dx - along * ex, dy - along * ey, dz - along * ez
+            want[f] = np.sqrt(ax * ax + ay * ay + az * az) > far
+        else:
+            sq = 0.0
+            for k in range(3):
+                i = (k + 2) % 3
+                x, y, z = T[f, k, 0] - T[f, i, 0], T[f, k, 1] - T[f, i, 1], T[f, k, 2] - T[f, i, 2]
+                sq += x * x + y * y + z * z
+            want[f] = (abs(dx * N[f, 0] + dy * N[f, 1] + dz * N[f, 2]) > far
+                       and q * 0.5 * t / max(sq, 1e-300) > min_quality)
+    return want, N
+
+
 @numba.njit(cache=True, inline="always")
 def _spread(x):
     """The low 21 bits of ``x`` spread to every third bit."""
