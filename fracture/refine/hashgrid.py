@@ -6,7 +6,11 @@ elements cost the same. Each level has its own hash table, sized to what it
 holds: the coarse levels, where few long elements live, stay small and in
 cache. Every slot (an element in one cell) keeps a copy of its element's box
 and the packed coordinates of its cell, so a scan reads its bucket in order
-and hash collisions are told apart without looking anything up.
+and hash collisions are told apart without looking anything up; the slots of
+a bucket are sorted by the boxes' lower x, and a scan stops at the first box
+that starts beyond the one it tests. The elements' vertices, needed only for
+the pairs whose boxes overlap, are read from the element array (a copy per
+slot would be memory a build writes afresh every iteration).
 
 Overlapping pairs are enumerated without queries: two elements on one level
 meet in a cell they share, so the pairs inside every bucket are tried (the
@@ -74,15 +78,15 @@ def _scales(inv, levels):
 @numba.njit(cache=True)
 def build(lo, hi, inv, verts):
     """Hash the boxes ``lo, hi (k, 3)`` of elements with vertices ``verts (k, w)``, ``w <= 3``
-    (negative entries are no vertex).
+    (negative entries are no vertex). The grid refers to ``verts``: it must not change.
 
-    Returns the grid as a tuple ``(scale, level, toff, tmask, start, items, key, box, sv)``:
+    Returns the grid as a tuple ``(scale, level, toff, tmask, start, items, key, box, verts)``:
     per level the inverse cell size; each element's level; per level the
     offset of its table in ``start`` and its mask (tables are powers of two,
     ``-1`` mask for an empty level); the buckets as CSR ranges
     ``start[b]:start[b + 1]`` of slots; per slot its element, its cell's
-    packed coordinates, its element's box (lower then upper corner) and
-    vertices (padded with -1).
+    packed coordinates and its element's box (lower then upper corner); the
+    elements' vertices.
     """
     k = lo.shape[0]
     level = np.empty(k, np.int64)
@@ -143,16 +147,12 @@ def build(lo, hi, inv, verts):
                 q -= 1
             items[q + 1], key[q + 1] = e, c
     box = np.empty((slots, 6))
-    sv = np.full((slots, 3), -1, np.int64)
-    w = verts.shape[1]
     for p in range(slots):
         e = items[p]
         for c in range(3):
             box[p, c] = lo[e, c]
             box[p, 3 + c] = hi[e, c]
-        for c in range(w):
-            sv[p, c] = verts[e, c]
-    return scale[: top + 1], level, toff, tmask, start, items, key, box, sv
+    return scale[: top + 1], level, toff, tmask, start, items, key, box, verts
 
 
 @numba.njit(cache=True, inline="always")
@@ -169,10 +169,15 @@ def _corner_key(box, p, q, s):
 
 
 @numba.njit(cache=True, inline="always")
-def _share_vertex(sv, p, q):
-    for i in range(3):
-        if sv[p, i] >= 0 and (sv[p, i] == sv[q, 0] or sv[p, i] == sv[q, 1] or sv[p, i] == sv[q, 2]):
-            return True
+def _share_vertex(verts, e, g):
+    """Elements e and g have a vertex in common."""
+    w = verts.shape[1]
+    for i in range(w):
+        a = verts[e, i]
+        if a >= 0:
+            for j in range(w):
+                if a == verts[g, j]:
+                    return True
     return False
 
 
@@ -205,7 +210,7 @@ def pairs(grid, n_first, skip_shared):
     elements share a vertex are left out.
     Returns an ``(c, 2)`` array.
     """
-    scale, level, toff, tmask, start, items, key, box, sv = grid
+    scale, level, toff, tmask, start, items, key, box, verts = grid
     out = np.empty((max(1024, items.shape[0] // 4), 2), np.int64)
     count = 0
     top = tmask.shape[0] - 1
@@ -227,7 +232,7 @@ def pairs(grid, n_first, skip_shared):
                     if not (box[p, 1] <= box[q, 4] and box[q, 1] <= box[p, 4]
                             and box[p, 2] <= box[q, 5] and box[q, 2] <= box[p, 5]):
                         continue
-                    if _corner_key(box, p, q, s) != key[p] or (skip_shared and _share_vertex(sv, p, q)):
+                    if _corner_key(box, p, q, s) != key[p] or (skip_shared and _share_vertex(verts, e, g)):
                         continue
                     out, count = _push(out, count, e, g, n_first)
     # pairs on two levels: the elements of one level look up the cells their
@@ -250,7 +255,7 @@ def pairs(grid, n_first, skip_shared):
                     g = items[q]
                     if n_first >= 0 and (e < n_first) == (g < n_first):
                         continue
-                    if not (skip_shared and _share_vertex(sv, p, q)):
+                    if not (skip_shared and _share_vertex(verts, e, g)):
                         out, count = _push(out, count, e, g, n_first)
     return out[:count]
 
@@ -266,7 +271,7 @@ def look_down(n_fine, n_coarse, apart):
 @numba.njit(cache=True)
 def _corner_slots(grid):
     """Per level, the slot of every element there that holds its box's lower corner (one per element)."""
-    scale, level, toff, tmask, start, items, key, box, sv = grid
+    scale, level, toff, tmask, start, items, key, box, verts = grid
     out = []
     for L in range(tmask.shape[0]):
         s = scale[L]
@@ -285,7 +290,7 @@ def _slots(grid, qlo, qhi, min_level, max_level, buf):
     """Slots, on levels ``min_level`` to ``max_level - 1``, of the elements whose boxes overlap the box
     ``qlo, qhi``, one per element (the cell holding the lower corner of the intersection), into ``buf``;
     returns (buf, count). ``buf`` grows when full."""
-    scale, level, toff, tmask, start, items, key, box, sv = grid
+    scale, level, toff, tmask, start, items, key, box, verts = grid
     count = 0
     for L in range(min_level, min(max_level, tmask.shape[0])):
         if tmask[L] < 0:
