@@ -281,6 +281,33 @@ def _swept_boxes(X0, X1, elems, pad):
 
 
 @numba.njit(cache=True)
+def _vertex_and_triangle_boxes(X0, X1, F, pad):
+    """Swept boxes of the vertices and then the triangles, as one element list ``lo, hi (n + m, 3)``,
+    and their vertices ``(n + m, 3)`` (a vertex element lists itself three times)."""
+    n, m = X0.shape[0], F.shape[0]
+    lo = np.empty((n + m, 3))
+    hi = np.empty((n + m, 3))
+    verts = np.empty((n + m, 3), np.int64)
+    for v in range(n):
+        for c in range(3):
+            lo[v, c] = min(X0[v, c], X1[v, c]) - pad
+            hi[v, c] = max(X0[v, c], X1[v, c]) + pad
+            verts[v, c] = v
+    for f in range(m):
+        for c in range(3):
+            a = np.inf
+            b = -np.inf
+            for j in range(3):
+                u = F[f, j]
+                a = min(a, X0[u, c], X1[u, c])
+                b = max(b, X0[u, c], X1[u, c])
+                verts[n + f, j] = u
+            lo[n + f, c] = a - pad
+            hi[n + f, c] = b + pad
+    return lo, hi, verts
+
+
+@numba.njit(cache=True)
 def _vertex_triangle_pair(X0, X1, F, v, f, eta2, times, stop):
     """Test vertex v against triangle f (not one of its corners); marks a colliding pair in ``stop``."""
     a, b, c = F[f, 0], F[f, 1], F[f, 2]
@@ -394,14 +421,11 @@ def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, E: np.ndarray
     if not len(E) and not len(F):
         return (stopped, 0, None) if return_grid else (stopped, 0)
     eta2 = float(eta) ** 2
-    ids = np.arange(n).reshape(-1, 1)
-    vlo, vhi = _swept_boxes(X0, X1, ids, eta)
-    tlo, thi = _swept_boxes(X0, X1, F, eta)
-    elo, ehi = _swept_boxes(X0, X1, E, eta)
     # vertices (ids below n) and triangles in one grid, edges in another
-    lo, hi = np.concatenate([vlo, tlo]), np.concatenate([vhi, thi])
+    lo, hi, verts = _vertex_and_triangle_boxes(X0, X1, F, eta)
+    elo, ehi = _swept_boxes(X0, X1, E, eta)
     inv = 1.0 / hashgrid.cell_size(lo, hi, _typical_cell(X0, E if len(E) else F[:, :2]))
-    vt = hashgrid.build(lo, hi, inv, np.concatenate([np.column_stack([ids, ids, ids]), F]))
+    vt = hashgrid.build(lo, hi, inv, verts)
     eg = hashgrid.build(elo, ehi, inv, E)
 
     def pairs_on(on):  # the pairs of the elements on vertices ``on`` (mask), against everything
