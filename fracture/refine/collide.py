@@ -372,13 +372,15 @@ def _query_pairs(grid, lo, hi, query, first, last, shift, flip):
 
 
 def _typical_cell(X, E):
-    """Twice the median length of edges ``E`` (of at most 4096 of them, evenly spread): cells about the
-    size of the elements' boxes. Any size gives the same pairs; this one makes the hash fast."""
+    """Three times the median length of edges ``E`` (of at most 4096 of them, evenly spread). Any size
+    gives the same pairs: smaller cells hold fewer elements but put each in more of them, and with
+    the buckets sorted by x (:mod:`~fracture.refine.hashgrid`) three edges was fastest (at 174K
+    triangles the collision grids' builds and pairs took 190 ms, 260 ms at two edges, 270 at six)."""
     if not len(E):
         return 1.0
     E = E[:: max(1, len(E) // 4096)]
     e = X[E[:, 1]] - X[E[:, 0]]
-    return 2.0 * float(np.sqrt(np.median(np.einsum("ij,ij->i", e, e))))
+    return 3.0 * float(np.sqrt(np.median(np.einsum("ij,ij->i", e, e))))
 
 
 def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, E: np.ndarray, eta: float,
