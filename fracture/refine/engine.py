@@ -11,7 +11,9 @@ One iteration:
    has one) is moved by Eq. 3 with the triangle as its neighbourhood; where it
    leaves the triangle by more than ``split_distance`` of the step, it becomes
    a vertex (1-to-3 split, or an edge split through every triangle on the
-   edge). Samples closer than ``min_edge`` grid cells to a corner are skipped;
+   edge). Samples closer than ``min_edge`` grid cells to a corner are skipped,
+   and so are boundary-edge samples whose projection onto B would turn one of
+   the new triangles over (:func:`split_folds`);
 3. the moves: no vertex moves more than ``max_move`` of its shortest edge nor
    more than a grid cell (no vertex can overtake its neighbours), and each
    vertex scales its move by its own gain: a vertex whose velocity turns back
