@@ -121,3 +121,18 @@ def test_testing_the_flips_of_a_pass_at_once_or_one_by_one_agrees():
     one_by_one = _unsafe(V, F, grid, 0, done, nxt, _EPS)
     assert 0 < one_by_one.sum() < flipped
     assert np.array_equal(_unsafe_all(V, F, done), one_by_one)
+
+
+def test_a_given_edge_table_flips_like_a_built_one():
+    from fracture.refine.kernels import edge_table
+    rng = np.random.default_rng(6)
+    P = rng.random((200, 2))
+    V = np.column_stack([P, 0.02 * np.sin(7 * P[:, 1])])
+    F = Delaunay(P * [1.0, 5.0]).simplices.astype(np.int64)
+    F = np.where((np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])[:, 2] < 0)[:, None], F[:, ::-1], F)
+    sides = np.zeros((len(F), 2), np.int64)
+    built, given = F.copy(), F.copy()
+    n = flip_edges(V, built, sides, max_passes=3, safe=True)
+    assert n > 0
+    assert flip_edges(V, given, sides, max_passes=3, safe=True, table=edge_table(F, len(V))) == n
+    assert np.array_equal(built, given)

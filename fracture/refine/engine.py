@@ -358,7 +358,7 @@ class Refiner:
         clock = log.tick("collisions", clock)
         moved = np.linalg.norm(X1 - m.V, axis=1)
         m.V = X1
-        flip_edges(m.V, m.F, m.sides, max_passes=3, safe=True, grid=grid)
+        flip_edges(m.V, m.F, m.sides, max_passes=3, safe=True, grid=grid, table=table)
         clock = log.tick("flips", clock)
         log.stopped.append(int(stopped.sum()))
         return float(moved[used].mean() / self.h) if used.any() else 0.0

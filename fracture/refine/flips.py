@@ -15,7 +15,7 @@ import numpy as np
 
 from fracture.refine import hashgrid
 from fracture.refine.collide import _EPS, _cross, _dot, _pt, _sub, _triangles_intersect, triangle_grid
-from fracture.refine.kernels import _edge_table, _find_edge
+from fracture.refine.kernels import EdgeTable, _edge_table, _find_edge
 
 
 @numba.njit(cache=True, inline="always")
@@ -207,7 +207,7 @@ def _unsafe_all(V: np.ndarray, F: np.ndarray, done: np.ndarray) -> np.ndarray:
 
 
 def flip_edges(V: np.ndarray, F: np.ndarray, sides: np.ndarray, max_passes: int = 8,
-               safe: bool = False, grid: tuple | None = None) -> int:
+               safe: bool = False, grid: tuple | None = None, table: EdgeTable | None = None) -> int:
     """Flip non-Delaunay edges of ``F`` in place (see the module notes); returns the number of flips.
 
     ``F`` must be a C-contiguous int64 array (it is edited in place). A flip
@@ -218,6 +218,8 @@ def flip_edges(V: np.ndarray, F: np.ndarray, sides: np.ndarray, max_passes: int 
     ``grid`` may give a :mod:`~fracture.refine.hashgrid` of boxes that
     contain the triangles, as ``(grid, first)`` with triangle ``f`` its
     element ``first + f`` (the collision step's); else one is built.
+    ``table``, the :class:`~fracture.refine.kernels.EdgeTable` of ``F`` as
+    passed, saves building it for the first pass (with ``safe``).
     """
     if F.dtype != np.int64 or not F.flags.c_contiguous:
         raise TypeError("F must be a C-contiguous int64 array")
@@ -228,9 +230,13 @@ def flip_edges(V: np.ndarray, F: np.ndarray, sides: np.ndarray, max_passes: int 
     total = 0
     pairs = _pair_buffer(len(F), 1)
     nxt, root = np.arange(len(F)), np.arange(len(F))
-    for _ in range(max_passes):  # one pass at a time: a triangle takes part in one flip per pass
+    for i in range(max_passes):  # one pass at a time: a triangle takes part in one flip per pass
         before = F.copy()
-        flipped = int(_flip(V, F, sides, 1, pairs))
+        if i == 0 and table is not None:
+            flipped = int(_flip_pass(V, F, sides, table.eid, table.count, table.first, table.second, table._start,
+                                     table._hi, table._row, pairs, 0))
+        else:
+            flipped = int(_flip(V, F, sides, 1, pairs))
         if not flipped:
             break
         if grid is None:  # the boxes from before the first flip
