@@ -65,9 +65,11 @@ def test_testing_only_the_moving_vertices_stops_the_same_ones():
     moving = rng.choice(len(V), 40, replace=False)
     X1 = V.copy()
     X1[moving] += rng.normal(0, 0.03, (40, 3))
-    everything, _ = stop_collisions(V, Xa := X1.copy(), F, E, 1e-9)
+    everything, pairs = stop_collisions(V, Xa := X1.copy(), F, E, 1e-9)
     assert everything.any()  # some of them do collide
-    assert np.array_equal(stop_collisions(V, Xb := X1.copy(), F, E, 1e-9, moving=moving)[0][moving], everything[moving])
+    stopped, found = stop_collisions(V, Xb := X1.copy(), F, E, 1e-9, moving=moving)
+    assert np.array_equal(stopped[moving], everything[moving])
+    assert found == pairs  # every colliding pair has a moving vertex, and is counted once
     assert np.array_equal(Xa, Xb) and self_intersections(Xb, F) == 0
 
 

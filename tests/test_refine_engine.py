@@ -91,3 +91,27 @@ def test_a_sample_asks_for_a_split_when_it_leaves_its_triangle():
     # the corners' own move is subtracted: a sample moving with its triangle stays in it
     v[:, 2] = 0.2
     assert not split_wanted(T, P, bary, d, v, F, 1.0, np.zeros(6, np.int64), has_edge, 0.01**2, 0.1, 0.2)[0][0]
+
+
+def test_settle_boundary_stops_a_vertex_whose_way_onto_b_is_blocked():
+    """A boundary vertex pulled 0.03 inside the box; a small sheet lies across its way back to y = 0."""
+    from fracture.refine.collide import self_intersections
+    pyramid = two_weak_sheets()
+    BV, BF = box([0, 0, 0], [1, 1, 1], (8, 8, 8))
+    sheet_mesh = flat_cut()
+    V, F, sides = sheet_mesh.V.copy(), sheet_mesh.F.copy(), sheet_mesh.sides.copy()
+    on_y0 = np.flatnonzero(V[:, 1] == 0.0)
+    v = on_y0[np.argmin(np.abs(V[on_y0, 2] - 0.5))]
+    z0 = V[v, 2]
+    V[v, 1] = 0.03
+    obstacle = np.array([[0.45, 0.015, z0 - 0.01], [0.59, 0.015, z0 - 0.01], [0.52, 0.015, z0 + 0.03]])
+    mesh = RefineMesh.from_coarse(np.vstack([V, obstacle]), np.vstack([F, len(V) + np.array([[0, 1, 2]])]),
+                                  np.vstack([sides, [[1, 2]]]))
+    assert self_intersections(mesh.V, mesh.F) == 0
+    r = Refiner(mesh, pyramid, BV, BF, RefineParams(), np.random.default_rng(0))
+    r.boundary = np.array([v])
+    before = mesh.V.copy()
+    assert abs(r.settle_boundary() - 0.03) < 1e-12  # still off B ...
+    assert np.array_equal(mesh.V, before) and r.hold[v] == r.params.hold  # ... held where it was
+    mesh.V[-3:, 0] += 2.0  # the obstacle elsewhere: it goes
+    assert r.settle_boundary() < 1e-12 and mesh.V[v, 1] == 0.0

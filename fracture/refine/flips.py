@@ -97,22 +97,6 @@ def _pair_buffer(m: int, passes: int) -> np.ndarray:
     return np.empty((passes * (m // 2 + 1), 2), np.int64)
 
 
-@numba.njit(cache=True)
-def _join(nxt, root, pairs):
-    """Merge the clusters of the triangles of each flipped pair: circular member lists ``nxt``, union-find ``root``."""
-    for i in range(pairs.shape[0]):
-        f, g = pairs[i, 0], pairs[i, 1]
-        while root[f] != f:
-            root[f] = root[root[f]]
-            f = root[f]
-        while root[g] != g:
-            root[g] = root[root[g]]
-            g = root[g]
-        if f != g:
-            root[g] = f
-            nxt[f], nxt[g] = nxt[g], nxt[f]  # splices the two cycles into one
-
-
 @numba.njit(cache=True, inline="always")
 def _boxes_apart(V, F, f, c):
     """The bounding boxes of triangles f and c do not overlap."""
@@ -141,15 +125,15 @@ def _near(V, F, pairs, faces):
 
 
 @numba.njit(cache=True)
-def _unsafe(V, F, grid, first, pairs, nxt, eps):
+def _unsafe(V, F, grid, first, cgrid, changed, now, pairs, eps):
     """Which flipped ``pairs`` meet another triangle of the surface.
 
-    ``grid`` holds boxes that contained the triangles before the flips
-    (triangle ``f`` as element ``first + f``; elements below ``first`` are
-    not triangles). A flipped triangle lies inside the boxes of the triangles
-    it was flipped with (its cluster, linked by ``nxt``), so every triangle
-    near a new pair is found through some member of its cluster, and the
-    whole cluster is tested.
+    ``grid`` holds boxes that contain the triangles as they were before the
+    flips (triangle ``f`` as element ``first + f``; elements below ``first``
+    are not triangles): it finds the triangles that are still so. ``cgrid``
+    holds the boxes of the triangles ``changed`` by the flips, as they are
+    now (element ``i`` is triangle ``changed[i]``): it finds those of them
+    still changed (``now``; an undone flip is back to its old triangles).
     """
     buf = np.empty(256, np.int64)
     lo = np.empty(3)
@@ -160,21 +144,29 @@ def _unsafe(V, F, grid, first, pairs, nxt, eps):
         for c in range(3):
             lo[c] = min(V[F[f, 0], c], V[F[f, 1], c], V[F[f, 2], c], V[F[g, 0], c], V[F[g, 1], c], V[F[g, 2], c])
             hi[c] = max(V[F[f, 0], c], V[F[f, 1], c], V[F[f, 2], c], V[F[g, 0], c], V[F[g, 1], c], V[F[g, 2], c])
-        buf, k = hashgrid.gather(grid, lo, hi, buf)
-        for j in range(k):
-            if buf[j] < first:
-                continue
-            c = start = buf[j] - first
-            while True:
-                if c != f and c != g and (_meet(V, F, f, c, eps) or _meet(V, F, g, c, eps)):
+        for new in range(2):
+            buf, k = hashgrid.gather(cgrid if new else grid, lo, hi, buf)
+            for j in range(k):
+                if new:
+                    c = changed[buf[j]]
+                elif buf[j] < first:
+                    continue
+                else:
+                    c = buf[j] - first
+                if now[c] != new or c == f or c == g:
+                    continue  # found through the other grid, or one of the pair
+                if _meet(V, F, f, c, eps) or _meet(V, F, g, c, eps):
                     bad[i] = True
-                    break
-                c = nxt[c]
-                if c == start:
                     break
             if bad[i]:
                 break
     return bad
+
+
+def _changed_grid(V: np.ndarray, F: np.ndarray, start: np.ndarray) -> tuple[tuple, np.ndarray]:
+    """A hash grid of the triangles of ``F`` that differ from ``start``, and their ids."""
+    changed = np.flatnonzero((F != start).any(axis=1))
+    return triangle_grid(V, np.ascontiguousarray(F[changed])), changed
 
 
 @numba.njit(cache=True)
@@ -229,7 +221,7 @@ def flip_edges(V: np.ndarray, F: np.ndarray, sides: np.ndarray, max_passes: int 
         return int(_flip(V, F, sides, int(max_passes), _pair_buffer(len(F), max_passes)))
     total = 0
     pairs = _pair_buffer(len(F), 1)
-    nxt, root = np.arange(len(F)), np.arange(len(F))
+    start = F.copy()  # the triangles whose boxes the grid holds
     for i in range(max_passes):  # one pass at a time: a triangle takes part in one flip per pass
         before = F.copy()
         if i == 0 and table is not None:
@@ -242,14 +234,18 @@ def flip_edges(V: np.ndarray, F: np.ndarray, sides: np.ndarray, max_passes: int 
         if grid is None:  # the boxes from before the first flip
             grid = triangle_grid(V, before), 0
         done = pairs[:flipped].copy()
-        _join(nxt, root, done)
         kept = np.ones(flipped, bool)
         test = np.arange(flipped)
+        cgrid = None
         while len(test):
             if len(test) > len(F) // 5:  # many: all at once (about 1.5 us per triangle, not 7 per flip)
                 bad = test[_unsafe_all(V, F, done[test])]
             else:
-                bad = test[_unsafe(V, F, grid[0], grid[1], done[test], nxt, _EPS)]
+                if cgrid is None:  # undoing flips later in the pass only takes triangles out of it
+                    cgrid, changed = _changed_grid(V, F, start)
+                now = np.zeros(len(F), bool)
+                now[changed] = (F[changed] != start[changed]).any(axis=1)
+                bad = test[_unsafe(V, F, grid[0], grid[1], cgrid, changed, now, done[test], _EPS)]
             if not len(bad):
                 break
             back = done[bad].ravel()

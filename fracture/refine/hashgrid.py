@@ -12,12 +12,14 @@ that starts beyond the one it tests. The elements' vertices, needed only for
 the pairs whose boxes overlap, are read from the element array (a copy per
 slot would be memory a build writes afresh every iteration).
 
-Overlapping pairs are enumerated without queries: two elements on one level
-meet in a cell they share, so the pairs inside every bucket are tried (the
+Overlapping pairs on one level are enumerated without queries: two such
+elements meet in a cell they share, so the pairs inside every bucket are tried (the
 buckets are contiguous: this is a scan of memory in order); a pair on two
-levels is found by the finer element, which looks up the few coarse cells
-its box covers. A pair is reported once, from the cell (on the coarser of
-its two levels) holding the lower corner of the intersection of the boxes.
+levels is found by looking up, for every element of one of them, the cells
+its box covers on the other (from the finer level, or from the coarser when
+its elements are so few that their many fine cells cost less). A pair is
+reported once, from the cell (on the level looked up) holding the lower
+corner of the intersection of the boxes.
 
 libigl's AABB tree and scipy's cKDTree answer point queries; the moving
 surfaces of the refinement need all pairs of overlapping swept boxes of
@@ -264,8 +266,8 @@ def pairs(grid, n_first, skip_shared):
 def look_down(n_fine, n_coarse, apart):
     """Whether the elements of a coarse level look up the cells of a level ``apart`` levels finer
     (up to ``(2^apart + 1)^3`` each) rather than the fine ones the coarse cells (about 4 each)."""
-    span = (1 << apart) + 1
-    return n_coarse * span * span * span < 4 * n_fine
+    span = 2.0 ** apart + 1.0  # float: (2^apart + 1)^3 overflows int64 for levels far apart
+    return n_coarse * span * span * span < 4.0 * n_fine
 
 
 @numba.njit(cache=True)
