@@ -144,3 +144,24 @@ def test_a_given_edge_table_flips_like_a_built_one():
     assert n > 0
     assert flip_edges(V, given, sides, max_passes=3, safe=True, table=edge_table(F, len(V))) == n
     assert np.array_equal(built, given)
+
+
+def test_safe_flips_between_two_close_sheets_leave_nothing_crossing():
+    """Passes with undone flips (tested again against what the undoing changed) end intersection-free."""
+    inputs = refused = 0
+    for seed in range(40):
+        rng = np.random.default_rng(seed)
+        (P1, F1), (P2, F2) = _sheet(rng, 200, 6.0), _sheet(rng, 200, 0.2)
+        V = np.vstack([np.c_[P1, 0.01 * rng.standard_normal(len(P1))],
+                       np.c_[P2, 0.04 + 0.01 * rng.standard_normal(len(P2))]])
+        F = np.vstack([F1, F2 + len(P1)])
+        if self_intersections(V, F):
+            continue
+        inputs += 1
+        sides = np.r_[np.tile([[0, 1]], (len(F1), 1)), np.tile([[1, 2]], (len(F2), 1))]
+        plain, safe = F.copy(), F.copy()
+        n_plain = flip_edges(V, plain, sides, max_passes=3)
+        n_safe = flip_edges(V, safe, sides, max_passes=3, safe=True)
+        assert self_intersections(V, safe) == 0
+        refused += n_safe < n_plain or not np.array_equal(plain, safe)
+    assert inputs >= 10 and refused >= 3

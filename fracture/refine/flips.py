@@ -113,12 +113,22 @@ def _meet(V, F, f, c, eps):
 
 
 @numba.njit(cache=True)
-def _near(V, F, pairs, faces):
-    """Which triangle ``pairs`` have a triangle whose box overlaps the box of one of ``faces``."""
+def _meet_any(V, F, pairs, grid, ids, eps):
+    """Which triangle ``pairs`` meet one of the triangles ``ids`` (hashed in ``grid``, element ``i``
+    being triangle ``ids[i]``)."""
+    buf = np.empty(256, np.int64)
+    lo = np.empty(3)
+    hi = np.empty(3)
     out = np.zeros(pairs.shape[0], np.bool_)
     for i in range(pairs.shape[0]):
-        for c in faces:
-            if not _boxes_apart(V, F, pairs[i, 0], c) or not _boxes_apart(V, F, pairs[i, 1], c):
+        f, g = pairs[i, 0], pairs[i, 1]
+        for c in range(3):
+            lo[c] = min(V[F[f, 0], c], V[F[f, 1], c], V[F[f, 2], c], V[F[g, 0], c], V[F[g, 1], c], V[F[g, 2], c])
+            hi[c] = max(V[F[f, 0], c], V[F[f, 1], c], V[F[f, 2], c], V[F[g, 0], c], V[F[g, 1], c], V[F[g, 2], c])
+        buf, k = hashgrid.gather(grid, lo, hi, buf)
+        for j in range(k):
+            c = ids[buf[j]]
+            if c != f and c != g and (_meet(V, F, f, c, eps) or _meet(V, F, g, c, eps)):
                 out[i] = True
                 break
     return out
@@ -234,27 +244,22 @@ def flip_edges(V: np.ndarray, F: np.ndarray, sides: np.ndarray, max_passes: int 
         if grid is None:  # the boxes from before the first flip
             grid = triangle_grid(V, before), 0
         done = pairs[:flipped].copy()
-        kept = np.ones(flipped, bool)
-        test = np.arange(flipped)
-        cgrid = None
-        while len(test):
-            if len(test) > len(F) // 5:  # many: all at once (about 1.5 us per triangle, not 7 per flip)
-                bad = test[_unsafe_all(V, F, done[test])]
-            else:
-                if cgrid is None:  # undoing flips later in the pass only takes triangles out of it
-                    cgrid, changed = _changed_grid(V, F, start)
-                now = np.zeros(len(F), bool)
-                now[changed] = (F[changed] != start[changed]).any(axis=1)
-                bad = test[_unsafe(V, F, grid[0], grid[1], cgrid, changed, now, done[test], _EPS)]
-            if not len(bad):
-                break
+        if flipped > len(F) // 5:  # many: all at once (about 1.5 us per triangle, not 7 per flip)
+            bad = _unsafe_all(V, F, done)
+        else:
+            cgrid, changed = _changed_grid(V, F, start)
+            now = np.zeros(len(F), bool)
+            now[changed] = True
+            bad = _unsafe(V, F, grid[0], grid[1], cgrid, changed, now, done, _EPS)
+        kept = ~bad
+        while bad.any():
             back = done[bad].ravel()
             F[back] = before[back]
-            kept[bad] = False
-            # undoing flips changes only the undone triangles: test again the kept
-            # pairs whose boxes overlap one of them (the others' tests stand)
+            # undoing flips changes only the undone triangles: the kept flips are
+            # tested again against these alone (their other tests stand)
             test = np.flatnonzero(kept)
-            if len(back) <= 512:
-                test = test[_near(V, F, done[test], back)]
+            bad = np.zeros(flipped, bool)
+            bad[test] = _meet_any(V, F, done[test], triangle_grid(V, np.ascontiguousarray(F[back])), back, _EPS)
+            kept &= ~bad
         total += int(kept.sum())
     return total
