@@ -113,70 +113,64 @@ def _meet(V, F, f, c, eps):
 
 
 @numba.njit(cache=True)
-def _meet_any(V, F, pairs, grid, ids, eps):
-    """Which triangle ``pairs`` meet one of the triangles ``ids`` (hashed in ``grid``, element ``i``
-    being triangle ``ids[i]``)."""
+def _meet_found(V, F, pairs, grid, first, ids, skip, eps, out):
+    """Mark in ``out`` the triangle ``pairs`` that meet a triangle found in ``grid``: element
+    ``first + i`` is triangle ``ids[i]`` (elements below ``first`` are not triangles), and triangles
+    with ``skip`` are left out. Pairs already marked are not looked at again."""
     buf = np.empty(256, np.int64)
     lo = np.empty(3)
     hi = np.empty(3)
-    out = np.zeros(pairs.shape[0], np.bool_)
     for i in range(pairs.shape[0]):
+        if out[i]:
+            continue
         f, g = pairs[i, 0], pairs[i, 1]
         for c in range(3):
             lo[c] = min(V[F[f, 0], c], V[F[f, 1], c], V[F[f, 2], c], V[F[g, 0], c], V[F[g, 1], c], V[F[g, 2], c])
             hi[c] = max(V[F[f, 0], c], V[F[f, 1], c], V[F[f, 2], c], V[F[g, 0], c], V[F[g, 1], c], V[F[g, 2], c])
         buf, k = hashgrid.gather(grid, lo, hi, buf)
         for j in range(k):
-            c = ids[buf[j]]
-            if c != f and c != g and (_meet(V, F, f, c, eps) or _meet(V, F, g, c, eps)):
+            if buf[j] < first:
+                continue
+            c = ids[buf[j] - first]
+            if not skip[c] and c != f and c != g and (_meet(V, F, f, c, eps) or _meet(V, F, g, c, eps)):
                 out[i] = True
                 break
+
+
+def _meet_any(V: np.ndarray, F: np.ndarray, pairs: np.ndarray, ids: np.ndarray) -> np.ndarray:
+    """Which triangle ``pairs`` meet one of the triangles ``ids``."""
+    out = np.zeros(len(pairs), bool)
+    _meet_found(V, F, pairs, _grid_of(V, F, ids), 0, ids, np.zeros(len(F), bool), _EPS, out)
     return out
 
 
-@numba.njit(cache=True)
-def _unsafe(V, F, grid, first, cgrid, changed, now, pairs, eps):
+def _unsafe(V: np.ndarray, F: np.ndarray, grid: tuple, first: int, cgrid: tuple, changed: np.ndarray,
+            pairs: np.ndarray) -> np.ndarray:
     """Which flipped ``pairs`` meet another triangle of the surface.
 
     ``grid`` holds boxes that contain the triangles as they were before the
     flips (triangle ``f`` as element ``first + f``; elements below ``first``
     are not triangles): it finds the triangles that are still so. ``cgrid``
     holds the boxes of the triangles ``changed`` by the flips, as they are
-    now (element ``i`` is triangle ``changed[i]``): it finds those of them
-    still changed (``now``; an undone flip is back to its old triangles).
+    now (element ``i`` is triangle ``changed[i]``): it finds those.
     """
-    buf = np.empty(256, np.int64)
-    lo = np.empty(3)
-    hi = np.empty(3)
-    bad = np.zeros(pairs.shape[0], np.bool_)
-    for i in range(pairs.shape[0]):
-        f, g = pairs[i, 0], pairs[i, 1]
-        for c in range(3):
-            lo[c] = min(V[F[f, 0], c], V[F[f, 1], c], V[F[f, 2], c], V[F[g, 0], c], V[F[g, 1], c], V[F[g, 2], c])
-            hi[c] = max(V[F[f, 0], c], V[F[f, 1], c], V[F[f, 2], c], V[F[g, 0], c], V[F[g, 1], c], V[F[g, 2], c])
-        for new in range(2):
-            buf, k = hashgrid.gather(cgrid if new else grid, lo, hi, buf)
-            for j in range(k):
-                if new:
-                    c = changed[buf[j]]
-                elif buf[j] < first:
-                    continue
-                else:
-                    c = buf[j] - first
-                if now[c] != new or c == f or c == g:
-                    continue  # found through the other grid, or one of the pair
-                if _meet(V, F, f, c, eps) or _meet(V, F, g, c, eps):
-                    bad[i] = True
-                    break
-            if bad[i]:
-                break
-    return bad
+    is_changed = np.zeros(len(F), bool)
+    is_changed[changed] = True
+    out = np.zeros(len(pairs), bool)
+    _meet_found(V, F, pairs, grid, first, np.arange(len(F)), is_changed, _EPS, out)
+    _meet_found(V, F, pairs, cgrid, 0, changed, np.zeros(len(F), bool), _EPS, out)
+    return out
+
+
+def _grid_of(V: np.ndarray, F: np.ndarray, ids: np.ndarray) -> tuple:
+    """A hash grid of the triangles ``ids`` (element ``i`` is triangle ``ids[i]``)."""
+    return triangle_grid(V, np.ascontiguousarray(F[ids]))
 
 
 def _changed_grid(V: np.ndarray, F: np.ndarray, start: np.ndarray) -> tuple[tuple, np.ndarray]:
     """A hash grid of the triangles of ``F`` that differ from ``start``, and their ids."""
     changed = np.flatnonzero((F != start).any(axis=1))
-    return triangle_grid(V, np.ascontiguousarray(F[changed])), changed
+    return _grid_of(V, F, changed), changed
 
 
 @numba.njit(cache=True)
@@ -247,10 +241,7 @@ def flip_edges(V: np.ndarray, F: np.ndarray, sides: np.ndarray, max_passes: int 
         if flipped > len(F) // 5:  # many: all at once (about 1.5 us per triangle, not 7 per flip)
             bad = _unsafe_all(V, F, done)
         else:
-            cgrid, changed = _changed_grid(V, F, start)
-            now = np.zeros(len(F), bool)
-            now[changed] = True
-            bad = _unsafe(V, F, grid[0], grid[1], cgrid, changed, now, done, _EPS)
+            bad = _unsafe(V, F, grid[0], grid[1], *_changed_grid(V, F, start), done)
         kept = ~bad
         while bad.any():
             back = done[bad].ravel()
@@ -259,7 +250,7 @@ def flip_edges(V: np.ndarray, F: np.ndarray, sides: np.ndarray, max_passes: int 
             # tested again against these alone (their other tests stand)
             test = np.flatnonzero(kept)
             bad = np.zeros(flipped, bool)
-            bad[test] = _meet_any(V, F, done[test], triangle_grid(V, np.ascontiguousarray(F[back])), back, _EPS)
+            bad[test] = _meet_any(V, F, done[test], back)
             kept &= ~bad
         total += int(kept.sum())
     return total
