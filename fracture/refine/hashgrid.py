@@ -94,11 +94,13 @@ def build(lo, hi, inv, verts):
     level = np.empty(k, np.int64)
     per_level = np.zeros(41, np.int64)
     scale = _scales(inv, 41)
+    cells = np.empty(k, np.int64)  # per element, the cells its box covers
     for e in range(k):
         level[e] = L = _level(lo[e], hi[e], inv)
         s = scale[L]
-        per_level[L] += ((_cell(hi[e, 0], s) - _cell(lo[e, 0], s) + 1) * (_cell(hi[e, 1], s) - _cell(lo[e, 1], s) + 1)
-                         * (_cell(hi[e, 2], s) - _cell(lo[e, 2], s) + 1))
+        cells[e] = ((_cell(hi[e, 0], s) - _cell(lo[e, 0], s) + 1) * (_cell(hi[e, 1], s) - _cell(lo[e, 1], s) + 1)
+                    * (_cell(hi[e, 2], s) - _cell(lo[e, 2], s) + 1))
+        per_level[L] += cells[e]
     top = 0
     for L in range(41):
         if per_level[L]:
@@ -113,31 +115,35 @@ def build(lo, hi, inv, verts):
                 size *= 2
             tmask[L] = size - 1
         toff[L + 1] = toff[L] + size
+    # every element's cells, listed once in element order (bucket and packed
+    # coordinates), then moved into their buckets (a counting sort)
+    slots = per_level.sum()
+    cell_bucket = np.empty(slots, np.int64)
+    cell_key = np.empty(slots, np.int64)
     start = np.zeros(toff[-1] + 1, np.int64)
+    p = 0
     for e in range(k):
         L = level[e]
         s = scale[L]
         for ix in range(_cell(lo[e, 0], s), _cell(hi[e, 0], s) + 1):
             for iy in range(_cell(lo[e, 1], s), _cell(hi[e, 1], s) + 1):
                 for iz in range(_cell(lo[e, 2], s), _cell(hi[e, 2], s) + 1):
-                    start[toff[L] + _hash(ix, iy, iz, tmask[L]) + 1] += 1
+                    cell_bucket[p] = b = toff[L] + _hash(ix, iy, iz, tmask[L])
+                    cell_key[p] = _key(ix, iy, iz)
+                    start[b + 1] += 1
+                    p += 1
     for b in range(toff[-1]):
         start[b + 1] += start[b]
     fill = start[:-1].copy()
-    slots = start[-1]
     items = np.empty(slots, np.int64)
     key = np.empty(slots, np.int64)
+    p = 0
     for e in range(k):
-        L = level[e]
-        s = scale[L]
-        for ix in range(_cell(lo[e, 0], s), _cell(hi[e, 0], s) + 1):
-            for iy in range(_cell(lo[e, 1], s), _cell(hi[e, 1], s) + 1):
-                for iz in range(_cell(lo[e, 2], s), _cell(hi[e, 2], s) + 1):
-                    b = toff[L] + _hash(ix, iy, iz, tmask[L])
-                    p = fill[b]
-                    fill[b] += 1
-                    items[p] = e
-                    key[p] = _key(ix, iy, iz)
+        for _ in range(cells[e]):
+            q = fill[cell_bucket[p]]
+            fill[cell_bucket[p]] += 1
+            items[q], key[q] = e, cell_key[p]
+            p += 1
     # every bucket sorted by the boxes' lower x (insertion sort: buckets are
     # short): scans of a bucket stop at the first box that starts beyond theirs
     for b in range(toff[-1]):
