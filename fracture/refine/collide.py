@@ -263,10 +263,10 @@ def _edge_edge_hit(p0, p1, q0, q1, r0, r1, s0, s1, eta2, times):
 
 
 @numba.njit(cache=True)
-def _swept_boxes(X0, X1, elems, pad):
+def _fill_boxes(X0, X1, elems, pad, lo, hi):
+    """Write into ``lo, hi`` the boxes of elements ``elems (k, w)`` (vertex ids) swept from ``X0`` to ``X1``,
+    grown by ``pad``."""
     k, w = elems.shape
-    lo = np.empty((k, 3))
-    hi = np.empty((k, 3))
     for e in range(k):
         for c in range(3):
             a = np.inf
@@ -277,6 +277,13 @@ def _swept_boxes(X0, X1, elems, pad):
                 b = max(b, X0[v, c], X1[v, c])
             lo[e, c] = a - pad
             hi[e, c] = b + pad
+
+
+@numba.njit(cache=True)
+def _swept_boxes(X0, X1, elems, pad):
+    lo = np.empty((elems.shape[0], 3))
+    hi = np.empty((elems.shape[0], 3))
+    _fill_boxes(X0, X1, elems, pad, lo, hi)
     return lo, hi
 
 
@@ -285,25 +292,13 @@ def _vertex_and_triangle_boxes(X0, X1, F, pad):
     """Swept boxes of the vertices and then the triangles, as one element list ``lo, hi (n + m, 3)``,
     and their vertices ``(n + m, 3)`` (a vertex element lists itself three times)."""
     n, m = X0.shape[0], F.shape[0]
-    lo = np.empty((n + m, 3))
-    hi = np.empty((n + m, 3))
     verts = np.empty((n + m, 3), np.int64)
     for v in range(n):
-        for c in range(3):
-            lo[v, c] = min(X0[v, c], X1[v, c]) - pad
-            hi[v, c] = max(X0[v, c], X1[v, c]) + pad
-            verts[v, c] = v
-    for f in range(m):
-        for c in range(3):
-            a = np.inf
-            b = -np.inf
-            for j in range(3):
-                u = F[f, j]
-                a = min(a, X0[u, c], X1[u, c])
-                b = max(b, X0[u, c], X1[u, c])
-                verts[n + f, j] = u
-            lo[n + f, c] = a - pad
-            hi[n + f, c] = b + pad
+        verts[v, 0] = verts[v, 1] = verts[v, 2] = v
+    verts[n:] = F
+    lo = np.empty((n + m, 3))
+    hi = np.empty((n + m, 3))
+    _fill_boxes(X0, X1, verts, pad, lo, hi)
     return lo, hi, verts
 
 
