@@ -90,7 +90,7 @@ def test_renumbering_keeps_the_surface_and_the_tree():
     # the tree maps the coarse vertices (creation order) to every vertex in the current order
     coarse = m.V[np.argsort(m.label)[: m.n_coarse]]
     assert np.allclose(m.tree_matrix() @ coarse, m.V)
-    new = m.in_creation_order()
+    new = m.reorder(m.creation_order())
     assert (m.label == np.arange(len(m.V))).all() and len(new) == len(m.V)
     assert np.array_equal(m.V, ref.V)
     assert {tuple(t) for t in m.F.tolist()} == {tuple(t) for t in ref.F.tolist()}  # same corners, same order

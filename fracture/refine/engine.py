@@ -401,5 +401,5 @@ class Refiner:
             if stop and off_b <= tol.on_b * self.h:  # else a boundary vertex is still off B: iterate on
                 log.stop = stop
                 break
-        self._renumber(np.argsort(self.mesh.label))  # creation order: the tree's, coarse vertices first
+        self._renumber(self.mesh.creation_order())  # the tree's order, coarse vertices first
         return self.log

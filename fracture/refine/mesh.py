@@ -12,7 +12,7 @@ deformation to the refined surface.
 The refinement renumbers vertices and triangles now and then so that
 neighbours stay near in memory (:meth:`RefineMesh.reorder`); the tree speaks
 of vertices by creation order (``label``), and
-:meth:`RefineMesh.in_creation_order` restores that order.
+:meth:`RefineMesh.creation_order` gives the order that restores it.
 """
 
 from __future__ import annotations
@@ -78,9 +78,9 @@ class RefineMesh:
         self.F = np.ascontiguousarray(F)
         return new
 
-    def in_creation_order(self) -> np.ndarray:
-        """Number the vertices in creation order again (coarse ones first); returns the old-to-new map."""
-        return self.reorder(np.argsort(self.label))
+    def creation_order(self) -> np.ndarray:
+        """The vertex order that numbers them in creation order again (coarse ones first), for :meth:`reorder`."""
+        return np.argsort(self.label)
 
     def _add_vertices(self, parents: np.ndarray, weights: np.ndarray) -> np.ndarray:
         P = np.einsum("kj,kjc->kc", weights, self.V[parents])
