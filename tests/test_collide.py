@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 from fracture.refine.collide import self_intersections, stop_collisions
-from fracture.topology import unique_edges
 
 
 def grid_sheet(n, z, shift=0.0):
@@ -15,27 +14,31 @@ def grid_sheet(n, z, shift=0.0):
 
 
 def test_a_vertex_through_a_triangle_is_stopped_and_a_miss_is_not():
-    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0.2, 0.2, 1.0]])
-    F = np.array([[0, 1, 2]])
+    # the tip (vertex 3) of an upright triangle moves down through the flat one, or beside it
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0.2, 0.2, 1.0], [0.25, 0.2, 3.0], [0.2, 0.25, 3.0]])
+    F = np.array([[0, 1, 2], [3, 4, 5]])
     X1 = V.copy()
     X1[3, 2] = -1.0
-    stopped, pairs = stop_collisions(V, X1, F, unique_edges(F)[0], 1e-9)
-    assert pairs >= 1 and stopped[3] and np.array_equal(X1, V)
+    stopped, pairs = stop_collisions(V, X1, F, 1e-9)
+    assert pairs >= 1 and stopped[:4].all() and np.array_equal(X1, V)
     X1 = V.copy()
     X1[3] = [2.0, 2.0, -1.0]  # passes beside the triangle
-    stopped, pairs = stop_collisions(V, X1, F, unique_edges(F)[0], 1e-9)
+    stopped, pairs = stop_collisions(V, X1, F, 1e-9)
     assert pairs == 0 and not stopped.any() and X1[3, 2] == -1.0
 
 
 def test_crossing_edges_are_stopped():
-    V = np.array([[0, -1, 1], [0, 1, 1], [-1, 0, 0], [1, 0, 0]], float)
+    # two triangles in the planes x = 0 and y = 0; only their first edges ever cross
+    V = np.array([[0, -1, 1], [0, 1, 1], [0, 0, 3], [-1, 0, 0], [1, 0, 0], [0, 0, -3]], float)
+    F = np.array([[0, 1, 2], [3, 4, 5]])
     X1 = V.copy()
-    X1[:2, 2] = -1.0
-    stopped, pairs = stop_collisions(V, X1, np.zeros((0, 3), np.int64), np.array([[0, 1], [2, 3]]), 1e-9)
-    assert pairs == 1 and stopped.all()
+    X1[:3, 2] -= 2.0
+    stopped, pairs = stop_collisions(V, X1, F, 1e-9)
+    assert pairs == 1 and stopped[[0, 1, 3, 4]].all() and not stopped[[2, 5]].any()
+    assert np.array_equal(X1[:2], V[:2]) and X1[2, 2] == 1.0  # the apex, on no colliding edge, moved
     X1 = V.copy()
-    X1[:2, 0] += 3.0  # the moving edge passes beside
-    assert stop_collisions(V, X1, np.zeros((0, 3), np.int64), np.array([[0, 1], [2, 3]]), 1e-9)[1] == 0
+    X1[:3, 0] += 3.0  # the moving triangle passes beside
+    assert stop_collisions(V, X1, F, 1e-9)[1] == 0
 
 
 def test_random_moves_of_two_close_sheets_never_leave_them_intersecting():
@@ -49,7 +52,7 @@ def test_random_moves_of_two_close_sheets_never_leave_them_intersecting():
         assert self_intersections(V, F) == 0
         X1 = V + rng.normal(0, 0.03, V.shape)
         crossed += self_intersections(X1, F) > 0
-        stopped, _ = stop_collisions(V, X1, F, unique_edges(F)[0], 1e-9)
+        stopped, _ = stop_collisions(V, X1, F, 1e-9)
         assert self_intersections(X1, F) == 0
         assert not stopped.all()  # most vertices still moved
     assert crossed >= 10  # the unconstrained moves do make the sheets cross
@@ -61,13 +64,12 @@ def test_testing_only_the_moving_vertices_stops_the_same_ones():
     V2, F2 = grid_sheet(12, 0.03, 0.013)
     V = np.vstack([V1, V2]) + rng.normal(0, 0.004, (2 * len(V1), 3))
     F = np.vstack([F1, F2 + len(V1)])
-    E = unique_edges(F)[0]
     moving = rng.choice(len(V), 40, replace=False)
     X1 = V.copy()
     X1[moving] += rng.normal(0, 0.03, (40, 3))
-    everything, pairs = stop_collisions(V, Xa := X1.copy(), F, E, 1e-9)
+    everything, pairs = stop_collisions(V, Xa := X1.copy(), F, 1e-9)
     assert everything.any()  # some of them do collide
-    stopped, found = stop_collisions(V, Xb := X1.copy(), F, E, 1e-9, moving=moving)
+    stopped, found = stop_collisions(V, Xb := X1.copy(), F, 1e-9, moving=moving)
     assert np.array_equal(stopped[moving], everything[moving])
     assert found == pairs  # every colliding pair has a moving vertex, and is counted once
     assert np.array_equal(Xa, Xb) and self_intersections(Xb, F) == 0

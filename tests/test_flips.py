@@ -109,26 +109,58 @@ def _sheet(rng, n, stretch):
     return P, np.where((turn[:, 2] < 0)[:, None], F[:, ::-1], F)
 
 
-@pytest.mark.parametrize("seed", [19, 22, 32])
-def test_testing_the_flips_of_a_pass_at_once_or_one_by_one_agrees(seed):
-    """Two crumpled sheets 0.04 apart, triangulated differently: some flips cut the other sheet, and
-    some cut a triangle the same pass flipped (which the old triangles' boxes need not contain)."""
-    from fracture.refine.collide import triangle_grid
-    from fracture.refine.flips import _changed_grid, _flip, _pair_buffer, _unsafe, _unsafe_all
+def _two_sheets(seed, n=300):
+    """Two crumpled sheets 0.04 apart, triangulated differently (one poorly in x, one in y)."""
     rng = np.random.default_rng(seed)
-    (P1, F1), (P2, F2) = _sheet(rng, 300, 6.0), _sheet(rng, 300, 0.2)
+    (P1, F1), (P2, F2) = _sheet(rng, n, 6.0), _sheet(rng, n, 0.2)
     V = np.vstack([np.c_[P1, 0.02 * rng.standard_normal(len(P1))], np.c_[P2, 0.04 + 0.02 * rng.standard_normal(len(P2))]])
-    F = np.vstack([F1, F2 + len(P1)])
     sides = np.r_[np.tile([[0, 1]], (len(F1), 1)), np.tile([[1, 2]], (len(F2), 1))]
+    return V, np.vstack([F1, F2 + len(P1)]), sides
+
+
+def _plain_passes(V, F, sides, passes):
+    from fracture.refine.flips import _flip, _pair_buffer
+    from fracture.refine.kernels import edge_table
+    t = edge_table(F, len(V))
+    pairs = _pair_buffer(len(F), passes)
+    flipped = _flip(V, F, sides, passes, pairs, (t.eid, t.count, t.first, t.second, t._start, t._hi, t._row), True)
+    return pairs[:flipped].copy()
+
+
+@pytest.mark.parametrize("seed", [19, 22, 32])
+def test_testing_the_flipped_triangles_at_once_or_one_by_one_agrees(seed):
+    """Some flips cut the other sheet, and some cut a triangle another flip changed (which the old
+    triangles' boxes need not contain)."""
+    from fracture.refine.collide import triangle_grid
+    from fracture.refine.flips import _regions, _unsafe, _unsafe_all
+    V, F, sides = _two_sheets(seed)
     start = F.copy()
     grid = triangle_grid(V, start)
-    pairs = _pair_buffer(len(F), 1)
-    flipped = _flip(V, F, sides, 1, pairs)
-    done = pairs[:flipped].copy()
-    cgrid, changed = _changed_grid(V, F, start)
-    one_by_one = _unsafe(V, F, grid, 0, cgrid, changed, done)
-    assert 0 < one_by_one.sum() < flipped
-    assert np.array_equal(_unsafe_all(V, F, done), one_by_one)
+    changed = np.flatnonzero(_regions(len(F), _plain_passes(V, F, sides, 3)) >= 0)
+    one_by_one = _unsafe(V, F, grid, changed)
+    assert 0 < one_by_one.sum() < len(changed)
+    assert np.array_equal(_unsafe_all(V, F, changed), one_by_one)
+
+
+@pytest.mark.parametrize("seed", [3, 4])
+def test_triangles_joined_by_flips_cover_the_same_polygon_before_and_after(seed):
+    """What makes undoing a group of flips sound: its triangles' boundary edges never change."""
+    from fracture.refine.flips import _regions
+    V, F, sides = _two_sheets(seed)
+    start = F.copy()
+    group = _regions(len(F), _plain_passes(V, F, sides, 3))
+    roots, sizes = np.unique(group[group >= 0], return_counts=True)
+    assert sizes.max() > 2  # chains of flips over several passes
+
+    def boundary(T):
+        E = np.sort(np.concatenate([T[:, [0, 1]], T[:, [1, 2]], T[:, [2, 0]]]), axis=1)
+        E, count = np.unique(E, axis=0, return_counts=True)
+        return E[count == 1]
+
+    for r in roots:
+        ids = np.flatnonzero(group == r)
+        assert np.array_equal(boundary(start[ids]), boundary(F[ids]))
+    assert np.array_equal(start[group < 0], F[group < 0])
 
 
 def test_a_given_edge_table_flips_like_a_built_one():
@@ -147,7 +179,7 @@ def test_a_given_edge_table_flips_like_a_built_one():
 
 
 def test_safe_flips_between_two_close_sheets_leave_nothing_crossing():
-    """Passes with undone flips (tested again against what the undoing changed) end intersection-free."""
+    """Flips undone in groups (the kept ones tested again against what went back) end intersection-free."""
     inputs = refused = 0
     for seed in range(40):
         rng = np.random.default_rng(seed)
@@ -163,5 +195,7 @@ def test_safe_flips_between_two_close_sheets_leave_nothing_crossing():
         n_plain = flip_edges(V, plain, sides, max_passes=3)
         n_safe = flip_edges(V, safe, sides, max_passes=3, safe=True)
         assert self_intersections(V, safe) == 0
+        E = np.sort(np.concatenate([safe[:, [0, 1]], safe[:, [1, 2]], safe[:, [2, 0]]]), axis=1)
+        assert np.unique(E, axis=0, return_counts=True)[1].max() <= 2  # going back made no edge twice
         refused += n_safe < n_plain or not np.array_equal(plain, safe)
     assert inputs >= 10 and refused >= 3

@@ -10,11 +10,12 @@ every colliding pair are stopped (``X1 = X0``) and the test repeats until no
 pair collides: a surface that does not intersect itself at ``X0`` does not
 at ``X1``.
 
-Broad phase: the swept boxes of the vertices and triangles go into one
-hierarchical spatial hash, those of the edges into another
-(:mod:`fracture.refine.hashgrid`), which list every overlapping pair once;
-pairs that share a vertex are left out there. Pairs further apart than their
-relative move are dropped before the cubic. libigl and pymeshlab answer
+Broad phase: the swept boxes of the triangles go into a hierarchical
+spatial hash (:mod:`fracture.refine.hashgrid`), which lists every
+overlapping pair once; each pair tests the vertices and edges its two
+triangles represent (every feature has one representative triangle, Curtis
+et al. 2008). Pairs further apart than their relative move are dropped
+before the cubic. libigl and pymeshlab answer
 static questions only (``pymeshlab`` selects self-intersecting faces of one
 mesh state), so the moving test is written here, and the static count
 :func:`self_intersections` uses the same hash (the tests check it against an
@@ -263,10 +264,12 @@ def _edge_edge_hit(p0, p1, q0, q1, r0, r1, s0, s1, eta2, times):
 
 
 @numba.njit(cache=True)
-def _fill_boxes(X0, X1, elems, pad, lo, hi):
-    """Write into ``lo, hi`` the boxes of elements ``elems (k, w)`` (vertex ids) swept from ``X0`` to ``X1``,
+def _swept_boxes(X0, X1, elems, pad):
+    """The boxes ``lo, hi (k, 3)`` of elements ``elems (k, w)`` (vertex ids) swept from ``X0`` to ``X1``,
     grown by ``pad``."""
     k, w = elems.shape
+    lo = np.empty((k, 3))
+    hi = np.empty((k, 3))
     for e in range(k):
         for c in range(3):
             a = np.inf
@@ -277,93 +280,117 @@ def _fill_boxes(X0, X1, elems, pad, lo, hi):
                 b = max(b, X0[v, c], X1[v, c])
             lo[e, c] = a - pad
             hi[e, c] = b + pad
-
-
-@numba.njit(cache=True)
-def _swept_boxes(X0, X1, elems, pad):
-    lo = np.empty((elems.shape[0], 3))
-    hi = np.empty((elems.shape[0], 3))
-    _fill_boxes(X0, X1, elems, pad, lo, hi)
     return lo, hi
 
 
 @numba.njit(cache=True)
-def _vertex_and_triangle_boxes(X0, X1, F, pad):
-    """Swept boxes of the vertices and then the triangles, as one element list ``lo, hi (n + m, 3)``,
-    and their vertices ``(n + m, 3)`` (a vertex element lists itself three times)."""
-    n, m = X0.shape[0], F.shape[0]
-    verts = np.empty((n + m, 3), np.int64)
-    for v in range(n):
-        verts[v, 0] = verts[v, 1] = verts[v, 2] = v
-    verts[n:] = F
-    lo = np.empty((n + m, 3))
-    hi = np.empty((n + m, 3))
-    _fill_boxes(X0, X1, verts, pad, lo, hi)
-    return lo, hi, verts
+def _represented(F, n, edge_rows):
+    """Which features every triangle represents (Curtis et al. 2008): bit ``k`` its vertex ``k``,
+    bit ``3 + k`` its edge ``k`` (``F[f, k] -> F[f, k + 1]``). Each vertex is represented by its
+    first triangle, each edge by the triangle of its row in ``edge_rows`` (``3 f + k``, one per edge)."""
+    rep = np.zeros(F.shape[0], np.int64)
+    taken = np.zeros(n, np.bool_)
+    for f in range(F.shape[0]):
+        for k in range(3):
+            if not taken[F[f, k]]:
+                taken[F[f, k]] = True
+                rep[f] |= 1 << k
+    for r in edge_rows:
+        rep[r // 3] |= 8 << (r % 3)
+    return rep
+
+
+@numba.njit(cache=True)
+def _path_boxes(X0, X1):
+    """Per vertex the box of its path, ``(n, 6)``: lower corner, then upper corner."""
+    B = np.empty((X0.shape[0], 6))
+    for v in range(X0.shape[0]):
+        for c in range(3):
+            B[v, c] = min(X0[v, c], X1[v, c])
+            B[v, 3 + c] = max(X0[v, c], X1[v, c])
+    return B
+
+
+@numba.njit(cache=True, inline="always")
+def _near(B, v, lo, hi, t, F):
+    """Vertex v, not a corner of triangle t, has its path box overlap t's box ``lo[t], hi[t]``
+    (``&`` rather than ``and``: no branches, most pairs are rejected)."""
+    return ((v != F[t, 0]) & (v != F[t, 1]) & (v != F[t, 2])
+            & (B[v, 3] >= lo[t, 0]) & (B[v, 0] <= hi[t, 0]) & (B[v, 4] >= lo[t, 1]) & (B[v, 1] <= hi[t, 1])
+            & (B[v, 5] >= lo[t, 2]) & (B[v, 2] <= hi[t, 2]))
+
+
+@numba.njit(cache=True, inline="always")
+def _any_on(on, F, f):
+    return on[F[f, 0]] or on[F[f, 1]] or on[F[f, 2]]
+
+
+@numba.njit(cache=True)
+def _feature_tests(X0, X1, F, B, lo, hi, rep, pairs, eta, every, on, stop):
+    """Test the features that the triangles of each overlapping pair represent against each other:
+    the vertices of each against the other triangle, and the edges of one against the edges of the
+    other. ``B`` holds the vertices' path boxes (:func:`_path_boxes`), ``lo, hi`` the triangles'
+    swept boxes grown by ``eta``. Unless ``every``, only the features with a vertex in ``on`` are
+    tested. Marks the vertices of colliding features in ``stop``; returns their number.
+
+    Every vertex-triangle pair whose swept boxes overlap is tested once, from
+    the pair of the vertex's representative and the triangle (their boxes
+    overlap too); every edge pair once, from its representatives' pair.
+    """
+    times = np.empty(4)
+    eta2 = eta * eta
+    box = np.empty((6, 6))  # the edges' path boxes of both triangles, the first three grown by eta
+    hits = 0
+    for i in range(pairs.shape[0]):
+        a, b = pairs[i, 0], pairs[i, 1]
+        if not every and not _any_on(on, F, a) and not _any_on(on, F, b):
+            continue
+        for (s, t) in ((a, b), (b, a)):  # the vertices s represents against triangle t
+            r = rep[s]
+            near = ((((r & 1) != 0) & _near(B, F[s, 0], lo, hi, t, F))
+                    | ((((r & 2) != 0) & _near(B, F[s, 1], lo, hi, t, F)) << 1)
+                    | ((((r & 4) != 0) & _near(B, F[s, 2], lo, hi, t, F)) << 2))
+            for k in range(3):
+                if near & (1 << k) and (every or on[F[s, k]] or _any_on(on, F, t)):
+                    hits += _vertex_triangle_pair(X0, X1, F, F[s, k], t, eta2, times, stop)
+        if not rep[a] & 56 or not rep[b] & 56:
+            continue
+        for k in range(3):  # the edges a represents against those b does
+            for (f, row, pad) in ((a, k, eta), (b, 3 + k, 0.0)):
+                p, q = F[f, k], F[f, (k + 1) % 3]
+                for c in range(3):
+                    box[row, c] = min(B[p, c], B[q, c]) - pad
+                    box[row, 3 + c] = max(B[p, 3 + c], B[q, 3 + c]) + pad
+        for k in range(3):
+            if not rep[a] & (8 << k):
+                continue
+            p, q = F[a, k], F[a, (k + 1) % 3]
+            for j in range(3):
+                if not rep[b] & (8 << j):
+                    continue
+                r, s = F[b, j], F[b, (j + 1) % 3]
+                if ((p == r) | (p == s) | (q == r) | (q == s)
+                        | (box[k, 3] < box[3 + j, 0]) | (box[3 + j, 3] < box[k, 0]) | (box[k, 4] < box[3 + j, 1])
+                        | (box[3 + j, 4] < box[k, 1]) | (box[k, 5] < box[3 + j, 2]) | (box[3 + j, 5] < box[k, 2])):
+                    continue
+                if not (every or on[p] or on[q] or on[r] or on[s]):
+                    continue
+                if _edge_edge_hit(_pt(X0, p), _pt(X1, p), _pt(X0, q), _pt(X1, q),
+                                  _pt(X0, r), _pt(X1, r), _pt(X0, s), _pt(X1, s), eta2, times):
+                    hits += 1
+                    stop[p] = stop[q] = stop[r] = stop[s] = True
+    return hits
 
 
 @numba.njit(cache=True)
 def _vertex_triangle_pair(X0, X1, F, v, f, eta2, times, stop):
     """Test vertex v against triangle f (not one of its corners); marks a colliding pair in ``stop``."""
     a, b, c = F[f, 0], F[f, 1], F[f, 2]
-    if v == a or v == b or v == c:
-        return 0
     if not _vertex_triangle_hit(_pt(X0, v), _pt(X1, v), _pt(X0, a), _pt(X1, a),
                                 _pt(X0, b), _pt(X1, b), _pt(X0, c), _pt(X1, c), eta2, times):
         return 0
     stop[v] = stop[a] = stop[b] = stop[c] = True
     return 1
-
-
-@numba.njit(cache=True)
-def _vertex_triangle_tests(X0, X1, F, pairs, eta2, stop):
-    """Test the (vertex, triangle) ``pairs``; marks the vertices of colliding ones in ``stop``."""
-    times = np.empty(4)
-    hits = 0
-    for i in range(pairs.shape[0]):
-        hits += _vertex_triangle_pair(X0, X1, F, pairs[i, 0], pairs[i, 1], eta2, times, stop)
-    return hits
-
-
-@numba.njit(cache=True)
-def _edge_edge_tests(X0, X1, E, pairs, eta2, stop):
-    """Test the (edge, edge) ``pairs``; marks the vertices of colliding ones in ``stop``."""
-    times = np.empty(4)
-    hits = 0
-    for i in range(pairs.shape[0]):
-        p, q = E[pairs[i, 0], 0], E[pairs[i, 0], 1]
-        r, s = E[pairs[i, 1], 0], E[pairs[i, 1], 1]
-        if p == r or p == s or q == r or q == s:
-            continue
-        if _edge_edge_hit(_pt(X0, p), _pt(X1, p), _pt(X0, q), _pt(X1, q),
-                          _pt(X0, r), _pt(X1, r), _pt(X0, s), _pt(X1, s), eta2, times):
-            hits += 1
-            stop[p] = stop[q] = stop[r] = stop[s] = True
-    return hits
-
-
-@numba.njit(cache=True)
-def _query_pairs(grid, lo, hi, query, first, last, shift, flip):
-    """Pairs of each element ``q`` of ``query`` (box ``lo[q], hi[q]``) with the grid's elements in
-    ``[first, last)``, as ``(q, g - shift)`` (``(g - shift, q)`` with ``flip``).
-
-    Pairs of an element with itself may be listed: the tests reject pairs that share a vertex."""
-    buf = np.empty(256, np.int64)
-    out = np.empty((max(16, 8 * query.shape[0]), 2), np.int64)
-    count = 0
-    for q in query:
-        buf, k = hashgrid.gather(grid, lo[q], hi[q], buf)
-        for i in range(k):
-            g = buf[i]
-            if g < first or g >= last:
-                continue
-            if count == out.shape[0]:
-                bigger = np.empty((2 * out.shape[0], 2), np.int64)
-                bigger[:count] = out
-                out = bigger
-            out[count, 0], out[count, 1] = (g - shift, q) if flip else (q, g - shift)
-            count += 1
-    return out[:count]
 
 
 def _typical_cell(X, E):
@@ -378,31 +405,35 @@ def _typical_cell(X, E):
     return 3.0 * float(np.sqrt(np.median(np.einsum("ij,ij->i", e, e))))
 
 
-def _unique_rows(pairs: np.ndarray, base: int) -> np.ndarray:
-    """The distinct rows of ``(k, 2)`` pairs whose second entries are below ``base``."""
-    _, first = np.unique(pairs[:, 0] * base + pairs[:, 1], return_index=True)
-    return pairs[first]
-
-
-def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, E: np.ndarray, eta: float,
+def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, eta: float, edge_rows: np.ndarray | None = None,
                     max_rounds: int = 32, return_grid: bool = False, moving: np.ndarray | None = None):
     """Stop the vertices of colliding pairs, in place in ``X1``, until the step is collision-free.
 
+    Broad phase: the pairs of triangles whose swept boxes overlap, from one
+    :mod:`~fracture.refine.hashgrid`. Each vertex and each edge is represented
+    by one of its triangles, and a pair of triangles tests the features they
+    represent (Curtis, Tamstorf and Manocha 2008): every vertex-triangle and
+    edge-edge pair that can meet is tested once, and the grid holds a third of
+    the elements that grids of the vertices, edges and triangles would.
+
     The first round tests every pair; stopping a vertex changes only the
-    paths of the elements on it, so each later round tests just those
-    elements (against everything), on the same grids (the boxes of the full
-    step contain the shortened paths). With ``moving`` (vertex ids; every
-    other vertex has ``X1 == X0``) the first round too tests only the
-    elements on them: two elements at rest cannot collide.
+    paths of the features on it, so each later round tests just those (from
+    the same triangle pairs: the boxes of the full step contain the shortened
+    paths). With ``moving`` (vertex ids; every other vertex has ``X1 == X0``)
+    the first round too tests only the features on them: two features at
+    rest cannot collide.
 
     Parameters
     ----------
     X0, X1 : (n, 3) float
         Positions before and after the step (``X1`` is edited).
     F : (m, 3) int
-        Triangles; ``E (k, 2)`` their unique edges.
+        Triangles.
     eta : float
         Thickness: closer than this counts as contact.
+    edge_rows : (k,) int, optional
+        One directed triangle edge ``3 f + k`` per edge of ``F`` (e.g.
+        :attr:`~fracture.refine.kernels.EdgeTable.first`); found if not given.
 
     Returns
     -------
@@ -410,55 +441,47 @@ def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, E: np.ndarray
         Vertices held at ``X0``.
     pairs : int
         Colliding pairs found in the first round.
-    grid : (tuple, int)
+    grid : tuple
         With ``return_grid``: the :mod:`~fracture.refine.hashgrid` of the
-        swept boxes of the vertices and then the triangles (triangle ``f`` is
-        element ``n + f``), and ``n``. Its boxes contain the triangles at
-        ``X1`` too.
+        triangles' swept boxes (grown by ``eta``), which contain the
+        triangles at ``X1`` too.
     """
     X0 = np.ascontiguousarray(X0, np.float64)
     F = np.ascontiguousarray(F, np.int64)
-    E = np.ascontiguousarray(E, np.int64)
     n = len(X0)
     stopped = np.zeros(n, bool)
-    if not len(E) and not len(F):
+    if not len(F):
         return (stopped, 0, None) if return_grid else (stopped, 0)
-    eta2 = float(eta) ** 2
-    # vertices (ids below n) and triangles in one grid, edges in another
-    lo, hi, verts = _vertex_and_triangle_boxes(X0, X1, F, eta)
-    elo, ehi = _swept_boxes(X0, X1, E, eta)
-    inv = 1.0 / hashgrid.cell_size(lo, hi, _typical_cell(X0, E if len(E) else F[:, :2]))
-    vt = hashgrid.build(lo, hi, inv, verts)
-    eg = hashgrid.build(elo, ehi, inv, E)
-
-    def pairs_on(on):  # the pairs of the elements on vertices ``on`` (mask), against everything, once
-        qv, qt, qe = np.flatnonzero(on), np.flatnonzero(on[F].any(axis=1)), np.flatnonzero(on[E].any(axis=1))
-        vf = np.concatenate([_query_pairs(vt, lo, hi, qv, n, n + len(F), n, False),
-                             _query_pairs(vt, lo, hi, qt + n, 0, n, 0, True) - [0, n]])
-        ee = np.sort(_query_pairs(eg, elo, ehi, qe, 0, len(E), 0, False), axis=1)
-        return _unique_rows(vf, len(F)), _unique_rows(ee, len(E))
-
-    if moving is None:
-        vf, ee = hashgrid.pairs(vt, n, True), hashgrid.pairs(eg, -1, True)
-    else:
-        on = np.zeros(n, bool)
+    if edge_rows is None:
+        from fracture.refine.kernels import edge_table
+        edge_rows = edge_table(F, n).first
+    eta = float(eta)
+    lo, hi = _swept_boxes(X0, X1, F, eta)
+    inv = 1.0 / hashgrid.cell_size(lo, hi, _typical_cell(X0, F[:, :2]))
+    grid = hashgrid.build(lo, hi, inv, F)
+    overlapping = hashgrid.pairs(grid, -1, False)
+    rep = _represented(F, n, np.ascontiguousarray(edge_rows, np.int64))
+    B = _path_boxes(X0, X1)
+    every = moving is None
+    on = np.zeros(n, bool)
+    if not every:
         on[moving] = True
-        vf, ee = pairs_on(on)
     first = None
     for _ in range(max_rounds):
         stop = np.zeros(n, bool)
-        pairs = _vertex_triangle_tests(X0, X1, F, vf, eta2, stop) + _edge_edge_tests(X0, X1, E, ee, eta2, stop)
+        pairs = _feature_tests(X0, X1, F, B, lo, hi, rep, overlapping, eta, every, on, stop)
         first = pairs if first is None else first
         stop &= ~stopped  # pairs of stopped vertices only are at rest: contact they had at X0
         if not stop.any():
-            return (stopped, first, (vt, n)) if return_grid else (stopped, first)
+            return (stopped, first, grid) if return_grid else (stopped, first)
         X1[stop] = X0[stop]
+        B[stop, 3:] = B[stop, :3] = X0[stop]
         stopped |= stop
-        vf, ee = pairs_on(stop)
+        every, on = False, stop
     # still colliding: nothing moves, and the state at X0 is intersection-free
     X1[:] = X0
     stopped[:] = True
-    return (stopped, first, (vt, n)) if return_grid else (stopped, first)
+    return (stopped, first, grid) if return_grid else (stopped, first)
 
 
 # -- static self-intersections ---------------------------------------------------------------

@@ -15,7 +15,7 @@ import numpy as np
 
 from fracture.refine import hashgrid
 from fracture.refine.collide import _EPS, _cross, _dot, _pt, _sub, _triangles_intersect, triangle_grid
-from fracture.refine.kernels import EdgeTable, _edge_table, _find_edge
+from fracture.refine.kernels import EdgeTable, _edge_table, _find_edge, edge_table
 
 
 @numba.njit(cache=True, inline="always")
@@ -35,8 +35,11 @@ def _normal(V, a, b, c):
 
 
 @numba.njit(cache=True)
-def _flip_pass(V, F, sides, eid, count, first, second, start, hi, row, pairs, done):
-    """One pass: flip a set of edges that share no triangle (the table is the one before the pass)."""
+def _flip_pass(V, F, sides, table, guard, pairs, done):
+    """One pass: flip a set of edges that share no triangle (``table``, the edge table before the
+    pass, as ``(eid, count, first, second, start, hi, row)``). No flip makes an edge that ``guard``
+    (an edge table of the same form) has."""
+    eid, count, first, second, start, hi, row = table
     busy = np.zeros(F.shape[0], np.bool_)
     flipped = 0
     new_edges = {(np.int64(0), np.int64(0))}
@@ -62,7 +65,8 @@ def _flip_pass(V, F, sides, eid, count, first, second, start, hi, row, pairs, do
         if _cot(V, w, u, v) + _cot(V, x, v, u) >= -1e-12:
             continue
         pair = (min(w, x), max(w, x))
-        if _find_edge(start, hi, row, eid, w, x) >= 0 or pair in new_edges:
+        if (_find_edge(start, hi, row, eid, w, x) >= 0 or pair in new_edges
+                or _find_edge(guard[4], guard[5], guard[6], guard[0], w, x) >= 0):
             continue
         a = _normal(V, u, v, w)
         b = _normal(V, v, u, x)
@@ -80,12 +84,15 @@ def _flip_pass(V, F, sides, eid, count, first, second, start, hi, row, pairs, do
 
 
 @numba.njit(cache=True)
-def _flip(V, F, sides, max_passes, pairs):
-    """Up to ``max_passes`` passes; the flipped triangle pairs go to ``pairs`` (room for m // 2 + 1 per pass)."""
+def _flip(V, F, sides, max_passes, pairs, table, guarded):
+    """Up to ``max_passes`` passes; the flipped triangle pairs go to ``pairs`` (room for m // 2 + 1 per
+    pass). ``table`` is the edge table of ``F`` as given (used by the first pass); with ``guarded`` no
+    flip makes an edge it has, so that restoring any flipped triangles to their first state
+    (:func:`flip_edges`) cannot give an edge four triangles."""
     total = 0
-    for _ in range(max_passes):
-        eid, count, first, second, start, hi, row = _edge_table(F, V.shape[0])
-        flipped = _flip_pass(V, F, sides, eid, count, first, second, start, hi, row, pairs, total)
+    for i in range(max_passes):
+        current = table if i == 0 else _edge_table(F, V.shape[0])
+        flipped = _flip_pass(V, F, sides, current, table if guarded else current, pairs, total)
         total += flipped
         if flipped == 0:
             break
@@ -95,6 +102,34 @@ def _flip(V, F, sides, max_passes, pairs):
 def _pair_buffer(m: int, passes: int) -> np.ndarray:
     # a pass flips triangles that share none: at most m // 2 pairs
     return np.empty((passes * (m // 2 + 1), 2), np.int64)
+
+
+@numba.njit(cache=True)
+def _regions(m, done):
+    """The triangles that flips ``done (k, 2)`` joined: per triangle the root of its group (a triangle
+    of it), -1 for triangles no flip touched. The triangles of a group always cover the same
+    polygon (a flip re-triangulates its two triangles' quad), so a group can go back to its first
+    triangles without touching any other triangle."""
+    parent = np.full(m, -1, np.int64)
+    for i in range(done.shape[0]):
+        for f in (done[i, 0], done[i, 1]):
+            if parent[f] < 0:
+                parent[f] = f
+    for i in range(done.shape[0]):
+        a, b = done[i, 0], done[i, 1]
+        while parent[a] != a:
+            a = parent[a]
+        while parent[b] != b:
+            b = parent[b]
+        if a != b:
+            parent[max(a, b)] = min(a, b)
+    for f in range(m):
+        if parent[f] >= 0:
+            r = f
+            while parent[r] != r:
+                r = parent[r]
+            parent[f] = r
+    return parent
 
 
 @numba.njit(cache=True, inline="always")
@@ -107,58 +142,33 @@ def _boxes_apart(V, F, f, c):
     return False
 
 
-@numba.njit(cache=True, inline="always")
-def _meet(V, F, f, c, eps):
-    return not _boxes_apart(V, F, f, c) and _triangles_intersect(V, F, f, c, eps)
-
-
 @numba.njit(cache=True)
-def _meet_found(V, F, pairs, grid, first, ids, skip, eps, out):
-    """Mark in ``out`` the triangle ``pairs`` that meet a triangle found in ``grid``: element
-    ``first + i`` is triangle ``ids[i]`` (elements below ``first`` are not triangles), and triangles
-    with ``skip`` are left out. Pairs already marked are not looked at again."""
+def _meet_found(V, F, tris, grid, ids, skip, eps, out):
+    """Mark in ``out`` the triangles ``tris`` that meet a triangle found in ``grid`` (element ``i`` is
+    triangle ``ids[i]``); triangles with ``skip`` are left out. Triangles already marked are not
+    looked at again."""
     buf = np.empty(256, np.int64)
     lo = np.empty(3)
     hi = np.empty(3)
-    for i in range(pairs.shape[0]):
+    for i in range(tris.shape[0]):
         if out[i]:
             continue
-        f, g = pairs[i, 0], pairs[i, 1]
+        f = tris[i]
         for c in range(3):
-            lo[c] = min(V[F[f, 0], c], V[F[f, 1], c], V[F[f, 2], c], V[F[g, 0], c], V[F[g, 1], c], V[F[g, 2], c])
-            hi[c] = max(V[F[f, 0], c], V[F[f, 1], c], V[F[f, 2], c], V[F[g, 0], c], V[F[g, 1], c], V[F[g, 2], c])
+            lo[c] = min(V[F[f, 0], c], V[F[f, 1], c], V[F[f, 2], c])
+            hi[c] = max(V[F[f, 0], c], V[F[f, 1], c], V[F[f, 2], c])
         buf, k = hashgrid.gather(grid, lo, hi, buf)
         for j in range(k):
-            if buf[j] < first:
-                continue
-            c = ids[buf[j] - first]
-            if not skip[c] and c != f and c != g and (_meet(V, F, f, c, eps) or _meet(V, F, g, c, eps)):
+            c = ids[buf[j]]
+            if not skip[c] and c != f and not _boxes_apart(V, F, f, c) and _triangles_intersect(V, F, f, c, eps):
                 out[i] = True
                 break
 
 
-def _meet_any(V: np.ndarray, F: np.ndarray, pairs: np.ndarray, ids: np.ndarray) -> np.ndarray:
-    """Which triangle ``pairs`` meet one of the triangles ``ids``."""
-    out = np.zeros(len(pairs), bool)
-    _meet_found(V, F, pairs, _grid_of(V, F, ids), 0, ids, np.zeros(len(F), bool), _EPS, out)
-    return out
-
-
-def _unsafe(V: np.ndarray, F: np.ndarray, grid: tuple, first: int, cgrid: tuple, changed: np.ndarray,
-            pairs: np.ndarray) -> np.ndarray:
-    """Which flipped ``pairs`` meet another triangle of the surface.
-
-    ``grid`` holds boxes that contain the triangles as they were before the
-    flips (triangle ``f`` as element ``first + f``; elements below ``first``
-    are not triangles): it finds the triangles that are still so. ``cgrid``
-    holds the boxes of the triangles ``changed`` by the flips, as they are
-    now (element ``i`` is triangle ``changed[i]``): it finds those.
-    """
-    is_changed = np.zeros(len(F), bool)
-    is_changed[changed] = True
-    out = np.zeros(len(pairs), bool)
-    _meet_found(V, F, pairs, grid, first, np.arange(len(F)), is_changed, _EPS, out)
-    _meet_found(V, F, pairs, cgrid, 0, changed, np.zeros(len(F), bool), _EPS, out)
+def _meet_any(V: np.ndarray, F: np.ndarray, tris: np.ndarray, ids: np.ndarray) -> np.ndarray:
+    """Which triangles ``tris`` meet one of the triangles ``ids``."""
+    out = np.zeros(len(tris), bool)
+    _meet_found(V, F, tris, _grid_of(V, F, ids), ids, np.zeros(len(F), bool), _EPS, out)
     return out
 
 
@@ -167,39 +177,43 @@ def _grid_of(V: np.ndarray, F: np.ndarray, ids: np.ndarray) -> tuple:
     return triangle_grid(V, np.ascontiguousarray(F[ids]))
 
 
-def _changed_grid(V: np.ndarray, F: np.ndarray, start: np.ndarray) -> tuple[tuple, np.ndarray]:
-    """A hash grid of the triangles of ``F`` that differ from ``start``, and their ids."""
-    changed = np.flatnonzero((F != start).any(axis=1))
-    return _grid_of(V, F, changed), changed
+def _unsafe(V: np.ndarray, F: np.ndarray, grid: tuple, changed: np.ndarray) -> np.ndarray:
+    """Which of the triangles ``changed`` (by flips) meet another triangle of the surface.
+
+    ``grid`` holds boxes that contain the triangles as they were before the
+    flips (element ``f`` is triangle ``f``): it finds the triangles that are
+    still so. A hash of the changed triangles' boxes as they are now finds
+    those.
+    """
+    is_changed = np.zeros(len(F), bool)
+    is_changed[changed] = True
+    out = np.zeros(len(changed), bool)
+    _meet_found(V, F, changed, grid, np.arange(len(F)), is_changed, _EPS, out)
+    _meet_found(V, F, changed, _grid_of(V, F, changed), changed, np.zeros(len(F), bool), _EPS, out)
+    return out
 
 
 @numba.njit(cache=True)
-def _meeting_flips(V, F, pairs, flip_of, eps, bad):
-    """Mark in ``bad`` the flips (``flip_of`` each triangle, -1 for none) with a triangle in one of the
-    overlapping triangle ``pairs`` that meet."""
+def _meeting(V, F, pairs, changed, eps, out):
+    """Mark in ``out`` the ``changed`` triangles in one of the overlapping triangle ``pairs`` that meet."""
     for i in range(pairs.shape[0]):
         a, b = pairs[i, 0], pairs[i, 1]
-        fa, fb = flip_of[a], flip_of[b]
-        if fa == fb:
-            continue  # neither flipped, or the two triangles of one flip (they share their edge)
-        if (fa < 0 or bad[fa]) and (fb < 0 or bad[fb]):
+        if (not changed[a] or out[a]) and (not changed[b] or out[b]):
             continue  # decides nothing new
         if _triangles_intersect(V, F, a, b, eps):
-            if fa >= 0:
-                bad[fa] = True
-            if fb >= 0:
-                bad[fb] = True
+            out[a] |= changed[a]
+            out[b] |= changed[b]
 
 
-def _unsafe_all(V: np.ndarray, F: np.ndarray, done: np.ndarray) -> np.ndarray:
-    """:func:`_unsafe` for many flipped pairs ``done`` at once: one hash of all the triangles as they
-    are now lists the overlapping pairs, and those with a triangle of ``done`` are tested. When a
-    pass flips many edges this costs less than a look-up in the grid per flip."""
-    flip_of = np.full(len(F), -1, np.int64)
-    flip_of[done[:, 0]] = flip_of[done[:, 1]] = np.arange(len(done))
-    bad = np.zeros(len(done), bool)
-    _meeting_flips(V, F, hashgrid.pairs(triangle_grid(V, F), -1, False), flip_of, _EPS, bad)
-    return bad
+def _unsafe_all(V: np.ndarray, F: np.ndarray, changed: np.ndarray) -> np.ndarray:
+    """:func:`_unsafe` at once: one hash of all the triangles as they are now lists the overlapping
+    pairs, and those with a changed triangle are tested. When many triangles changed this costs
+    less than a look-up in the grid per triangle."""
+    is_changed = np.zeros(len(F), bool)
+    is_changed[changed] = True
+    out = np.zeros(len(F), bool)
+    _meeting(V, F, hashgrid.pairs(triangle_grid(V, F), -1, False), is_changed, _EPS, out)
+    return out[changed]
 
 
 def flip_edges(V: np.ndarray, F: np.ndarray, sides: np.ndarray, max_passes: int = 8,
@@ -207,50 +221,44 @@ def flip_edges(V: np.ndarray, F: np.ndarray, sides: np.ndarray, max_passes: int 
     """Flip non-Delaunay edges of ``F`` in place (see the module notes); returns the number of flips.
 
     ``F`` must be a C-contiguous int64 array (it is edited in place). A flip
-    replaces the two triangles of a non-planar quad by the other two: with
-    ``safe``, flips whose new triangles meet the rest of the surface are
-    undone, and the flips kept are tested again until none meets anything
-    (a static test of the flipped triangles against their surroundings).
-    ``grid`` may give a :mod:`~fracture.refine.hashgrid` of boxes that
-    contain the triangles, as ``(grid, first)`` with triangle ``f`` its
-    element ``first + f`` (the collision step's); else one is built.
+    replaces the two triangles of a non-planar quad by the other two. With
+    ``safe`` no flipped triangle meets the rest of the surface: the passes
+    run first (none makes an edge ``F`` had), then the triangles they changed
+    are tested (a static test against their surroundings), every group of
+    triangles joined by flips with one that meets something goes back to its
+    first triangles, and the groups kept are tested again against those until
+    none meets anything. ``grid`` may give a :mod:`~fracture.refine.hashgrid`
+    of boxes that contain the triangles as given (triangle ``f`` its element
+    ``f``, e.g. the collision step's); else one is built if needed.
     ``table``, the :class:`~fracture.refine.kernels.EdgeTable` of ``F`` as
-    passed, saves building it for the first pass (with ``safe``).
+    given, saves building it.
     """
     if F.dtype != np.int64 or not F.flags.c_contiguous:
         raise TypeError("F must be a C-contiguous int64 array")
     V = np.ascontiguousarray(V, np.float64)
     sides = np.ascontiguousarray(sides, np.int64)
-    if not safe:
-        return int(_flip(V, F, sides, int(max_passes), _pair_buffer(len(F), max_passes)))
-    total = 0
-    pairs = _pair_buffer(len(F), 1)
-    start = F.copy()  # the triangles whose boxes the grid holds
-    for i in range(max_passes):  # one pass at a time: a triangle takes part in one flip per pass
-        before = F.copy()
-        if i == 0 and table is not None:
-            flipped = int(_flip_pass(V, F, sides, table.eid, table.count, table.first, table.second, table._start,
-                                     table._hi, table._row, pairs, 0))
-        else:
-            flipped = int(_flip(V, F, sides, 1, pairs))
-        if not flipped:
-            break
-        if grid is None:  # the boxes from before the first flip
-            grid = triangle_grid(V, before), 0
-        done = pairs[:flipped].copy()
-        if flipped > len(F) // 5:  # many: all at once (about 1.5 us per triangle, not 7 per flip)
-            bad = _unsafe_all(V, F, done)
-        else:
-            bad = _unsafe(V, F, grid[0], grid[1], *_changed_grid(V, F, start), done)
-        kept = ~bad
-        while bad.any():
-            back = done[bad].ravel()
-            F[back] = before[back]
-            # undoing flips changes only the undone triangles: the kept flips are
-            # tested again against these alone (their other tests stand)
-            test = np.flatnonzero(kept)
-            bad = np.zeros(flipped, bool)
-            bad[test] = _meet_any(V, F, done[test], back)
-            kept &= ~bad
-        total += int(kept.sum())
-    return total
+    table = table if table is not None else edge_table(F, len(V))
+    arrays = (table.eid, table.count, table.first, table.second, table._start, table._hi, table._row)
+    pairs = _pair_buffer(len(F), max_passes)
+    start = F.copy() if safe else None
+    total = int(_flip(V, F, sides, int(max_passes), pairs, arrays, safe))
+    if not safe or not total:
+        return total
+    done = pairs[:total]
+    group = _regions(len(F), done)
+    changed = np.flatnonzero(group >= 0)
+    if len(changed) > len(F) // 3:  # many: all at once (about 1.5 us per triangle, not 4 per changed one)
+        meets = _unsafe_all(V, F, changed)
+    else:
+        meets = _unsafe(V, F, grid if grid is not None else triangle_grid(V, start), changed)
+    while meets.any():
+        bad = np.zeros(len(F), bool)
+        bad[group[changed[meets]]] = True
+        back = changed[bad[group[changed]]]
+        F[back] = start[back]
+        group[back] = -1
+        # going back changes only those triangles: the groups kept are tested
+        # again against these alone (their other tests stand)
+        changed = np.flatnonzero(group >= 0)
+        meets = _meet_any(V, F, changed, back)
+    return int((group[done[:, 0]] >= 0).sum())
