@@ -24,26 +24,18 @@ def _overlapping(lo, hi, a, b):
 @pytest.mark.parametrize("seed", [0, 1])
 def test_all_pairs_match_a_brute_force_search(seed):
     lo, hi = _boxes(400, seed)
-    verts = np.random.default_rng(seed).integers(0, 300, (400, 2))
-    grid = hashgrid.build(lo, hi, 1.0 / hashgrid.cell_size(lo, hi, 0.01), verts)
+    grid = hashgrid.build(lo, hi, 1.0 / hashgrid.cell_size(lo, hi, 0.01))
     assert len(np.unique(grid[1])) >= 4  # the boxes do spread over levels
-    found = hashgrid.pairs(grid, -1, False)
+    found = hashgrid.pairs(grid)
     assert (found[:, 0] < found[:, 1]).all()
     assert len({tuple(p) for p in found.tolist()}) == len(found)  # none twice
     brute = {(a, b) for a in range(400) for b in range(a + 1, 400) if _overlapping(lo, hi, a, b)}
     assert {tuple(p) for p in found.tolist()} == brute
-    # pairs sharing a vertex are left out on request
-    apart = hashgrid.pairs(grid, -1, True)
-    assert {tuple(p) for p in apart.tolist()} == {(a, b) for a, b in brute if not set(verts[a]) & set(verts[b])}
 
 
-def test_pairs_of_two_kinds_and_queries_match_a_brute_force_search():
+def test_queries_match_a_brute_force_search():
     lo, hi = _boxes(500, 2)
-    n_first = 200  # e.g. points first, then triangles
-    grid = hashgrid.build(lo, hi, 1.0 / hashgrid.cell_size(lo, hi, 0.02), -np.ones((500, 1), np.int64))
-    found = hashgrid.pairs(grid, n_first, False)
-    brute = {(a, b - n_first) for a in range(n_first) for b in range(n_first, 500) if _overlapping(lo, hi, a, b)}
-    assert len(found) == len(brute) and {tuple(p) for p in found.tolist()} == brute
+    grid = hashgrid.build(lo, hi, 1.0 / hashgrid.cell_size(lo, hi, 0.02))
     buf = np.empty(4, np.int64)  # grows as needed
     for q in range(0, 500, 7):
         buf, k = hashgrid.gather(grid, lo[q], hi[q], buf)
@@ -54,7 +46,7 @@ def test_far_coordinates_do_not_overflow_the_packed_cells():
     lo = np.array([[0.0, 0.0, 0.0], [1e9, 0.0, 0.0], [1e9 + 0.5, 0.0, 0.0]])
     hi = lo + 1.0
     inv = 1.0 / hashgrid.cell_size(lo, hi, 1e-3)
-    found = hashgrid.pairs(hashgrid.build(lo, hi, inv, np.zeros((3, 0), np.int64)), -1, False)
+    found = hashgrid.pairs(hashgrid.build(lo, hi, inv))
     assert found.tolist() == [[1, 2]]
 
 
@@ -65,10 +57,10 @@ def test_few_large_among_many_small_boxes_from_either_side():
     size = np.full((3000, 3), 0.02) * rng.uniform(0.2, 1.0, (3000, 3))
     size[:15] *= rng.uniform(2.0, 12.0, (15, 1))
     hi = lo + size
-    grid = hashgrid.build(lo, hi, 1.0 / hashgrid.cell_size(lo, hi, 0.03), -np.ones((3000, 1), np.int64))
+    grid = hashgrid.build(lo, hi, 1.0 / hashgrid.cell_size(lo, hi, 0.03))
     counts = np.bincount(grid[1])
     assert hashgrid.look_down(counts[0], counts[1], 1)
-    found = hashgrid.pairs(grid, -1, False)
+    found = hashgrid.pairs(grid)
     i, j = np.triu_indices(3000, 1)
     hit = np.all(lo[i] <= hi[j], axis=1) & np.all(lo[j] <= hi[i], axis=1)
     assert sorted(map(tuple, found.tolist())) == sorted(zip(i[hit].tolist(), j[hit].tolist()))

@@ -28,6 +28,7 @@ import numba
 import numpy as np
 
 from fracture.refine import hashgrid
+from fracture.refine.kernels import edge_table
 
 _EPS = 1e-10  # relative tolerance of the static tests
 
@@ -284,19 +285,36 @@ def _swept_boxes(X0, X1, elems, pad):
 
 
 @numba.njit(cache=True)
-def _represented(F, n, edge_rows):
+def _represented(F, n, eid):
     """Which features every triangle represents (Curtis et al. 2008): bit ``k`` its vertex ``k``,
-    bit ``3 + k`` its edge ``k`` (``F[f, k] -> F[f, k + 1]``). Each vertex is represented by its
-    first triangle, each edge by the triangle of its row in ``edge_rows`` (``3 f + k``, one per edge)."""
-    rep = np.zeros(F.shape[0], np.int64)
-    taken = np.zeros(n, np.bool_)
-    for f in range(F.shape[0]):
-        for k in range(3):
-            if not taken[F[f, k]]:
-                taken[F[f, k]] = True
-                rep[f] |= 1 << k
-    for r in edge_rows:
-        rep[r // 3] |= 8 << (r % 3)
+    bit ``3 + k`` its edge ``k`` (``F[f, k] -> F[f, k + 1]``, edge id ``eid[3 f + k]``); each
+    vertex and each edge has one representative.
+
+    The features go to as few triangles as a greedy pass finds: first every
+    triangle none of whose edges is taken takes all three, then the edges
+    left go to their first triangle, and the vertices to their first
+    triangle that represents something already. A pair of triangles of
+    which neither represents anything then costs one look.
+    """
+    m = F.shape[0]
+    rep = np.zeros(m, np.int64)
+    taken = np.zeros(eid.max() + 1 if eid.shape[0] else 0, np.bool_)
+    for f in range(m):
+        if not taken[eid[3 * f]] and not taken[eid[3 * f + 1]] and not taken[eid[3 * f + 2]]:
+            taken[eid[3 * f]] = taken[eid[3 * f + 1]] = taken[eid[3 * f + 2]] = True
+            rep[f] = 56
+    for r in range(3 * m):
+        if not taken[eid[r]]:
+            taken[eid[r]] = True
+            rep[r // 3] |= 8 << (r % 3)
+    held = np.zeros(n, np.bool_)
+    for again in range(2):
+        for f in range(m):
+            if again or rep[f]:
+                for k in range(3):
+                    if not held[F[f, k]]:
+                        held[F[f, k]] = True
+                        rep[f] |= 1 << k
     return rep
 
 
@@ -331,7 +349,7 @@ def _feature_tests(X0, X1, F, B, lo, hi, rep, pairs, eta, every, on, stop):
     the vertices of each against the other triangle, and the edges of one against the edges of the
     other. ``B`` holds the vertices' path boxes (:func:`_path_boxes`), ``lo, hi`` the triangles'
     swept boxes grown by ``eta``. Unless ``every``, only the features with a vertex in ``on`` are
-    tested. Marks the vertices of colliding features in ``stop``; returns their number.
+    tested (the pairs are those with such a vertex). Marks the vertices of colliding features in ``stop``; returns their number.
 
     Every vertex-triangle pair whose swept boxes overlap is tested once, from
     the pair of the vertex's representative and the triangle (their boxes
@@ -343,10 +361,10 @@ def _feature_tests(X0, X1, F, B, lo, hi, rep, pairs, eta, every, on, stop):
     hits = 0
     for i in range(pairs.shape[0]):
         a, b = pairs[i, 0], pairs[i, 1]
-        if not every and not _any_on(on, F, a) and not _any_on(on, F, b):
-            continue
         for (s, t) in ((a, b), (b, a)):  # the vertices s represents against triangle t
             r = rep[s]
+            if not r & 7:
+                continue
             near = ((((r & 1) != 0) & _near(B, F[s, 0], lo, hi, t, F))
                     | ((((r & 2) != 0) & _near(B, F[s, 1], lo, hi, t, F)) << 1)
                     | ((((r & 4) != 0) & _near(B, F[s, 2], lo, hi, t, F)) << 2))
@@ -361,19 +379,23 @@ def _feature_tests(X0, X1, F, B, lo, hi, rep, pairs, eta, every, on, stop):
                 for c in range(3):
                     box[row, c] = min(B[p, c], B[q, c]) - pad
                     box[row, 3 + c] = max(B[p, 3 + c], B[q, 3 + c]) + pad
+        near = 0  # bit 3 k + j: edge k of a and edge j of b share no vertex and their boxes overlap
         for k in range(3):
-            if not rep[a] & (8 << k):
-                continue
             p, q = F[a, k], F[a, (k + 1) % 3]
             for j in range(3):
-                if not rep[b] & (8 << j):
-                    continue
                 r, s = F[b, j], F[b, (j + 1) % 3]
-                if ((p == r) | (p == s) | (q == r) | (q == s)
-                        | (box[k, 3] < box[3 + j, 0]) | (box[3 + j, 3] < box[k, 0]) | (box[k, 4] < box[3 + j, 1])
-                        | (box[3 + j, 4] < box[k, 1]) | (box[k, 5] < box[3 + j, 2]) | (box[3 + j, 5] < box[k, 2])):
-                    continue
-                if not (every or on[p] or on[q] or on[r] or on[s]):
+                near |= ((((rep[a] >> (3 + k)) & (rep[b] >> (3 + j)) & 1) != 0)
+                         & (p != r) & (p != s) & (q != r) & (q != s)
+                         & (box[k, 3] >= box[3 + j, 0]) & (box[3 + j, 3] >= box[k, 0]) & (box[k, 4] >= box[3 + j, 1])
+                         & (box[3 + j, 4] >= box[k, 1]) & (box[k, 5] >= box[3 + j, 2])
+                         & (box[3 + j, 5] >= box[k, 2])) << (3 * k + j)
+        if not near:
+            continue
+        for k in range(3):
+            p, q = F[a, k], F[a, (k + 1) % 3]
+            for j in range(3):
+                r, s = F[b, j], F[b, (j + 1) % 3]
+                if not near & (1 << (3 * k + j)) or not (every or on[p] or on[q] or on[r] or on[s]):
                     continue
                 if _edge_edge_hit(_pt(X0, p), _pt(X1, p), _pt(X0, q), _pt(X1, q),
                                   _pt(X0, r), _pt(X1, r), _pt(X0, s), _pt(X1, s), eta2, times):
@@ -394,18 +416,18 @@ def _vertex_triangle_pair(X0, X1, F, v, f, eta2, times, stop):
 
 
 def _typical_cell(X, E):
-    """Three times the median length of edges ``E`` (of at most 4096 of them, evenly spread). Any size
+    """Four times the median length of edges ``E`` (of at most 4096 of them, evenly spread). Any size
     gives the same pairs: smaller cells hold fewer elements but put each in more of them, and with
-    the buckets sorted by x (:mod:`~fracture.refine.hashgrid`) three edges was fastest (at 174K
-    triangles the collision grids' builds and pairs took 190 ms, 260 ms at two edges, 270 at six)."""
+    the buckets sorted by x (:mod:`~fracture.refine.hashgrid`) four edges was fastest (a build and
+    the pairs of 128K triangles' boxes took 63 ms, 65 at three edges, 78 at two and at five)."""
     if not len(E):
         return 1.0
     E = E[:: -(-len(E) // 4096)]
     e = X[E[:, 1]] - X[E[:, 0]]
-    return 3.0 * float(np.sqrt(np.median(np.einsum("ij,ij->i", e, e))))
+    return 4.0 * float(np.sqrt(np.median(np.einsum("ij,ij->i", e, e))))
 
 
-def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, eta: float, edge_rows: np.ndarray | None = None,
+def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, eta: float, eid: np.ndarray | None = None,
                     max_rounds: int = 32, return_grid: bool = False, moving: np.ndarray | None = None):
     """Stop the vertices of colliding pairs, in place in ``X1``, until the step is collision-free.
 
@@ -431,9 +453,9 @@ def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, eta: float, e
         Triangles.
     eta : float
         Thickness: closer than this counts as contact.
-    edge_rows : (k,) int, optional
-        One directed triangle edge ``3 f + k`` per edge of ``F`` (e.g.
-        :attr:`~fracture.refine.kernels.EdgeTable.first`); found if not given.
+    eid : (3m,) int, optional
+        The edge id of every directed triangle edge ``3 f + k``
+        (:attr:`~fracture.refine.kernels.EdgeTable.eid`); found if not given.
 
     Returns
     -------
@@ -452,24 +474,29 @@ def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, eta: float, e
     stopped = np.zeros(n, bool)
     if not len(F):
         return (stopped, 0, None) if return_grid else (stopped, 0)
-    if edge_rows is None:
-        from fracture.refine.kernels import edge_table
-        edge_rows = edge_table(F, n).first
+    if eid is None:
+        eid = edge_table(F, n).eid
     eta = float(eta)
     lo, hi = _swept_boxes(X0, X1, F, eta)
     inv = 1.0 / hashgrid.cell_size(lo, hi, _typical_cell(X0, F[:, :2]))
-    grid = hashgrid.build(lo, hi, inv, F)
-    overlapping = hashgrid.pairs(grid, -1, False)
-    rep = _represented(F, n, np.ascontiguousarray(edge_rows, np.int64))
+    grid = hashgrid.build(lo, hi, inv)
+    overlapping = hashgrid.pairs(grid)
+    rep = _represented(F, n, np.ascontiguousarray(eid, np.int64))
     B = _path_boxes(X0, X1)
+    def pairs_on(on):  # the triangle pairs with a vertex in ``on`` (the others' features are not tested)
+        touched = on[F].any(axis=1)
+        return overlapping[touched[overlapping[:, 0]] | touched[overlapping[:, 1]]]
+
     every = moving is None
     on = np.zeros(n, bool)
+    todo = overlapping
     if not every:
         on[moving] = True
+        todo = pairs_on(on)
     first = None
     for _ in range(max_rounds):
         stop = np.zeros(n, bool)
-        pairs = _feature_tests(X0, X1, F, B, lo, hi, rep, overlapping, eta, every, on, stop)
+        pairs = _feature_tests(X0, X1, F, B, lo, hi, rep, todo, eta, every, on, stop)
         first = pairs if first is None else first
         stop &= ~stopped  # pairs of stopped vertices only are at rest: contact they had at X0
         if not stop.any():
@@ -478,6 +505,7 @@ def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, eta: float, e
         B[stop, 3:] = B[stop, :3] = X0[stop]
         stopped |= stop
         every, on = False, stop
+        todo = pairs_on(on)
     # still colliding: nothing moves, and the state at X0 is intersection-free
     X1[:] = X0
     stopped[:] = True
@@ -562,7 +590,7 @@ def _pair_tests(X, F, pairs, eps, first):
 def triangle_grid(V: np.ndarray, F: np.ndarray) -> tuple:
     """A :mod:`~fracture.refine.hashgrid` of the triangles' bounding boxes."""
     lo, hi = _swept_boxes(V, V, F, 0.0)
-    return hashgrid.build(lo, hi, 1.0 / hashgrid.cell_size(lo, hi, _typical_cell(V, F[:, :2])), F)
+    return hashgrid.build(lo, hi, 1.0 / hashgrid.cell_size(lo, hi, _typical_cell(V, F[:, :2])))
 
 
 def self_intersections(V: np.ndarray, F: np.ndarray, report: int = 0) -> int | tuple[int, np.ndarray]:
@@ -575,5 +603,5 @@ def self_intersections(V: np.ndarray, F: np.ndarray, report: int = 0) -> int | t
     first = np.zeros((report, 2), np.int64)
     count = 0
     if len(F) >= 2:
-        count = _pair_tests(V, F, hashgrid.pairs(triangle_grid(V, F), -1, False), _EPS, first)
+        count = _pair_tests(V, F, hashgrid.pairs(triangle_grid(V, F)), _EPS, first)
     return (int(count), first[:min(count, report)]) if report else int(count)

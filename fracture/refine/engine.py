@@ -203,7 +203,7 @@ class Refiner:
             return float(np.sqrt(d2.max()))
         X1 = m.V.copy()
         X1[ids[off]] = P[off]
-        stopped, _ = stop_collisions(m.V, X1, m.F, self.params.thickness * self.h, self.edges().first,
+        stopped, _ = stop_collisions(m.V, X1, m.F, self.params.thickness * self.h, self.edges().eid,
                                      moving=ids[off])
         self.hold[stopped] = self.params.hold
         m.V = X1
@@ -352,7 +352,7 @@ class Refiner:
         self.boundary = boundary  # flips keep the boundary: valid until the next splits
         self.project_to_exterior(boundary, X1)
         clock = log.tick("boundary", clock)
-        stopped, _, grid = stop_collisions(m.V, X1, m.F, p.thickness * self.h, table.first, return_grid=True)
+        stopped, _, grid = stop_collisions(m.V, X1, m.F, p.thickness * self.h, table.eid, return_grid=True)
         self.hold[stopped] = p.hold
         clock = log.tick("collisions", clock)
         moved = np.linalg.norm(X1 - m.V, axis=1)

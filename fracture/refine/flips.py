@@ -212,7 +212,7 @@ def _unsafe_all(V: np.ndarray, F: np.ndarray, changed: np.ndarray) -> np.ndarray
     is_changed = np.zeros(len(F), bool)
     is_changed[changed] = True
     out = np.zeros(len(F), bool)
-    _meeting(V, F, hashgrid.pairs(triangle_grid(V, F), -1, False), is_changed, _EPS, out)
+    _meeting(V, F, hashgrid.pairs(triangle_grid(V, F)), is_changed, _EPS, out)
     return out[changed]
 
 
