@@ -36,6 +36,7 @@ def test_flips_make_a_planar_triangulation_delaunay():
     n = flip_edges(V, Fs, np.zeros((len(F), 2), np.int64))
     assert n > 0
     assert abs(_min_angle(V, Fs) - good) < 1e-9  # back to the Delaunay triangulation's smallest angle
+    assert flip_edges(V, Fs, np.zeros((len(F), 2), np.int64)) == 0  # the later passes missed no edge
     assert len(unique_edges(Fs)[0]) == len(unique_edges(F)[0])
 
 
@@ -123,7 +124,7 @@ def _plain_passes(V, F, sides, passes):
     from fracture.refine.kernels import edge_table
     t = edge_table(F, len(V))
     pairs = _pair_buffer(len(F), passes)
-    flipped = _flip(V, F, sides, passes, pairs, (t.eid, t.count, t.first, t.second, t._start, t._hi, t._row), True)
+    flipped = _flip(V, F, sides, passes, pairs, (t.eid, t.count, t.first, t.second, t._start, t._hi, t._row))
     return pairs[:flipped].copy()
 
 

@@ -122,6 +122,7 @@ class Refiner:
         self._field_V = np.zeros((0, 3))
         self._psi, self._grad = np.zeros(0), np.zeros((0, 3))
         self.boundary = np.zeros(0, np.int64)  # boundary vertices of the last iteration
+        self.off_b = np.zeros(0, np.int64)  # boundary vertices off B at the last velocity
         self.full = False  # the triangle budget has stopped a wanted split
         self._ordered = 0  # vertex count when the mesh was last put in spatial order
 
@@ -160,7 +161,7 @@ class Refiner:
         self.hold = follow(self.hold, np.zeros(len(vorder), np.int64))
         self.gain = follow(self.gain, np.ones(len(vorder)))
         self.velocity = follow(self.velocity, self.velocity)
-        self.boundary = new[self.boundary]
+        self.boundary, self.off_b = new[self.boundary], new[self.off_b]
 
     def put_in_spatial_order(self) -> None:
         """Number vertices along a Morton curve and triangles by their first vertex
@@ -229,10 +230,12 @@ class Refiner:
         # not normal to B) and the part normal to B (projection undoes it)
         rows = table.boundary_rows
         if not len(rows):
+            self.off_b = np.zeros(0, np.int64)
             return v, psi, np.zeros(0, np.int64)
         verts, c = boundary_conormals(m.V, m.F, row_edges(m.F, rows), strict=False, face=rows // 3, by_length=True)
         v[verts] -= np.einsum("ij,ij->i", v[verts], c)[:, None] * c
-        _, tri, _ = self.B.closest(m.V[verts])
+        d2, tri, _ = self.B.closest(m.V[verts])
+        self.off_b = verts[d2 > (tol.on_b * self.h) ** 2]
         nb = self.B.normals[tri]
         v[verts] -= np.einsum("ij,ij->i", v[verts], nb)[:, None] * nb
         return v, psi, verts
@@ -276,6 +279,13 @@ class Refiner:
         want, N = split_wanted(T, P, bary, d, v, m.F, dt, k_edge, has_edge, (p.min_edge * self.h) ** 2,
                                p.split_distance * p.step * self.h, 0.2)
         self._keep_unfolded(want, table, P, T, N, k_edge)
+        if len(self.off_b):
+            # no splits beside a boundary vertex still off B (a collision stopped its
+            # projection): smaller triangles around it would make the move onto B
+            # fold them over, and it would never get there
+            near = np.zeros(len(m.V), bool)
+            near[self.off_b] = True
+            want &= ~near[m.F].any(axis=1)
         budget = max(0, (p.max_triangles - len(m.F)) // 2)
         # edge splits: one per edge (a random one of its triangles' samples) ...
         ef = np.flatnonzero(want & has_edge)

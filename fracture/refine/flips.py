@@ -15,7 +15,7 @@ import numpy as np
 
 from fracture.refine import hashgrid
 from fracture.refine.collide import _EPS, _cross, _dot, _pt, _sub, _triangles_intersect, triangle_grid
-from fracture.refine.kernels import EdgeTable, _edge_table, _find_edge, edge_table
+from fracture.refine.kernels import EdgeTable, _find_edge, edge_table
 
 
 @numba.njit(cache=True, inline="always")
@@ -34,68 +34,103 @@ def _normal(V, a, b, c):
     return _cross(_sub(_pt(V, b), A), _sub(_pt(V, c), A))
 
 
+@numba.njit(cache=True, inline="always")
+def _link(twin, row, other):
+    """Make directed triangle edges ``row`` and ``other`` (-1: none) each other's twin."""
+    twin[row] = other
+    if other >= 0:
+        twin[other] = row
+
+
 @numba.njit(cache=True)
-def _flip_pass(V, F, sides, table, guard, pairs, done):
-    """One pass: flip a set of edges that share no triangle (``table``, the edge table before the
-    pass, as ``(eid, count, first, second, start, hi, row)``). No flip makes an edge that ``guard``
-    (an edge table of the same form) has."""
+def _try_flip(V, F, sides, r, twin, busy, made, table):
+    """Flip the edge of directed triangle edge ``r`` if it should be (module notes) and neither of its
+    triangles is ``busy``; keeps ``twin`` (the other triangle's directed edge on each two-triangle
+    edge) up to date. No flip makes an edge that ``table`` (the edge table before the first pass)
+    has, or that an earlier flip made (``made``). Returns the other triangle if it flipped, else -1."""
+    r2 = twin[r]
+    if r2 < 0:
+        return -1
+    f, g = r // 3, r2 // 3
+    ka, kb = r % 3, r2 % 3
+    if busy[f] or busy[g] or sides[f, 0] != sides[g, 0] or sides[f, 1] != sides[g, 1]:
+        return -1
+    # f = (u, v, w) with edge u->v; g = (v, u, x) with edge v->u
+    u = F[f, ka]
+    v = F[f, (ka + 1) % 3]
+    w = F[f, (ka + 2) % 3]
+    if F[g, kb] != v or F[g, (kb + 1) % 3] != u:
+        return -1  # not consistently oriented
+    x = F[g, (kb + 2) % 3]
+    if w == x:
+        return -1
+    # the angles opposite the edge add up to more than pi: cot a + cot b < 0
+    # (sin(a + b) = sin a sin b (cot a + cot b), with both angles in (0, pi))
+    if _cot(V, w, u, v) + _cot(V, x, v, u) >= -1e-12:
+        return -1
+    pair = (min(w, x), max(w, x))
+    if pair in made or _find_edge(table[4], table[5], table[6], table[0], w, x) >= 0:
+        return -1
+    a = _normal(V, u, v, w)
+    b = _normal(V, v, u, x)
+    n_old = (a[0] + b[0], a[1] + b[1], a[2] + b[2])
+    if _dot(_normal(V, w, x, v), n_old) <= 0.0 or _dot(_normal(V, x, w, u), n_old) <= 0.0:
+        return -1
+    vw, wu = twin[3 * f + (ka + 1) % 3], twin[3 * f + (ka + 2) % 3]
+    ux, xv = twin[3 * g + (kb + 1) % 3], twin[3 * g + (kb + 2) % 3]
+    F[f, 0], F[f, 1], F[f, 2] = w, x, v
+    F[g, 0], F[g, 1], F[g, 2] = x, w, u
+    _link(twin, 3 * f, 3 * g)  # w->x and x->w
+    _link(twin, 3 * f + 1, xv)
+    _link(twin, 3 * f + 2, vw)
+    _link(twin, 3 * g + 1, wu)
+    _link(twin, 3 * g + 2, ux)
+    busy[f] = True
+    busy[g] = True
+    made.add(pair)
+    return g
+
+
+@numba.njit(cache=True)
+def _flip(V, F, sides, max_passes, pairs, table):
+    """Up to ``max_passes`` passes, each flipping a set of edges that share no triangle; the flipped
+    triangle pairs go to ``pairs`` (room for m // 2 + 1 per pass). ``table`` is the edge table of
+    ``F`` as given, ``(eid, count, first, second, start, hi, row)``.
+
+    The first pass tries every edge; a later one only the outer edges of the
+    triangles the pass before flipped (the others' triangles are unchanged,
+    and a flipped edge is locally Delaunay), found through each directed
+    edge's twin, which the flips keep up to date: no edge table is rebuilt.
+    No flip makes an edge that ``F`` had or an earlier flip made, so that
+    restoring any flipped triangles to their first state
+    (:func:`flip_edges`) cannot give an edge four triangles.
+    """
     eid, count, first, second, start, hi, row = table
-    busy = np.zeros(F.shape[0], np.bool_)
-    flipped = 0
-    new_edges = {(np.int64(0), np.int64(0))}
-    new_edges.clear()
+    m = F.shape[0]
+    twin = np.full(3 * m, -1, np.int64)
     for e in range(count.shape[0]):
-        if count[e] != 2:
-            continue
-        f, g = first[e] // 3, second[e] // 3
-        ka, kb = first[e] % 3, second[e] % 3
-        if busy[f] or busy[g] or sides[f, 0] != sides[g, 0] or sides[f, 1] != sides[g, 1]:
-            continue
-        # f = (u, v, w) with edge u->v; g = (v, u, x) with edge v->u
-        u = F[f, ka]
-        v = F[f, (ka + 1) % 3]
-        w = F[f, (ka + 2) % 3]
-        if F[g, kb] != v or F[g, (kb + 1) % 3] != u:
-            continue  # not consistently oriented
-        x = F[g, (kb + 2) % 3]
-        if w == x:
-            continue
-        # the angles opposite the edge add up to more than pi: cot a + cot b < 0
-        # (sin(a + b) = sin a sin b (cot a + cot b), with both angles in (0, pi))
-        if _cot(V, w, u, v) + _cot(V, x, v, u) >= -1e-12:
-            continue
-        pair = (min(w, x), max(w, x))
-        if (_find_edge(start, hi, row, eid, w, x) >= 0 or pair in new_edges
-                or _find_edge(guard[4], guard[5], guard[6], guard[0], w, x) >= 0):
-            continue
-        a = _normal(V, u, v, w)
-        b = _normal(V, v, u, x)
-        n_old = (a[0] + b[0], a[1] + b[1], a[2] + b[2])
-        if _dot(_normal(V, w, x, v), n_old) <= 0.0 or _dot(_normal(V, x, w, u), n_old) <= 0.0:
-            continue
-        F[f, 0], F[f, 1], F[f, 2] = w, x, v
-        F[g, 0], F[g, 1], F[g, 2] = x, w, u
-        busy[f] = True
-        busy[g] = True
-        new_edges.add(pair)
-        pairs[done + flipped, 0], pairs[done + flipped, 1] = f, g
-        flipped += 1
-    return flipped
-
-
-@numba.njit(cache=True)
-def _flip(V, F, sides, max_passes, pairs, table, guarded):
-    """Up to ``max_passes`` passes; the flipped triangle pairs go to ``pairs`` (room for m // 2 + 1 per
-    pass). ``table`` is the edge table of ``F`` as given (used by the first pass); with ``guarded`` no
-    flip makes an edge it has, so that restoring any flipped triangles to their first state
-    (:func:`flip_edges`) cannot give an edge four triangles."""
+        if count[e] == 2:
+            _link(twin, first[e], second[e])
+    made = {(np.int64(0), np.int64(0))}
+    made.clear()
+    busy = np.zeros(m, np.bool_)
+    work = first[count == 2]
     total = 0
-    for i in range(max_passes):
-        current = table if i == 0 else _edge_table(F, V.shape[0])
-        flipped = _flip_pass(V, F, sides, current, table if guarded else current, pairs, total)
-        total += flipped
+    for _ in range(max_passes):
+        busy[:] = False
+        flipped = 0
+        for r in work:
+            g = _try_flip(V, F, sides, r, twin, busy, made, table)
+            if g >= 0:
+                pairs[total + flipped, 0], pairs[total + flipped, 1] = r // 3, g
+                flipped += 1
         if flipped == 0:
             break
+        work = np.empty(4 * flipped, np.int64)
+        for j in range(flipped):
+            f, g = pairs[total + j, 0], pairs[total + j, 1]
+            work[4 * j], work[4 * j + 1], work[4 * j + 2], work[4 * j + 3] = 3 * f + 1, 3 * f + 2, 3 * g + 1, 3 * g + 2
+        total += flipped
     return total
 
 
@@ -241,7 +276,7 @@ def flip_edges(V: np.ndarray, F: np.ndarray, sides: np.ndarray, max_passes: int 
     arrays = (table.eid, table.count, table.first, table.second, table._start, table._hi, table._row)
     pairs = _pair_buffer(len(F), max_passes)
     start = F.copy() if safe else None
-    total = int(_flip(V, F, sides, int(max_passes), pairs, arrays, safe))
+    total = int(_flip(V, F, sides, int(max_passes), pairs, arrays))
     if not safe or not total:
         return total
     done = pairs[:total]
