@@ -115,3 +115,23 @@ def test_settle_boundary_stops_a_vertex_whose_way_onto_b_is_blocked():
     assert np.array_equal(mesh.V, before) and r.hold[v] == r.params.hold  # ... held where it was
     mesh.V[-3:, 0] += 2.0  # the obstacle elsewhere: it goes
     assert r.settle_boundary() < 1e-12 and mesh.V[v, 1] == 0.0
+
+
+def test_no_splits_beside_a_boundary_vertex_that_is_off_b():
+    """Smaller triangles around a boundary vertex that a collision kept off B would fold when it moves
+    onto B at last: its triangles wait, the others split."""
+    pyramid = two_weak_sheets()
+    BV, BF = box([0, 0, 0], [1, 1, 1], (8, 8, 8))
+    mesh = flat_cut()
+    r = Refiner(mesh, pyramid, BV, BF, RefineParams(split_distance=0.0), np.random.default_rng(0))
+    on_y0 = np.flatnonzero(mesh.V[:, 1] == 0.0)
+    v = on_y0[np.argmin(np.abs(mesh.V[on_y0, 2] - 0.5))]
+    mesh.V[v, 1] = 0.03
+    table = r.edges()
+    vel, psi, _ = r._velocity(table)
+    assert r.off_b.tolist() == [v]
+    fan = mesh.F[(mesh.F == v).any(axis=1)].copy()
+    m = len(mesh.F)
+    assert r.remesh(table, vel, psi, 10.0 * r._step_size(vel, np.ones(len(mesh.V), bool))) > 0
+    assert len(mesh.F) > m + len(fan)  # the rest did split ...
+    assert np.array_equal(mesh.F[(mesh.F == v).any(axis=1)], fan)  # ... around v nothing did

@@ -279,19 +279,23 @@ class Refiner:
         want, N = split_wanted(T, P, bary, d, v, m.F, dt, k_edge, has_edge, (p.min_edge * self.h) ** 2,
                                p.split_distance * p.step * self.h, 0.2)
         self._keep_unfolded(want, table, P, T, N, k_edge)
-        if len(self.off_b):
-            # no splits beside a boundary vertex still off B (a collision stopped its
-            # projection): smaller triangles around it would make the move onto B
-            # fold them over, and it would never get there
-            near = np.zeros(len(m.V), bool)
-            near[self.off_b] = True
-            want &= ~near[m.F].any(axis=1)
+        # no splits beside a boundary vertex still off B (a collision stopped its
+        # projection): smaller triangles around it would make the move onto B
+        # fold them over, and it would never get there
+        beside = np.zeros(len(m.V), bool)
+        beside[self.off_b] = True
+        beside = beside[m.F].any(axis=1)
+        want &= ~beside
         budget = max(0, (p.max_triangles - len(m.F)) // 2)
         # edge splits: one per edge (a random one of its triangles' samples) ...
         ef = np.flatnonzero(want & has_edge)
         eid = table.eid[3 * ef + k_edge[ef]]
         keep = first_per_group(eid, self.rng.random(len(ef)))
         ef, eid = ef[keep], eid[keep]
+        if self.off_b.size and eid.size:  # ... nor of a junction edge with such a triangle
+            on, which = table.rows_of(eid)
+            clear = np.bincount(which, weights=beside[on // 3], minlength=len(eid)) == 0
+            ef, eid = ef[clear], eid[clear]
         # ... and a triangle takes part in one split at most: of two chosen
         # edges on a triangle, the later one is dropped everywhere
         good = table.independent(eid)
