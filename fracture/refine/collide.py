@@ -415,6 +415,24 @@ def _vertex_triangle_pair(X0, X1, F, v, f, eta2, times, stop):
     return 1
 
 
+@numba.njit(cache=True)
+def _pairs_touching(F, pairs, on):
+    """The rows of triangle ``pairs`` with a vertex in ``on``."""
+    touched = np.zeros(F.shape[0], np.bool_)
+    for f in range(F.shape[0]):
+        touched[f] = on[F[f, 0]] or on[F[f, 1]] or on[F[f, 2]]
+    k = 0
+    for i in range(pairs.shape[0]):
+        k += touched[pairs[i, 0]] | touched[pairs[i, 1]]
+    out = np.empty((k, 2), np.int64)
+    k = 0
+    for i in range(pairs.shape[0]):
+        if touched[pairs[i, 0]] or touched[pairs[i, 1]]:
+            out[k, 0], out[k, 1] = pairs[i, 0], pairs[i, 1]
+            k += 1
+    return out
+
+
 def _typical_cell(X, E):
     """Four times the median length of edges ``E`` (of at most 4096 of them, evenly spread). Any size
     gives the same pairs: smaller cells hold fewer elements but put each in more of them, and with
@@ -483,9 +501,9 @@ def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, eta: float, e
     overlapping = hashgrid.pairs(grid)
     rep = _represented(F, n, np.ascontiguousarray(eid, np.int64))
     B = _path_boxes(X0, X1)
+
     def pairs_on(on):  # the triangle pairs with a vertex in ``on`` (the others' features are not tested)
-        touched = on[F].any(axis=1)
-        return overlapping[touched[overlapping[:, 0]] | touched[overlapping[:, 1]]]
+        return _pairs_touching(F, overlapping, on)
 
     every = moving is None
     on = np.zeros(n, bool)
