@@ -533,9 +533,10 @@ def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, eta: float, e
 # -- static self-intersections ---------------------------------------------------------------
 
 
-@numba.njit(cache=True)
-def _segment_hits_triangle(p, q, a, b, c, eps):
-    """Segment pq meets triangle abc, edges included, crossing its plane.
+@numba.njit(cache=True, inline="always")
+def _segment_hits_triangle(p, q, a, e1, e2, n, nn, eps):
+    """Segment pq meets the triangle at ``a`` with edges ``e1, e2`` from it (normal ``n = e1 x e2`` of
+    length ``nn``), edges included, crossing its plane.
 
     Signed volumes decide the side of p and q (a segment within ``eps``
     relative of the plane at both ends lies in it: coplanar overlaps are not
@@ -543,9 +544,6 @@ def _segment_hits_triangle(p, q, a, b, c, eps):
     triangle with barycentric tolerance ``eps``. Touching counts: that is the
     conservative side for a check that must be 0.
     """
-    e1, e2 = _sub(b, a), _sub(c, a)
-    n = _cross(e1, e2)
-    nn = np.sqrt(_dot(n, n))
     d = _sub(q, p)
     tol = eps * nn * np.sqrt(_dot(d, d))
     op, oq = _dot(n, _sub(p, a)), _dot(n, _sub(q, a))
@@ -583,12 +581,15 @@ def _triangles_intersect(X, F, f, g, eps):
     if count >= 2:
         return False  # triangles on one edge meet only along it (coplanar folds aside)
     for (s, t) in ((f, g), (g, f)):
-        a, b, c = _pt(X, F[t, 0]), _pt(X, F[t, 1]), _pt(X, F[t, 2])
+        a = _pt(X, F[t, 0])
+        e1, e2 = _sub(_pt(X, F[t, 1]), a), _sub(_pt(X, F[t, 2]), a)
+        n = _cross(e1, e2)  # once per triangle, not per edge tested against it
+        nn = np.sqrt(_dot(n, n))
         for k in range(3):
             u, v = F[s, k], F[s, (k + 1) % 3]
             if u == shared or v == shared:
                 continue
-            if _segment_hits_triangle(_pt(X, u), _pt(X, v), a, b, c, eps):
+            if _segment_hits_triangle(_pt(X, u), _pt(X, v), a, e1, e2, n, nn, eps):
                 return True
     return False
 
