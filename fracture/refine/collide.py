@@ -420,7 +420,7 @@ def _pairs_touching(F, pairs, on):
     """The rows of triangle ``pairs`` with a vertex in ``on``."""
     touched = np.zeros(F.shape[0], np.bool_)
     for f in range(F.shape[0]):
-        touched[f] = on[F[f, 0]] or on[F[f, 1]] or on[F[f, 2]]
+        touched[f] = _any_on(on, F, f)
     k = 0
     for i in range(pairs.shape[0]):
         k += touched[pairs[i, 0]] | touched[pairs[i, 1]]
@@ -496,8 +496,7 @@ def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, eta: float, e
         eid = edge_table(F, n).eid
     eta = float(eta)
     lo, hi = _swept_boxes(X0, X1, F, eta)
-    inv = 1.0 / hashgrid.cell_size(lo, hi, _typical_cell(X0, F[:, :2]))
-    grid = hashgrid.build(lo, hi, inv)
+    grid = _box_grid(lo, hi, X0, F)
     overlapping = hashgrid.pairs(grid)
     rep = _represented(F, n, np.ascontiguousarray(eid, np.int64))
     B = _path_boxes(X0, X1)
@@ -606,10 +605,15 @@ def _pair_tests(X, F, pairs, eps, first):
     return count
 
 
+def _box_grid(lo: np.ndarray, hi: np.ndarray, X: np.ndarray, F: np.ndarray) -> tuple:
+    """A :mod:`~fracture.refine.hashgrid` of boxes ``lo, hi`` of triangles ``F`` over ``X``, its cells
+    sized by their edges (:func:`_typical_cell`)."""
+    return hashgrid.build(lo, hi, 1.0 / hashgrid.cell_size(lo, hi, _typical_cell(X, F[:, :2])))
+
+
 def triangle_grid(V: np.ndarray, F: np.ndarray) -> tuple:
     """A :mod:`~fracture.refine.hashgrid` of the triangles' bounding boxes."""
-    lo, hi = _swept_boxes(V, V, F, 0.0)
-    return hashgrid.build(lo, hi, 1.0 / hashgrid.cell_size(lo, hi, _typical_cell(V, F[:, :2])))
+    return _box_grid(*_swept_boxes(V, V, F, 0.0), V, F)
 
 
 def self_intersections(V: np.ndarray, F: np.ndarray, report: int = 0) -> int | tuple[int, np.ndarray]:

@@ -196,12 +196,8 @@ def pairs(grid):
 def _pairs_on_one_level(grid):
     """The pairs of elements on one level: they share a cell, so the pairs inside every bucket are
     tried; the bucket is sorted by lower x, so the scan for partners of p ends at the first box
-    starting beyond p's. Returns the pairs as rows of a larger array, and their number.
-
-    The tests of a candidate are combined without branches (``&``), and
-    every candidate is written and counted only if it is a pair: with about
-    a third of the candidates overlapping, branches on them would mostly be
-    mispredicted (this halves the time of the scans).
+    starting beyond p's. Every candidate is written, and counted only if it is a pair (no branches,
+    see the module notes). Returns the pairs as rows of a larger array, and their number.
     """
     scale, level, toff, tmask, start, items, key, box = grid
     out = np.empty((max(1024, 4 * items.shape[0]), 2), np.int64)  # triangles: about 3.8 pairs per slot
@@ -213,6 +209,8 @@ def _pairs_on_one_level(grid):
             for p in range(start[b], end):
                 out = _room(out, count, end - p)
                 e, kp = items[p], key[p]
+                # p's box in locals, and its corner cells with q's written out: writes to
+                # out might alias box for the compiler, which then reloads it (20 % slower)
                 x0, y0, z0, x1, y1, z1 = box[p, 0], box[p, 1], box[p, 2], box[p, 3], box[p, 4], box[p, 5]
                 for q in range(p + 1, end):
                     if box[q, 0] > x1:
