@@ -4,8 +4,9 @@ An edge is flipped when its two triangles are not locally Delaunay (the
 angles opposite it add up to more than pi), only if it has exactly two
 triangles, both separate the same pair of components with the same
 orientation, the flipped pair does not fold over (both new normals agree with
-the old ones), and the new edge does not exist yet. One pass flips a set of
-edges that share no triangle; passes repeat until nothing flips.
+the old ones), and the new edge neither existed before the first pass nor was
+made by an earlier flip. One pass flips a set of edges that share no
+triangle; the next tries the edges around its flips, until nothing flips.
 """
 
 from __future__ import annotations
@@ -95,7 +96,7 @@ def _try_flip(V, F, sides, r, twin, busy, made, table):
 def _flip(V, F, sides, max_passes, pairs, table):
     """Up to ``max_passes`` passes, each flipping a set of edges that share no triangle; the flipped
     triangle pairs go to ``pairs`` (room for m // 2 + 1 per pass). ``table`` is the edge table of
-    ``F`` as given, ``(eid, count, first, second, start, hi, row)``.
+    ``F`` as given (:meth:`~fracture.refine.kernels.EdgeTable.arrays`).
 
     The first pass tries every edge; a later one only the outer edges of the
     triangles the pass before flipped (the others' triangles are unchanged,
@@ -212,16 +213,16 @@ def _grid_of(V: np.ndarray, F: np.ndarray, ids: np.ndarray) -> tuple:
     return triangle_grid(V, np.ascontiguousarray(F[ids]))
 
 
-def _unsafe(V: np.ndarray, F: np.ndarray, grid: tuple, changed: np.ndarray) -> np.ndarray:
-    """Which of the triangles ``changed`` (by flips) meet another triangle of the surface.
+def _unsafe(V: np.ndarray, F: np.ndarray, grid: tuple, is_changed: np.ndarray) -> np.ndarray:
+    """Which of the triangles changed by flips (``is_changed``, per triangle) meet another triangle of
+    the surface, in the order of their ids.
 
     ``grid`` holds boxes that contain the triangles as they were before the
     flips (element ``f`` is triangle ``f``): it finds the triangles that are
     still so. A hash of the changed triangles' boxes as they are now finds
     those.
     """
-    is_changed = np.zeros(len(F), bool)
-    is_changed[changed] = True
+    changed = np.flatnonzero(is_changed)
     out = np.zeros(len(changed), bool)
     _meet_found(V, F, changed, grid, np.arange(len(F)), is_changed, _EPS, out)
     _meet_found(V, F, changed, _grid_of(V, F, changed), changed, np.zeros(len(F), bool), _EPS, out)
@@ -240,15 +241,13 @@ def _meeting(V, F, pairs, changed, eps, out):
             out[b] |= changed[b]
 
 
-def _unsafe_all(V: np.ndarray, F: np.ndarray, changed: np.ndarray) -> np.ndarray:
+def _unsafe_all(V: np.ndarray, F: np.ndarray, is_changed: np.ndarray) -> np.ndarray:
     """:func:`_unsafe` at once: one hash of all the triangles as they are now lists the overlapping
     pairs, and those with a changed triangle are tested. When many triangles changed this costs
     less than a look-up in the grid per triangle."""
-    is_changed = np.zeros(len(F), bool)
-    is_changed[changed] = True
     out = np.zeros(len(F), bool)
     _meeting(V, F, hashgrid.pairs(triangle_grid(V, F)), is_changed, _EPS, out)
-    return out[changed]
+    return out[is_changed]
 
 
 def flip_edges(V: np.ndarray, F: np.ndarray, sides: np.ndarray, max_passes: int = 8,
@@ -273,19 +272,19 @@ def flip_edges(V: np.ndarray, F: np.ndarray, sides: np.ndarray, max_passes: int 
     V = np.ascontiguousarray(V, np.float64)
     sides = np.ascontiguousarray(sides, np.int64)
     table = table if table is not None else edge_table(F, len(V))
-    arrays = (table.eid, table.count, table.first, table.second, table._start, table._hi, table._row)
     pairs = _pair_buffer(len(F), max_passes)
     start = F.copy() if safe else None
-    total = int(_flip(V, F, sides, int(max_passes), pairs, arrays))
+    total = int(_flip(V, F, sides, int(max_passes), pairs, table.arrays()))
     if not safe or not total:
         return total
     done = pairs[:total]
     group = _regions(len(F), done)
-    changed = np.flatnonzero(group >= 0)
+    is_changed = group >= 0
+    changed = np.flatnonzero(is_changed)
     if len(changed) > len(F) // 3:  # many: all at once (about 1.5 us per triangle, not 4 per changed one)
-        meets = _unsafe_all(V, F, changed)
+        meets = _unsafe_all(V, F, is_changed)
     else:
-        meets = _unsafe(V, F, grid if grid is not None else triangle_grid(V, start), changed)
+        meets = _unsafe(V, F, grid if grid is not None else triangle_grid(V, start), is_changed)
     while meets.any():
         bad = np.zeros(len(F), bool)
         bad[group[changed[meets]]] = True

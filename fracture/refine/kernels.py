@@ -111,6 +111,10 @@ class EdgeTable:
     _hi: np.ndarray
     _row: np.ndarray
 
+    def arrays(self) -> tuple:
+        """The table as the tuple ``_edge_table`` returns, for compiled code."""
+        return self.eid, self.count, self.first, self.second, self._start, self._hi, self._row
+
     @property
     def row_count(self) -> np.ndarray:
         """Triangle count of the edge of every directed triangle edge, ``(3m,)``."""
