@@ -282,20 +282,18 @@ class Refiner:
         # no splits beside a boundary vertex still off B (a collision stopped its
         # projection): smaller triangles around it would make the move onto B
         # fold them over, and it would never get there
-        beside = np.zeros(len(m.V), bool)
-        beside[self.off_b] = True
-        beside = beside[m.F].any(axis=1)
-        want &= ~beside
+        beside = None
+        if len(self.off_b):
+            off = np.zeros(len(m.V), bool)
+            off[self.off_b] = True
+            beside = off[m.F].any(axis=1)
+            want &= ~beside
         budget = max(0, (p.max_triangles - len(m.F)) // 2)
         # edge splits: one per edge (a random one of its triangles' samples) ...
         ef = np.flatnonzero(want & has_edge)
         eid = table.eid[3 * ef + k_edge[ef]]
         keep = first_per_group(eid, self.rng.random(len(ef)))
         ef, eid = ef[keep], eid[keep]
-        if self.off_b.size and eid.size:  # ... nor of a junction edge with such a triangle
-            on, which = table.rows_of(eid)
-            clear = np.bincount(which, weights=beside[on // 3], minlength=len(eid)) == 0
-            ef, eid = ef[clear], eid[clear]
         # ... and a triangle takes part in one split at most: of two chosen
         # edges on a triangle, the later one is dropped everywhere
         good = table.independent(eid)
@@ -303,6 +301,10 @@ class Refiner:
         good &= np.cumsum(good) <= budget
         ef, eid = ef[good], eid[good]
         on, which = table.rows_of(eid)
+        if beside is not None and len(eid):  # ... nor a junction edge with a triangle beside an off-B vertex
+            clear = np.bincount(which, weights=beside[on // 3], minlength=len(eid)) == 0
+            rows = clear[which]
+            ef, eid, on, which = ef[clear], eid[clear], on[rows], (np.cumsum(clear) - 1)[which[rows]]
         busy = np.zeros(len(m.F), bool)
         busy[on // 3] = True
         E = np.stack([m.F[ef, k_edge[ef]], m.F[ef, (k_edge[ef] + 1) % 3]], 1)
