@@ -218,7 +218,8 @@ class Refiner:
     def _velocity(self, table: EdgeTable) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Eq. 3 at every vertex with the boundary constraint.
 
-        Returns the velocity, the shifted psi at the vertices and the boundary vertices.
+        Returns the velocity, the shifted psi at the vertices and the boundary vertices; records
+        those off B in ``off_b`` (from the same closest-point query).
         """
         m = self.mesh
         psi, grad = self.vertex_field()
