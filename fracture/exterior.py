@@ -16,15 +16,25 @@ from fracture.topology import face_frames
 
 
 class Exterior:
-    """A closed triangle mesh with a winding-number hierarchy and an AABB tree."""
+    """A closed triangle mesh with a winding-number hierarchy and an AABB tree, each built on its
+    first query (the refinement asks only for closest points: the hierarchy of B's 56K triangles
+    in the bunny scene alone takes 50 ms)."""
 
     def __init__(self, V: np.ndarray, F: np.ndarray):
         self.V = np.ascontiguousarray(V, np.float64)
         self.F = np.ascontiguousarray(F, np.int64)
-        self._wn = igl.FastWindingNumberBVH()
-        self._wn.init(self.V, self.F)
-        self._tree = igl.AABB()
-        self._tree.init(self.V, self.F)
+
+    @cached_property
+    def _wn(self):
+        wn = igl.FastWindingNumberBVH()
+        wn.init(self.V, self.F)
+        return wn
+
+    @cached_property
+    def _tree(self):
+        tree = igl.AABB()
+        tree.init(self.V, self.F)
+        return tree
 
     @cached_property
     def normals(self) -> np.ndarray:

@@ -109,7 +109,7 @@ class Refiner:
         # a constant surface tension and leaves grad psi unchanged.
         values = pyramid.levels[0]
         self.offset = params.tension * float(np.ptp(values)) - float(values.min())
-        self.B = Exterior(BV, BF)  # trees built once: every iteration queries them
+        self.B = Exterior(BV, BF)  # its AABB tree, built on the first query, serves every iteration
         # speeds below this (psi changing by 1 % of its range per grid cell)
         # count as at rest: dt stops growing, the moves shrink, the loop ends
         self.slow = 0.01 * float(np.ptp(values)) / self.h
