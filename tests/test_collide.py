@@ -80,6 +80,26 @@ def _brute_force_pairs(V, F):
     return {(f, g) for f in range(len(F)) for g in range(f + 1, len(F)) if _triangles_intersect(V, F, f, g, _EPS)}
 
 
+def test_the_square_root_free_side_test_rejects_only_segments_the_full_test_rejects():
+    from fracture.refine.collide import _EPS, _clearly_one_side, _cross, _dot, _segment_hits_triangle
+    rng = np.random.default_rng(11)
+    rejected = 0
+    for flat in (1.0, 1e-9, 1e-13, 0.0):  # the segment's ends ever closer to the plane, then in it
+        for _ in range(4000):
+            a, b, c, p, q = rng.normal(size=(5, 3))
+            p[2], q[2] = p[2] * flat, q[2] * flat
+            a[2] = b[2] = c[2] = 0.0
+            e1, e2 = tuple(b - a), tuple(c - a)
+            n = _cross(e1, e2)
+            nn2 = _dot(n, n)
+            P, Q, A = tuple(p), tuple(q), tuple(a)
+            for eps in (_EPS, 1e-3):
+                if _clearly_one_side(P, Q, A, n, nn2, eps):
+                    rejected += 1
+                    assert not _segment_hits_triangle(P, Q, A, e1, e2, n, np.sqrt(nn2), eps)
+    assert rejected > 4000  # most segments well off the plane are decided without square roots
+
+
 def test_self_intersection_count_finds_every_crossing_pair():
     V1, F1 = grid_sheet(9, 0.0)
     V2, F2 = grid_sheet(9, 0.0, 0.031)

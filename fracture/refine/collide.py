@@ -561,6 +561,19 @@ def _segment_hits_triangle(p, q, a, e1, e2, n, nn, eps):
     return v >= -eps and w >= -eps and v + w <= 1.0 + eps
 
 
+@numba.njit(cache=True, inline="always")
+def _clearly_one_side(p, q, a, n, nn2, eps):
+    """Both ends of segment pq lie on one side of the plane through ``a`` with normal ``n``
+    (``n . n = nn2``), each further from it than :func:`_segment_hits_triangle`'s tolerance by a
+    factor of sqrt 2, far beyond rounding: that test would reject the segment too. Squares, so no
+    square roots (most pairs the static tests see are neighbours whose far edges lie off the
+    other's plane)."""
+    d = _sub(q, p)
+    tol2 = eps * eps * nn2 * _dot(d, d)
+    op, oq = _dot(n, _sub(p, a)), _dot(n, _sub(q, a))
+    return (tol2 > 1e-200) & (op * oq > 0.0) & (op * op > 2.0 * tol2) & (oq * oq > 2.0 * tol2)
+
+
 @numba.njit(cache=True)
 def _triangles_intersect(X, F, f, g, eps):
     """Triangles f and g meet anywhere but at the vertex or the edge they share.
@@ -583,12 +596,18 @@ def _triangles_intersect(X, F, f, g, eps):
         a = _pt(X, F[t, 0])
         e1, e2 = _sub(_pt(X, F[t, 1]), a), _sub(_pt(X, F[t, 2]), a)
         n = _cross(e1, e2)  # once per triangle, not per edge tested against it
-        nn = np.sqrt(_dot(n, n))
+        nn2 = _dot(n, n)
+        nn = -1.0  # its length, once a segment needs the full test
         for k in range(3):
             u, v = F[s, k], F[s, (k + 1) % 3]
             if u == shared or v == shared:
                 continue
-            if _segment_hits_triangle(_pt(X, u), _pt(X, v), a, e1, e2, n, nn, eps):
+            p, q = _pt(X, u), _pt(X, v)
+            if _clearly_one_side(p, q, a, n, nn2, eps):
+                continue
+            if nn < 0.0:
+                nn = np.sqrt(nn2)
+            if _segment_hits_triangle(p, q, a, e1, e2, n, nn, eps):
                 return True
     return False
 
