@@ -1,0 +1,32 @@
+"""Queries against the exterior surface B (fracture.exterior)."""
+
+import numpy as np
+
+from fracture.exterior import Exterior
+from fracture.primitives import box
+
+
+def test_closest_points_distances_and_inside_on_a_box():
+    V, F = box([0, 0, 0], [1, 2, 3], (2, 3, 4))
+    B = Exterior(V, F)
+    P = np.array([[2.0, 1.0, 1.5], [0.5, -1.0, 1.0], [0.25, 1.0, 1.5], [1.5, 2.5, 3.5]])
+    d2, tri, C = B.closest(P)
+    np.testing.assert_allclose(C, [[1.0, 1.0, 1.5], [0.5, 0.0, 1.0], [0.0, 1.0, 1.5], [1.0, 2.0, 3.0]], atol=1e-12)
+    np.testing.assert_allclose(d2, [1.0, 1.0, 0.0625, 0.75], atol=1e-12)
+    np.testing.assert_allclose(B.distance(P), np.sqrt([1.0, 1.0, 0.0625, 0.75]), atol=1e-12)
+    # the triangle found holds the closest point, and its normal points out there
+    for c, t, n in zip(C[:2], tri[:2], [[1, 0, 0], [0, -1, 0]]):
+        a, b, e = V[F[t]]
+        assert abs(np.dot(np.cross(b - a, e - a), c - a)) < 1e-12
+        np.testing.assert_allclose(B.normals[t], n, atol=1e-12)
+    assert B.inside(P).tolist() == [False, False, True, False]
+
+
+def test_each_tree_is_built_by_its_first_query_only():
+    V, F = box([0, 0, 0], [1, 1, 1])
+    B = Exterior(V, F)
+    assert "_tree" not in vars(B) and "_wn" not in vars(B)  # nothing built yet
+    B.closest(np.zeros((1, 3)))
+    assert "_tree" in vars(B) and "_wn" not in vars(B)  # closest points need no winding numbers
+    B.inside(np.zeros((1, 3)))
+    assert "_wn" in vars(B)
