@@ -170,6 +170,17 @@ def edge_table(F: np.ndarray, n: int) -> EdgeTable:
     return EdgeTable(*_edge_table(np.ascontiguousarray(F, np.int64), int(n)))
 
 
+@numba.njit(cache=True, inline="always")
+def _unit_normal_into(ux, uy, uz, vx, vy, vz, N, f):
+    """Write the unit normal of the triangle with edge vectors u and v into ``N[f]`` (left as it is
+    for a degenerate triangle); returns the length of u x v, twice the triangle's area."""
+    nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+    t = np.sqrt(nx * nx + ny * ny + nz * nz)
+    if t > 0.0:
+        N[f, 0], N[f, 1], N[f, 2] = nx / t, ny / t, nz / t
+    return t
+
+
 @numba.njit(cache=True)
 def face_geometry(V, F):
     """Areas ``(m,)`` and unit normals ``(m, 3)`` (zero for degenerate triangles)."""
@@ -178,13 +189,8 @@ def face_geometry(V, F):
     N = np.zeros((m, 3))
     for f in range(m):
         a, b, c = F[f, 0], F[f, 1], F[f, 2]
-        ux, uy, uz = V[b, 0] - V[a, 0], V[b, 1] - V[a, 1], V[b, 2] - V[a, 2]
-        vx, vy, vz = V[c, 0] - V[a, 0], V[c, 1] - V[a, 1], V[c, 2] - V[a, 2]
-        nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
-        t = np.sqrt(nx * nx + ny * ny + nz * nz)
-        A[f] = 0.5 * t
-        if t > 0.0:
-            N[f, 0], N[f, 1], N[f, 2] = nx / t, ny / t, nz / t
+        A[f] = 0.5 * _unit_normal_into(V[b, 0] - V[a, 0], V[b, 1] - V[a, 1], V[b, 2] - V[a, 2],
+                                       V[c, 0] - V[a, 0], V[c, 1] - V[a, 1], V[c, 2] - V[a, 2], N, f)
     return A, N
 
 
@@ -300,12 +306,8 @@ def split_wanted(T, P, bary, d, v, F, dt, k_edge, has_edge, near2, far, min_qual
         for k in range(3):
             x, y, z = T[f, k, 0] - P[f, 0], T[f, k, 1] - P[f, 1], T[f, k, 2] - P[f, 2]
             near = min(near, x * x + y * y + z * z)
-        ux, uy, uz = T[f, 1, 0] - T[f, 0, 0], T[f, 1, 1] - T[f, 0, 1], T[f, 1, 2] - T[f, 0, 2]
-        wx, wy, wz = T[f, 2, 0] - T[f, 0, 0], T[f, 2, 1] - T[f, 0, 1], T[f, 2, 2] - T[f, 0, 2]
-        nx, ny, nz = uy * wz - uz * wy, uz * wx - ux * wz, ux * wy - uy * wx
-        t = np.sqrt(nx * nx + ny * ny + nz * nz)
-        if t > 0.0:
-            N[f, 0], N[f, 1], N[f, 2] = nx / t, ny / t, nz / t
+        t = _unit_normal_into(T[f, 1, 0] - T[f, 0, 0], T[f, 1, 1] - T[f, 0, 1], T[f, 1, 2] - T[f, 0, 2],
+                              T[f, 2, 0] - T[f, 0, 0], T[f, 2, 1] - T[f, 0, 1], T[f, 2, 2] - T[f, 0, 2], N, f)
         if near < near2:
             continue
         a, b, c = F[f, 0], F[f, 1], F[f, 2]
