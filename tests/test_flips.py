@@ -16,7 +16,8 @@ def _min_angle(V, F):
     for k in range(3):
         a, b, c = V[F[:, k]], V[F[:, (k + 1) % 3]], V[F[:, (k + 2) % 3]]
         u, v = b - a, c - a
-        out.append(np.arccos(np.clip(np.einsum("ij,ij->i", u, v) / np.linalg.norm(u, axis=1) / np.linalg.norm(v, axis=1), -1, 1)))
+        cos = np.einsum("ij,ij->i", u, v) / np.linalg.norm(u, axis=1) / np.linalg.norm(v, axis=1)
+        out.append(np.arccos(np.clip(cos, -1, 1)))
     return np.degrees(np.min(out))
 
 
@@ -114,7 +115,8 @@ def _two_sheets(seed, n=300):
     """Two crumpled sheets 0.04 apart, triangulated differently (one poorly in x, one in y)."""
     rng = np.random.default_rng(seed)
     (P1, F1), (P2, F2) = _sheet(rng, n, 6.0), _sheet(rng, n, 0.2)
-    V = np.vstack([np.c_[P1, 0.02 * rng.standard_normal(len(P1))], np.c_[P2, 0.04 + 0.02 * rng.standard_normal(len(P2))]])
+    V = np.vstack([np.c_[P1, 0.02 * rng.standard_normal(len(P1))],
+                   np.c_[P2, 0.04 + 0.02 * rng.standard_normal(len(P2))]])
     sides = np.r_[np.tile([[0, 1]], (len(F1), 1)), np.tile([[1, 2]], (len(F2), 1))]
     return V, np.vstack([F1, F2 + len(P1)]), sides
 

@@ -349,7 +349,8 @@ def _feature_tests(X0, X1, F, B, lo, hi, rep, pairs, eta, every, on, stop):
     the vertices of each against the other triangle, and the edges of one against the edges of the
     other. ``B`` holds the vertices' path boxes (:func:`_path_boxes`), ``lo, hi`` the triangles'
     swept boxes grown by ``eta``. Unless ``every``, only the features with a vertex in ``on`` are
-    tested (the pairs are those with such a vertex). Marks the vertices of colliding features in ``stop``; returns their number.
+    tested (the pairs are those with such a vertex). Marks the vertices of colliding features in
+    ``stop``; returns their number.
 
     Every vertex-triangle pair whose swept boxes overlap is tested once, from
     the pair of the vertex's representative and the triangle (their boxes

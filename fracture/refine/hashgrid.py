@@ -303,7 +303,8 @@ def _slots(grid, qlo, qhi, min_level, max_level, buf):
                     for p in range(start[b], start[b + 1]):
                         if box[p, 0] > qhi[0]:
                             break  # the bucket is sorted by lower x
-                        buf[count] = p  # kept if in this cell, overlapping, and its corner cell (no branches: see pairs)
+                        # kept if in this cell, overlapping, and its corner cell (no branches: see pairs)
+                        buf[count] = p
                         count += ((key[p] == here) & _overlap(box, p, qlo, qhi)
                                   & (_key(_cell(max(qlo[0], box[p, 0]), s), _cell(max(qlo[1], box[p, 1]), s),
                                           _cell(max(qlo[2], box[p, 2]), s)) == here))
