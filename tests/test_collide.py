@@ -112,3 +112,58 @@ def test_self_intersection_count_finds_every_crossing_pair():
     from fracture.primitives import box
     BV, BF = box([0, 0, 0], [1, 2, 3], (4, 5, 6))
     assert self_intersections(BV, BF) == 0
+
+
+def _two_sheets_with_a_fin(seed):
+    """Two close noisy sheets, and a fin on an edge of the first (a non-manifold edge), moved at random."""
+    rng = np.random.default_rng(seed)
+    V1, F1 = grid_sheet(8, 0.0)
+    V2, F2 = grid_sheet(8, 0.03, 0.013)
+    V = np.vstack([V1, V2, [[0.3, 0.5, -0.2]]]) + rng.normal(0, 0.004, (2 * len(V1) + 1, 3))
+    a, b = F1[20, 0], F1[20, 1]
+    F = np.vstack([F1, F2 + len(V1), [[a, b, len(V) - 1]]])
+    return V, F, V + rng.normal(0, 0.03, V.shape)
+
+
+def test_every_vertex_and_edge_is_represented_once_by_a_triangle_on_it():
+    from fracture.refine.collide import _represented
+    from fracture.refine.kernels import edge_table
+    V, F, _ = _two_sheets_with_a_fin(0)
+    table = edge_table(F, len(V))
+    rep = _represented(F, len(V), table.eid)
+    edges = np.zeros(len(table.count), int)
+    vertices = np.zeros(len(V), int)
+    for f, k in zip(*np.nonzero(rep[:, None] & (8 << np.arange(3)))):
+        edges[table.eid[3 * f + k]] += 1
+    for f, k in zip(*np.nonzero(rep[:, None] & (1 << np.arange(3)))):
+        vertices[F[f, k]] += 1  # bit k is the triangle's own vertex k, so it is on it
+    assert (table.count == 3).sum() == 1 and (edges == 1).all() and (vertices == 1).all()
+    assert (rep == 0).mean() > 0.3  # features are packed: about half the triangles represent none
+
+
+def test_the_representatives_find_the_colliding_features_that_testing_all_of_them_finds():
+    from fracture.refine import hashgrid
+    from fracture.refine.collide import (_box_grid, _edge_edge_hit, _feature_tests, _path_boxes, _represented,
+                                         _swept_boxes, _vertex_triangle_hit)
+    from fracture.refine.kernels import edge_table
+    eta = 1e-3
+    for seed in range(3):
+        X0, F, X1 = _two_sheets_with_a_fin(seed)
+        table = edge_table(F, len(X0))
+        E = np.unique(np.sort(np.stack([F, np.roll(F, -1, 1)], 2).reshape(-1, 2), 1), axis=0)
+        expect = np.zeros(len(X0), bool)
+        times = np.empty(4)
+        P = lambda i: (tuple(X0[i]), tuple(X1[i]))  # noqa: E731
+        for v in range(len(X0)):
+            for a, b, c in F:
+                if v not in (a, b, c) and _vertex_triangle_hit(*P(v), *P(a), *P(b), *P(c), eta * eta, times):
+                    expect[[v, a, b, c]] = True
+        for i, (p, q) in enumerate(E):
+            for r, s in E[i + 1:]:
+                if len({p, q, r, s}) == 4 and _edge_edge_hit(*P(p), *P(q), *P(r), *P(s), eta * eta, times):
+                    expect[[p, q, r, s]] = True
+        lo, hi = _swept_boxes(X0, X1, F, eta)
+        stop = np.zeros(len(X0), bool)
+        _feature_tests(X0, X1, F, _path_boxes(X0, X1), lo, hi, _represented(F, len(X0), table.eid),
+                       hashgrid.pairs(_box_grid(lo, hi, X0, F)), eta, True, np.zeros(len(X0), bool), stop)
+        assert expect.sum() > 20 and np.array_equal(stop, expect)
