@@ -202,3 +202,18 @@ def test_safe_flips_between_two_close_sheets_leave_nothing_crossing():
         assert np.unique(E, axis=0, return_counts=True)[1].max() <= 2  # going back made no edge twice
         refused += n_safe < n_plain or not np.array_equal(plain, safe)
     assert inputs >= 10 and refused >= 3
+
+
+def test_an_edge_is_flipped_only_if_an_angle_opposite_it_is_obtuse():
+    # the dot-product shortcut skips the cotangents where neither opposite angle is obtuse:
+    # the angles then add up to at most pi, so the cotangent test would not flip either
+    from fracture.refine.flips import _cot, _obtuse
+    rng = np.random.default_rng(4)
+    flips = 0
+    for _ in range(20000):
+        V = rng.normal(size=(4, 3)) * [1.0, 1.0, rng.choice([1.0, 0.05, 0.0])]
+        wants = _cot(V, 2, 0, 1) + _cot(V, 3, 1, 0) < -1e-12
+        flips += wants
+        assert not wants or _obtuse(V, 2, 0, 1) or _obtuse(V, 3, 1, 0)
+        assert _obtuse(V, 2, 0, 1) == (np.dot(V[0] - V[2], V[1] - V[2]) < 0.0)
+    assert flips > 2000
