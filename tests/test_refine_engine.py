@@ -135,3 +135,26 @@ def test_no_splits_beside_a_boundary_vertex_that_is_off_b():
     assert r.remesh(table, vel, psi, 10.0 * r._step_size(vel, np.ones(len(mesh.V), bool))) > 0
     assert len(mesh.F) > m + len(fan)  # the rest did split ...
     assert np.array_equal(mesh.F[(mesh.F == v).any(axis=1)], fan)  # ... around v nothing did
+
+
+def test_closest_points_on_b_are_asked_again_only_for_vertices_that_moved():
+    pyramid = two_weak_sheets()
+    BV, BF = box([0, 0, 0], [1, 1, 1], (8, 8, 8))
+    mesh = flat_cut()
+    r = Refiner(mesh, pyramid, BV, BF, RefineParams(), np.random.default_rng(0))
+    asked = []
+    closest = r.B.closest
+    r.B.closest = lambda P: asked.append(len(P)) or closest(P)
+    ids = r.boundary_vertices()
+    for moved in (0, 3):
+        mesh.V[ids[:moved]] += 0.01
+        got = r.closest_on_b(ids)
+        for a, b in zip(got, closest(mesh.V[ids])):
+            assert np.array_equal(a, b)
+    assert asked == [len(ids), 3]
+    r._renumber(np.arange(len(mesh.V))[::-1])  # the answers follow a renumbering
+    mesh.split_triangles(np.array([0]), np.array([[0.2, 0.3, 0.5]]))  # and grow with the mesh
+    ids = r.boundary_vertices()
+    for a, b in zip(r.closest_on_b(np.r_[ids, len(mesh.V) - 1]), closest(mesh.V[np.r_[ids, len(mesh.V) - 1]])):
+        assert np.array_equal(a, b)
+    assert asked == [len(ids), 3, 1]

@@ -121,6 +121,8 @@ class Refiner:
         # evaluated again only when it moved or is new (see vertex_field)
         self._field_V = np.zeros((0, 3))
         self._psi, self._grad = np.zeros(0), np.zeros((0, 3))
+        # the last answers of closest_on_b: vertex ids, their positions then, and B's answers
+        self._near = (np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0), np.zeros(0, np.int64), np.zeros((0, 3)))
         self.boundary = np.zeros(0, np.int64)  # boundary vertices of the last iteration
         self.off_b = np.zeros(0, np.int64)  # boundary vertices off B at the last velocity
         self.full = False  # the triangle budget has stopped a wanted split
@@ -159,6 +161,7 @@ class Refiner:
         self._field_V, self._psi, self._grad = (follow(self._field_V, empty), follow(self._psi, np.zeros(0)),
                                                 follow(self._grad, empty))
         self.hold = follow(self.hold, np.zeros(len(vorder), np.int64))
+        self._near = (new[self._near[0]],) + self._near[1:]
         self.gain = follow(self.gain, np.ones(len(vorder)))
         self.velocity = follow(self.velocity, self.velocity)
         self.boundary, self.off_b = new[self.boundary], new[self.off_b]
@@ -180,6 +183,34 @@ class Refiner:
         return np.unique(row_edges(self.mesh.F, self.edges().boundary_rows))
 
     # -- constraints -----------------------------------------------------------------------
+    def closest_on_b(self, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`Exterior.closest` of vertices ``ids`` (distinct) where they are: squared distances,
+        triangles of B and closest points.
+
+        B is asked only about the vertices that were not in the last call or
+        have moved since: the boundary's distances measured at the end of an
+        iteration serve the next one's velocity, and the velocity after the
+        splits asks only about the new boundary vertices. The answers are
+        kept for the next call: read them, do not edit them.
+        """
+        V = self.mesh.V
+        last, X, d2, tri, P = self._near
+        slot = np.full(len(V), -1)
+        slot[last] = np.arange(len(last))
+        slot = slot[ids]
+        known = np.flatnonzero(slot >= 0)
+        known = known[(V[ids[known]] == X[slot[known]]).all(axis=1)]
+        answer = (np.empty(len(ids)), np.empty(len(ids), np.int64), np.empty((len(ids), 3)))
+        for a, b in zip(answer, (d2, tri, P)):
+            a[known] = b[slot[known]]
+        ask = np.ones(len(ids), bool)
+        ask[known] = False
+        if ask.any():
+            for a, b in zip(answer, self.B.closest(V[ids[ask]])):
+                a[ask] = b
+        self._near = (ids.copy(), V[ids]) + answer
+        return answer
+
     def project_to_exterior(self, ids: np.ndarray, V: np.ndarray) -> None:
         """Put vertices ``ids`` of positions ``V`` on B (in place)."""
         if len(ids):
@@ -198,7 +229,7 @@ class Refiner:
         m, ids = self.mesh, self.boundary
         if not len(ids):
             return 0.0
-        d2, _, P = self.B.closest(m.V[ids])
+        d2, _, P = self.closest_on_b(ids)
         off = d2 > (tol.on_b * self.h) ** 2
         if not off.any():
             return float(np.sqrt(d2.max()))
@@ -213,7 +244,7 @@ class Refiner:
     def boundary_error(self, ids: np.ndarray | None = None) -> float:
         """Largest distance of the boundary vertices (or of ``ids``) from B."""
         ids = self.boundary_vertices() if ids is None else ids
-        return float(np.sqrt(self.B.closest(self.mesh.V[ids])[0].max())) if len(ids) else 0.0
+        return float(np.sqrt(self.closest_on_b(ids)[0].max())) if len(ids) else 0.0
 
     def _velocity(self, table: EdgeTable) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Eq. 3 at every vertex with the boundary constraint.
@@ -235,7 +266,7 @@ class Refiner:
             return v, psi, np.zeros(0, np.int64)
         verts, c = boundary_conormals(m.V, m.F, row_edges(m.F, rows), strict=False, face=rows // 3, by_length=True)
         v[verts] -= np.einsum("ij,ij->i", v[verts], c)[:, None] * c
-        d2, tri, _ = self.B.closest(m.V[verts])
+        d2, tri, _ = self.closest_on_b(verts)
         self.off_b = verts[d2 > (tol.on_b * self.h) ** 2]
         nb = self.B.normals[tri]
         v[verts] -= np.einsum("ij,ij->i", v[verts], nb)[:, None] * nb
