@@ -20,6 +20,7 @@ is one pass:
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numba
 import numpy as np
@@ -115,12 +116,13 @@ class EdgeTable:
         """The table as the tuple ``_edge_table`` returns, for compiled code."""
         return self.eid, self.count, self.first, self.second, self._start, self._hi, self._row
 
-    @property
+    @cached_property
     def row_count(self) -> np.ndarray:
-        """Triangle count of the edge of every directed triangle edge, ``(3m,)``."""
+        """Triangle count of the edge of every directed triangle edge, ``(3m,)`` (the table is not
+        edited once built: computed once, like the next one)."""
         return self.count[self.eid]
 
-    @property
+    @cached_property
     def boundary_rows(self) -> np.ndarray:
         """Directed triangle edges ``3 f + k`` on edges with one triangle, in row order."""
         return np.flatnonzero(self.row_count == 1)
