@@ -139,8 +139,9 @@ def test_testing_the_flipped_triangles_at_once_or_one_by_one_agrees(seed):
     V, F, sides = _two_sheets(seed)
     start = F.copy()
     grid = triangle_grid(V, start)
-    is_changed = _regions(len(F), _plain_passes(V, F, sides, 3)) >= 0
-    one_by_one = _unsafe(V, F, grid, is_changed)
+    group = _regions(len(F), _plain_passes(V, F, sides, 3))
+    is_changed = group >= 0
+    one_by_one = _unsafe(V, F, grid, is_changed, group)
     assert 0 < one_by_one.sum() < is_changed.sum()
     assert np.array_equal(_unsafe_all(V, F, is_changed), one_by_one)
 
