@@ -23,7 +23,7 @@ test: install
 bench: install
 	$(BIN)/python benchmarks/bench_fields.py
 	$(BIN)/python benchmarks/bench_coarse.py
-	$(BIN)/python benchmarks/bench_refine.py --repeat 3
+	$(BIN)/python benchmarks/bench_refine.py --repeat 3 --rounds 2
 	$(BIN)/python benchmarks/bench_animate.py --triangles 200000
 
 install: system-deps $(STAMP)
