@@ -340,15 +340,9 @@ def _represented(F, n, eid):
     return rep
 
 
-@numba.njit(cache=True)
-def _path_boxes(X0, X1):
+def _path_boxes(X0: np.ndarray, X1: np.ndarray) -> np.ndarray:
     """Per vertex the box of its path, ``(n, 6)``: lower corner, then upper corner."""
-    B = np.empty((X0.shape[0], 6))
-    for v in range(X0.shape[0]):
-        for c in range(3):
-            B[v, c] = min(X0[v, c], X1[v, c])
-            B[v, 3 + c] = max(X0[v, c], X1[v, c])
-    return B
+    return np.hstack([np.minimum(X0, X1), np.maximum(X0, X1)])
 
 
 @numba.njit(cache=True, inline="always")
@@ -524,15 +518,13 @@ def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, eta: float, e
     rep = _represented(F, n, np.ascontiguousarray(eid, np.int64))
     B = _path_boxes(X0, X1)
 
-    def pairs_on(on):  # the triangle pairs with a vertex in ``on`` (the others' features are not tested)
-        return _pairs_touching(F, overlapping, on)
-
+    # a later round (or, with ``moving``, the first) tests only the triangle pairs with a vertex in ``on``
     every = moving is None
     on = np.zeros(n, bool)
     todo = overlapping
     if not every:
         on[moving] = True
-        todo = pairs_on(on)
+        todo = _pairs_touching(F, overlapping, on)
     first = None
     for _ in range(max_rounds):
         stop = np.zeros(n, bool)
@@ -545,7 +537,7 @@ def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, eta: float, e
         B[stop, 3:] = B[stop, :3] = X0[stop]
         stopped |= stop
         every, on = False, stop
-        todo = pairs_on(on)
+        todo = _pairs_touching(F, overlapping, on)
     # still colliding: nothing moves, and the state at X0 is intersection-free
     X1[:] = X0
     stopped[:] = True
