@@ -141,7 +141,7 @@ def test_testing_the_flipped_triangles_at_once_or_one_by_one_agrees(seed):
     grid = triangle_grid(V, start)
     group = _regions(len(F), _plain_passes(V, F, sides, 3))
     is_changed = group >= 0
-    one_by_one = _unsafe(V, F, grid, is_changed, group)
+    one_by_one = _unsafe(V, F, grid, group)
     assert 0 < one_by_one.sum() < is_changed.sum()
     assert np.array_equal(_unsafe_all(V, F, is_changed), one_by_one)
 

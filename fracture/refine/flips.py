@@ -234,16 +234,16 @@ def _grid_of(V: np.ndarray, F: np.ndarray, ids: np.ndarray) -> tuple:
     return triangle_grid(V, np.ascontiguousarray(F[ids]))
 
 
-def _unsafe(V: np.ndarray, F: np.ndarray, grid: tuple, is_changed: np.ndarray, group: np.ndarray) -> np.ndarray:
-    """Which of the triangles changed by flips (``is_changed``, per triangle; ``group``, the root of
-    each one's group, :func:`_regions`) meet another triangle of the surface, in the order of
-    their ids.
+def _unsafe(V: np.ndarray, F: np.ndarray, grid: tuple, group: np.ndarray) -> np.ndarray:
+    """Which of the triangles changed by flips (those in a ``group``, :func:`_regions`) meet another
+    triangle of the surface, in the order of their ids.
 
     ``grid`` holds boxes that contain the triangles as they were before the
     flips (element ``f`` is triangle ``f``): it finds the triangles that are
     still so, one look-up per group of flips. The pairs of a hash of the
     changed triangles' boxes as they are now find those that meet each other.
     """
+    is_changed = group >= 0
     changed = np.flatnonzero(is_changed)
     meets = np.zeros(len(F), bool)
     _meeting(V, F, changed[hashgrid.pairs(_grid_of(V, F, changed))], is_changed, _EPS, meets)
@@ -310,7 +310,7 @@ def flip_edges(V: np.ndarray, F: np.ndarray, sides: np.ndarray, max_passes: int 
     if len(changed) > len(F) // 2:  # most: all at once (about 1 us per triangle, against 2 to 2.5 per changed one)
         meets = _unsafe_all(V, F, is_changed)
     else:
-        meets = _unsafe(V, F, grid if grid is not None else triangle_grid(V, start), is_changed, group)
+        meets = _unsafe(V, F, grid if grid is not None else triangle_grid(V, start), group)
     while meets.any():
         bad = np.zeros(len(F), bool)
         bad[group[changed[meets]]] = True
