@@ -165,5 +165,6 @@ def test_the_representatives_find_the_colliding_features_that_testing_all_of_the
         lo, hi = _swept_boxes(X0, X1, F, eta)
         stop = np.zeros(len(X0), bool)
         _feature_tests(X0, X1, F, _path_boxes(X0, X1), lo, hi, _represented(F, len(X0), table.eid),
-                       hashgrid.pairs(_box_grid(lo, hi, X0, F)), eta, True, np.zeros(len(X0), bool), stop)
+                       hashgrid.pairs(_box_grid(lo, hi, X0, F)), eta, True, np.zeros(len(X0), bool),
+                       np.zeros(len(X0), bool), stop)
         assert expect.sum() > 20 and np.array_equal(stop, expect)

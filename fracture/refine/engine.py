@@ -46,6 +46,7 @@ import numpy as np
 
 from fracture.exterior import Exterior
 from fracture.refine.collide import stop_collisions
+from fracture.refine.fans import closed_vertices
 from fracture.refine.flips import flip_edges
 from fracture.refine.flow import energy, sample_displacement, velocity
 from fracture.refine.kernels import (EdgeTable, edge_table, first_per_group, limit_moves, row_edges, spatial_order,
@@ -235,7 +236,7 @@ class Refiner:
             return float(np.sqrt(d2.max()))
         X1 = m.V.copy()
         X1[ids[off]] = P[off]
-        stopped, _ = stop_collisions(m.V, X1, m.F, self.params.thickness * self.h, self.edges().eid,
+        stopped, _ = stop_collisions(m.V, X1, m.F, self.params.thickness * self.h, self.edges(),
                                      moving=ids[off])
         self.hold[stopped] = self.params.hold
         m.V = X1
@@ -400,12 +401,14 @@ class Refiner:
         self.boundary = boundary  # flips keep the boundary: valid until the next splits
         self.project_to_exterior(boundary, X1)
         clock = log.tick("boundary", clock)
-        stopped, _, grid = stop_collisions(m.V, X1, m.F, p.thickness * self.h, table.eid, return_grid=True)
+        closed = closed_vertices(m.F, len(m.V), table)  # for the collision step and the flips
+        stopped, _, grid = stop_collisions(m.V, X1, m.F, p.thickness * self.h, table, return_grid=True,
+                                         closed=closed)
         self.hold[stopped] = p.hold
         clock = log.tick("collisions", clock)
         moved = np.linalg.norm(X1 - m.V, axis=1)
         m.V = X1
-        flip_edges(m.V, m.F, m.sides, max_passes=3, safe=True, grid=grid, table=table)
+        flip_edges(m.V, m.F, m.sides, max_passes=3, safe=True, grid=grid, table=table, closed=closed)
         clock = log.tick("flips", clock)
         log.stopped.append(int(stopped.sum()))
         return float(moved[used].mean() / self.h) if used.any() else 0.0

@@ -16,6 +16,7 @@ import numpy as np
 
 from fracture.refine import hashgrid
 from fracture.refine.collide import _EPS, _cross, _dot, _pt, _sub, _triangles_intersect, triangle_grid
+from fracture.refine.fans import certified_fans, closed_vertices, share_certified
 from fracture.refine.kernels import EdgeTable, _find_edge, edge_table
 
 
@@ -189,9 +190,10 @@ def _boxes_apart(V, F, f, c):
 
 
 @numba.njit(cache=True)
-def _meet_found(V, F, tris, starts, grid, ids, skip, eps, out):
+def _meet_found(V, F, tris, starts, grid, ids, skip, sure, eps, out):
     """Mark in ``out`` the triangles ``tris`` that meet a triangle found in ``grid`` (element ``i`` is
-    triangle ``ids[i]``); triangles with ``skip`` are left out. Triangles already marked are not
+    triangle ``ids[i]``); triangles with ``skip``, and those that share a vertex in ``sure``
+    (:func:`~fracture.refine.fans.certified_fans`), are left out. Triangles already marked are not
     looked at again.
 
     ``tris`` come in groups ``starts[j]:starts[j + 1]`` of triangles near each
@@ -217,7 +219,8 @@ def _meet_found(V, F, tris, starts, grid, ids, skip, eps, out):
             f = tris[i]
             for n in range(k):
                 c = ids[buf[n]]
-                if not skip[c] and c != f and not _boxes_apart(V, F, f, c) and _triangles_intersect(V, F, f, c, eps):
+                if (not skip[c] and c != f and not _boxes_apart(V, F, f, c) and not share_certified(F, f, c, sure)
+                        and _triangles_intersect(V, F, f, c, eps)):
                     out[i] = True
                     break
 
@@ -225,7 +228,8 @@ def _meet_found(V, F, tris, starts, grid, ids, skip, eps, out):
 def _meet_any(V: np.ndarray, F: np.ndarray, tris: np.ndarray, ids: np.ndarray) -> np.ndarray:
     """Which triangles ``tris`` meet one of the triangles ``ids``."""
     out = np.zeros(len(tris), bool)
-    _meet_found(V, F, tris, np.arange(len(tris) + 1), _grid_of(V, F, ids), ids, np.zeros(len(F), bool), _EPS, out)
+    none = np.zeros(max(len(V), len(F)), bool)
+    _meet_found(V, F, tris, np.arange(len(tris) + 1), _grid_of(V, F, ids), ids, none, none, _EPS, out)
     return out
 
 
@@ -234,9 +238,10 @@ def _grid_of(V: np.ndarray, F: np.ndarray, ids: np.ndarray) -> tuple:
     return triangle_grid(V, np.ascontiguousarray(F[ids]))
 
 
-def _unsafe(V: np.ndarray, F: np.ndarray, grid: tuple, group: np.ndarray) -> np.ndarray:
+def _unsafe(V: np.ndarray, F: np.ndarray, grid: tuple, group: np.ndarray, sure: np.ndarray) -> np.ndarray:
     """Which of the triangles changed by flips (those in a ``group``, :func:`_regions`) meet another
-    triangle of the surface, in the order of their ids.
+    triangle of the surface, in the order of their ids. Pairs that share a vertex in ``sure`` (whose
+    fan does not fold, :func:`~fracture.refine.fans.certified_fans`) are not tested.
 
     ``grid`` holds boxes that contain the triangles as they were before the
     flips (element ``f`` is triangle ``f``): it finds the triangles that are
@@ -246,38 +251,40 @@ def _unsafe(V: np.ndarray, F: np.ndarray, grid: tuple, group: np.ndarray) -> np.
     is_changed = group >= 0
     changed = np.flatnonzero(is_changed)
     meets = np.zeros(len(F), bool)
-    _meeting(V, F, changed[hashgrid.pairs(_grid_of(V, F, changed))], is_changed, _EPS, meets)
+    _meeting(V, F, changed[hashgrid.pairs(_grid_of(V, F, changed))], is_changed, sure, _EPS, meets)
     tris = changed[np.argsort(group[changed], kind="stable")]
     starts = np.r_[0, np.flatnonzero(np.diff(group[tris])) + 1, len(tris)]
     out = meets[tris]
-    _meet_found(V, F, tris, starts, grid, np.arange(len(F)), is_changed, _EPS, out)
+    _meet_found(V, F, tris, starts, grid, np.arange(len(F)), is_changed, sure, _EPS, out)
     meets[tris] = out
     return meets[changed]
 
 
 @numba.njit(cache=True)
-def _meeting(V, F, pairs, changed, eps, out):
-    """Mark in ``out`` the ``changed`` triangles in one of the overlapping triangle ``pairs`` that meet."""
+def _meeting(V, F, pairs, changed, sure, eps, out):
+    """Mark in ``out`` the ``changed`` triangles in one of the overlapping triangle ``pairs`` that meet
+    (pairs that share a vertex in ``sure`` cannot)."""
     for i in range(pairs.shape[0]):
         a, b = pairs[i, 0], pairs[i, 1]
         if (not changed[a] or out[a]) and (not changed[b] or out[b]):
             continue  # decides nothing new
-        if _triangles_intersect(V, F, a, b, eps):
+        if not share_certified(F, a, b, sure) and _triangles_intersect(V, F, a, b, eps):
             out[a] |= changed[a]
             out[b] |= changed[b]
 
 
-def _unsafe_all(V: np.ndarray, F: np.ndarray, is_changed: np.ndarray) -> np.ndarray:
+def _unsafe_all(V: np.ndarray, F: np.ndarray, is_changed: np.ndarray, sure: np.ndarray) -> np.ndarray:
     """:func:`_unsafe` at once: one hash of all the triangles as they are now lists the overlapping
     pairs, and those with a changed triangle are tested. When many triangles changed this costs
     less than a look-up in the grid per triangle."""
     out = np.zeros(len(F), bool)
-    _meeting(V, F, hashgrid.pairs(triangle_grid(V, F)), is_changed, _EPS, out)
+    _meeting(V, F, hashgrid.pairs(triangle_grid(V, F)), is_changed, sure, _EPS, out)
     return out[is_changed]
 
 
 def flip_edges(V: np.ndarray, F: np.ndarray, sides: np.ndarray, max_passes: int = 8,
-               safe: bool = False, grid: tuple | None = None, table: EdgeTable | None = None) -> int:
+               safe: bool = False, grid: tuple | None = None, table: EdgeTable | None = None,
+               closed: np.ndarray | None = None) -> int:
     """Flip non-Delaunay edges of ``F`` in place (see the module notes); returns the number of flips.
 
     ``F`` must be a C-contiguous int64 array (it is edited in place). A flip
@@ -291,7 +298,11 @@ def flip_edges(V: np.ndarray, F: np.ndarray, sides: np.ndarray, max_passes: int 
     of boxes that contain the triangles as given (triangle ``f`` its element
     ``f``, e.g. the collision step's); else one is built if needed.
     ``table``, the :class:`~fracture.refine.kernels.EdgeTable` of ``F`` as
-    given, saves building it.
+    given, saves building it, and ``closed``, its
+    :func:`~fracture.refine.fans.closed_vertices`, finding those. The
+    triangles around a vertex whose fan does not fold after the flips
+    (:func:`~fracture.refine.fans.certified_fans`) are not tested against
+    each other.
     """
     if F.dtype != np.int64 or not F.flags.c_contiguous:
         raise TypeError("F must be a C-contiguous int64 array")
@@ -300,17 +311,20 @@ def flip_edges(V: np.ndarray, F: np.ndarray, sides: np.ndarray, max_passes: int 
     table = table if table is not None else edge_table(F, len(V))
     pairs = _pair_buffer(len(F), max_passes)
     start = F.copy() if safe else None
+    if safe and closed is None:
+        closed = closed_vertices(F, len(V), table)
     total = int(_flip(V, F, sides, int(max_passes), pairs, table.arrays()))
     if not safe or not total:
         return total
+    sure = certified_fans(V, V, F, closed)  # flips keep the closed vertices closed
     done = pairs[:total]
     group = _regions(len(F), done)
     is_changed = group >= 0
     changed = np.flatnonzero(is_changed)
     if len(changed) > len(F) // 2:  # most: all at once (about 1 us per triangle, against 2 to 2.5 per changed one)
-        meets = _unsafe_all(V, F, is_changed)
+        meets = _unsafe_all(V, F, is_changed, sure)
     else:
-        meets = _unsafe(V, F, grid if grid is not None else triangle_grid(V, start), group)
+        meets = _unsafe(V, F, grid if grid is not None else triangle_grid(V, start), group, sure)
     while meets.any():
         bad = np.zeros(len(F), bool)
         bad[group[changed[meets]]] = True
