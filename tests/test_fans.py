@@ -98,6 +98,14 @@ def _fan_collides(X0, X1, F, s):
     return False
 
 
+def test_the_static_test_agrees_with_a_step_that_moves_nothing():
+    X0, F, _ = _crumpled_sheet(0, move=0.0)
+    X0[:, :2] += np.random.default_rng(1).normal(0, 0.04, (len(X0), 2))  # folds some fans
+    static = _passes(X0, F)
+    assert 0.2 < static.mean() < 0.5  # of 0.64 closed
+    assert np.array_equal(_passes(X0, F, X0.copy()), static)
+
+
 @pytest.mark.parametrize("move", [0.03, 0.05])
 def test_no_fan_that_passes_has_a_colliding_pair(move):
     """Random moves of a crumpled sheet make many fans fold onto themselves; none of the fans that

@@ -69,7 +69,7 @@ def _fan_test(s, p, q, N0, H, N1, size2, normal, across, lim2, score):
 
 
 @numba.njit(cache=True)
-def _certified(X0, X1, F, closed):
+def _certified(X0, X1, F, closed, moving):
     n, m = X0.shape[0], F.shape[0]
     # every vertex's area-weighted normal at the start, and a probe direction strictly
     # inside one of its triangles as projected along it (towards the two other corners,
@@ -107,10 +107,12 @@ def _certified(X0, X1, F, closed):
     for f in range(m):
         a, b, c = F[f, 0], F[f, 1], F[f, 2]
         u0, v0 = _sub(_pt(X0, b), _pt(X0, a)), _sub(_pt(X0, c), _pt(X0, a))
-        u1, v1 = _sub(_pt(X1, b), _pt(X1, a)), _sub(_pt(X1, c), _pt(X1, a))
-        N0, N1 = _cross(u0, v0), _cross(u1, v1)
-        M1, M2 = _cross(u0, v1), _cross(u1, v0)
-        H = (0.5 * (M1[0] + M2[0]), 0.5 * (M1[1] + M2[1]), 0.5 * (M1[2] + M2[2]))
+        N0 = N1 = H = _cross(u0, v0)
+        if moving:
+            u1, v1 = _sub(_pt(X1, b), _pt(X1, a)), _sub(_pt(X1, c), _pt(X1, a))
+            N1 = _cross(u1, v1)
+            M1, M2 = _cross(u0, v1), _cross(u1, v0)
+            H = (0.5 * (M1[0] + M2[0]), 0.5 * (M1[1] + M2[1]), 0.5 * (M1[2] + M2[2]))
         size2 = 2.0 * _MARGIN * _MARGIN * (_dot(N0, N0) + _dot(N1, N1))
         w0 = _sub(v0, u0)  # edge b -> c
         _fan_test(a, u0, v0, N0, H, N1, size2, normal, probe, lim2, score)
@@ -126,9 +128,12 @@ def certified_fans(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, closed: np.nda
     """Mask of the vertices whose fans of triangles ``F`` cannot fold onto themselves while every vertex
     moves on a straight line from ``X0`` to ``X1`` (module notes): no two triangles that share such a
     vertex meet during the step, other than along what they share. ``closed`` is
-    :func:`closed_vertices`; no other vertex passes. With ``X1 = X0`` it is a static test."""
-    return _certified(np.ascontiguousarray(X0, np.float64), np.ascontiguousarray(X1, np.float64),
-                      np.ascontiguousarray(F, np.int64), np.ascontiguousarray(closed, np.bool_))
+    :func:`closed_vertices`; no other vertex passes. Given ``X0`` itself as ``X1`` it is a static test,
+    which skips the terms of the motion."""
+    moving = X1 is not X0
+    X0 = np.ascontiguousarray(X0, np.float64)
+    X1 = np.ascontiguousarray(X1, np.float64) if moving else X0
+    return _certified(X0, X1, np.ascontiguousarray(F, np.int64), np.ascontiguousarray(closed, np.bool_), moving)
 
 
 @numba.njit(cache=True, inline="always")
