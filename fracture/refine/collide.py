@@ -14,10 +14,12 @@ Broad phase: the swept boxes of the triangles go into a hierarchical
 spatial hash (:mod:`fracture.refine.hashgrid`), which lists every
 overlapping pair once; each pair tests the vertices and edges its two
 triangles represent (every feature has one representative triangle, Curtis
-et al. 2008). Pairs further apart than their relative move are dropped
-before the cubic. libigl and pymeshlab answer
-static questions only (``pymeshlab`` selects self-intersecting faces of one
-mesh state), so the moving test is written here, and the static count
+et al. 2008). Pairs of triangles around a vertex whose fan provably cannot
+fold during the step (:mod:`fracture.refine.fans`) are skipped, and pairs
+further apart than their relative move are dropped before the cubic.
+libigl and pymeshlab answer static questions only (``pymeshlab`` selects
+self-intersecting faces of one mesh state), so the moving test is written
+here, and the static count
 :func:`self_intersections` uses the same hash (the tests check it against an
 all-pairs search).
 """
