@@ -31,6 +31,35 @@ def mesh_area(V, F):
     return 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1).sum()
 
 
+def grid_sheet(n, z, shift=0.0):
+    """An n x n grid of the unit square at height z (moved by ``shift`` in x, 0.7 of it in y), two
+    triangles per cell."""
+    x, y = np.meshgrid(np.linspace(0, 1, n) + shift, np.linspace(0, 1, n) + 0.7 * shift, indexing="ij")
+    V = np.column_stack([x.ravel(), y.ravel(), np.full(n * n, z)])
+    i = (np.arange(n - 1)[:, None] * n + np.arange(n - 1)[None, :]).ravel()
+    return V, np.concatenate([np.stack([i, i + n, i + 1], 1), np.stack([i + 1, i + n, i + n + 1], 1)])
+
+
+def colliding_vertices(X0, X1, F, eta):
+    """Mask of the vertices of every vertex-triangle and edge-edge pair of triangles ``F`` (sharing no
+    vertex) that meets while the vertices move from ``X0`` to ``X1``, each pair tested: the reference
+    for the culled searches."""
+    from fracture.refine.collide import _edge_edge_hit, _vertex_triangle_hit
+    E = np.unique(np.sort(np.stack([F, np.roll(F, -1, 1)], 2).reshape(-1, 2), 1), axis=0)
+    hit = np.zeros(len(X0), bool)
+    times = np.empty(4)
+    P = lambda i: (tuple(X0[i]), tuple(X1[i]))  # noqa: E731
+    for v in np.unique(F):
+        for a, b, c in F:
+            if v not in (a, b, c) and _vertex_triangle_hit(*P(v), *P(a), *P(b), *P(c), eta * eta, times):
+                hit[[v, a, b, c]] = True
+    for i, (p, q) in enumerate(E):
+        for r, s in E[i + 1:]:
+            if len({p, q, r, s}) == 4 and _edge_edge_hit(*P(p), *P(q), *P(r), *P(s), eta * eta, times):
+                hit[[p, q, r, s]] = True
+    return hit
+
+
 @pytest.fixture
 def slab_meshes(tmp_path):
     """A 2 x 1 x 0.5 box and a wavy cut through it, written as OBJ files."""

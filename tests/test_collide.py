@@ -3,14 +3,8 @@
 from __future__ import annotations
 
 import numpy as np
+from conftest import colliding_vertices, grid_sheet
 from fracture.refine.collide import self_intersections, stop_collisions
-
-
-def grid_sheet(n, z, shift=0.0):
-    x, y = np.meshgrid(np.linspace(0, 1, n) + shift, np.linspace(0, 1, n) + 0.7 * shift, indexing="ij")
-    V = np.column_stack([x.ravel(), y.ravel(), np.full(n * n, z)])
-    i = (np.arange(n - 1)[:, None] * n + np.arange(n - 1)[None, :]).ravel()
-    return V, np.concatenate([np.stack([i, i + n, i + 1], 1), np.stack([i + 1, i + n, i + n + 1], 1)])
 
 
 def test_a_vertex_through_a_triangle_is_stopped_and_a_miss_is_not():
@@ -81,7 +75,8 @@ def _brute_force_pairs(V, F):
 
 
 def test_the_square_root_free_side_test_rejects_only_segments_the_full_test_rejects():
-    from fracture.refine.collide import _EPS, _clearly_one_side, _cross, _dot, _segment_hits_triangle
+    from fracture.refine.collide import _EPS, _clearly_one_side, _segment_hits_triangle
+    from fracture.refine.vec import _cross, _dot
     rng = np.random.default_rng(11)
     rejected = 0
     for flat in (1.0, 1e-9, 1e-13, 0.0):  # the segment's ends ever closer to the plane, then in it
@@ -143,25 +138,13 @@ def test_every_vertex_and_edge_is_represented_once_by_a_triangle_on_it():
 
 def test_the_representatives_find_the_colliding_features_that_testing_all_of_them_finds():
     from fracture.refine import hashgrid
-    from fracture.refine.collide import (_box_grid, _edge_edge_hit, _feature_tests, _path_boxes, _represented,
-                                         _swept_boxes, _vertex_triangle_hit)
+    from fracture.refine.collide import _box_grid, _feature_tests, _path_boxes, _represented, _swept_boxes
     from fracture.refine.kernels import edge_table
     eta = 1e-3
     for seed in range(3):
         X0, F, X1 = _two_sheets_with_a_fin(seed)
         table = edge_table(F, len(X0))
-        E = np.unique(np.sort(np.stack([F, np.roll(F, -1, 1)], 2).reshape(-1, 2), 1), axis=0)
-        expect = np.zeros(len(X0), bool)
-        times = np.empty(4)
-        P = lambda i: (tuple(X0[i]), tuple(X1[i]))  # noqa: E731
-        for v in range(len(X0)):
-            for a, b, c in F:
-                if v not in (a, b, c) and _vertex_triangle_hit(*P(v), *P(a), *P(b), *P(c), eta * eta, times):
-                    expect[[v, a, b, c]] = True
-        for i, (p, q) in enumerate(E):
-            for r, s in E[i + 1:]:
-                if len({p, q, r, s}) == 4 and _edge_edge_hit(*P(p), *P(q), *P(r), *P(s), eta * eta, times):
-                    expect[[p, q, r, s]] = True
+        expect = colliding_vertices(X0, X1, F, eta)
         lo, hi = _swept_boxes(X0, X1, F, eta)
         stop = np.zeros(len(X0), bool)
         _feature_tests(X0, X1, F, _path_boxes(X0, X1), lo, hi, _represented(F, len(X0), table.eid),

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import colliding_vertices, grid_sheet
 from fracture.refine.fans import certified_fans, closed_vertices
 from fracture.refine.kernels import edge_table
 
@@ -71,31 +72,15 @@ def test_a_triangle_turning_over_in_mid_step_fails_the_fan():
 
 def _crumpled_sheet(seed, n=10, noise=0.02, move=0.05):
     rng = np.random.default_rng(seed)
-    x, y = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n), indexing="ij")
-    V = np.column_stack([x.ravel(), y.ravel(), np.zeros(n * n)]) + rng.normal(0, noise, (n * n, 3))
-    i = (np.arange(n - 1)[:, None] * n + np.arange(n - 1)[None, :]).ravel()
-    F = np.concatenate([np.stack([i, i + n, i + 1], 1), np.stack([i + 1, i + n, i + n + 1], 1)])
+    V, F = grid_sheet(n, 0.0)
+    V = V + rng.normal(0, noise, V.shape)
     return V, F, V + rng.normal(0, move, V.shape)
 
 
 def _fan_collides(X0, X1, F, s):
     """Whether any vertex-triangle or edge-edge pair of the triangles around s, sharing no vertex,
     meets during the step (every pair tested)."""
-    from fracture.refine.collide import _edge_edge_hit, _vertex_triangle_hit
-    fan = F[(F == s).any(1)]
-    times = np.empty(4)
-    P = lambda i: (tuple(X0[i]), tuple(X1[i]))  # noqa: E731
-    eta2 = 1e-24
-    for v in np.unique(fan):
-        for a, b, c in fan:
-            if v not in (a, b, c) and _vertex_triangle_hit(*P(v), *P(a), *P(b), *P(c), eta2, times):
-                return True
-    E = np.unique(np.sort(np.stack([fan, np.roll(fan, -1, 1)], 2).reshape(-1, 2), 1), axis=0)
-    for i, (p, q) in enumerate(E):
-        for r, t in E[i + 1:]:
-            if len({p, q, r, t}) == 4 and _edge_edge_hit(*P(p), *P(q), *P(r), *P(t), eta2, times):
-                return True
-    return False
+    return colliding_vertices(X0, X1, F[(F == s).any(1)], 1e-12).any()
 
 
 def test_the_static_test_agrees_with_a_step_that_moves_nothing():
