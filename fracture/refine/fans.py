@@ -58,7 +58,8 @@ def closed_vertices(F: np.ndarray, n: int, table: EdgeTable) -> np.ndarray:
 def _fan_test(s, p, q, N0, H, N1, size2, normal, across, lim2, score):
     """One triangle of vertex s, with edges p, q from s: its normal's Bernstein coefficients ``N0, H,
     N1`` stay on the positive side of s's normal (by the margin: ``size2``), and whether its
-    projection holds s's probe strictly inside (a side close to the probe's direction fails s)."""
+    projection holds s's probe strictly inside (a side close to the probe's direction fails s); ``across``
+    holds every vertex's probe x normal."""
     ns, z = _pt(normal, s), _pt(across, s)
     low = min(_dot(ns, N0), _dot(ns, H), _dot(ns, N1))
     side_p, side_q = _dot(p, z), -_dot(q, z)  # n . (p x w) and n . (w x q)
@@ -89,6 +90,7 @@ def _certified(X0, X1, F, closed, moving):
             probe[c, k] = pa[k] + pb[k] - 2.0 * pc[k]
     # unit normals; probe x normal (a side p of a triangle has n . (p x w) = p . (w x n)),
     # and the margin of the winding test, squared
+    across = np.empty((n, 3))
     lim2 = np.empty(n)
     for s in range(n):
         length = _norm(_pt(normal, s))
@@ -96,7 +98,7 @@ def _certified(X0, X1, F, closed, moving):
             for k in range(3):
                 normal[s, k] /= length
         z = _cross(_pt(probe, s), _pt(normal, s))
-        probe[s, 0], probe[s, 1], probe[s, 2] = z
+        across[s, 0], across[s, 1], across[s, 2] = z
         lim2[s] = _MARGIN * _MARGIN * _dot(z, z)
     # every triangle keeps a positive component along the normal of each of its corners:
     # its normal N(t) = u(t) x v(t), edges moving linearly, is a quadratic whose Bernstein
@@ -115,9 +117,9 @@ def _certified(X0, X1, F, closed, moving):
             H = (0.5 * (M1[0] + M2[0]), 0.5 * (M1[1] + M2[1]), 0.5 * (M1[2] + M2[2]))
         size2 = 2.0 * _MARGIN * _MARGIN * (_dot(N0, N0) + _dot(N1, N1))
         w0 = _sub(v0, u0)  # edge b -> c
-        _fan_test(a, u0, v0, N0, H, N1, size2, normal, probe, lim2, score)
-        _fan_test(b, w0, (-u0[0], -u0[1], -u0[2]), N0, H, N1, size2, normal, probe, lim2, score)
-        _fan_test(c, (-v0[0], -v0[1], -v0[2]), (-w0[0], -w0[1], -w0[2]), N0, H, N1, size2, normal, probe, lim2, score)
+        _fan_test(a, u0, v0, N0, H, N1, size2, normal, across, lim2, score)
+        _fan_test(b, w0, (-u0[0], -u0[1], -u0[2]), N0, H, N1, size2, normal, across, lim2, score)
+        _fan_test(c, (-v0[0], -v0[1], -v0[2]), (-w0[0], -w0[1], -w0[2]), N0, H, N1, size2, normal, across, lim2, score)
     ok = np.empty(n, np.bool_)
     for s in range(n):
         ok[s] = closed[s] & (score[s] == 1)

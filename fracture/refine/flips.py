@@ -15,9 +15,10 @@ import numba
 import numpy as np
 
 from fracture.refine import hashgrid
-from fracture.refine.collide import _EPS, _cross, _dot, _pt, _sub, _triangles_intersect, triangle_grid
+from fracture.refine.collide import _EPS, _triangles_intersect, triangle_grid
 from fracture.refine.fans import certified_fans, closed_vertices, share_certified
 from fracture.refine.kernels import EdgeTable, _find_edge, edge_table
+from fracture.refine.vec import _cross, _dot, _pt, _sub
 
 
 @numba.njit(cache=True, inline="always")
@@ -228,8 +229,8 @@ def _meet_found(V, F, tris, starts, grid, ids, skip, sure, eps, out):
 def _meet_any(V: np.ndarray, F: np.ndarray, tris: np.ndarray, ids: np.ndarray) -> np.ndarray:
     """Which triangles ``tris`` meet one of the triangles ``ids``."""
     out = np.zeros(len(tris), bool)
-    none = np.zeros(max(len(V), len(F)), bool)
-    _meet_found(V, F, tris, np.arange(len(tris) + 1), _grid_of(V, F, ids), ids, none, none, _EPS, out)
+    _meet_found(V, F, tris, np.arange(len(tris) + 1), _grid_of(V, F, ids), ids, np.zeros(len(F), bool),
+                np.zeros(len(V), bool), _EPS, out)
     return out
 
 
