@@ -38,7 +38,7 @@ def _obtuse(V, a, b, c):
             + (V[b, 2] - V[a, 2]) * (V[c, 2] - V[a, 2])) < 0.0
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _normal(V, a, b, c):
     A = _pt(V, a)
     return _cross(_sub(_pt(V, b), A), _sub(_pt(V, c), A))
@@ -52,7 +52,7 @@ def _link(twin, row, other):
         twin[other] = row
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _try_flip(V, F, sides, r, twin, busy, made, table):
     """Flip the edge of directed triangle edge ``r`` if it should be (module notes) and neither of its
     triangles is ``busy``; keeps ``twin`` (the other triangle's directed edge on each two-triangle

@@ -71,7 +71,7 @@ def _edge_table(F, n):
     return eid, count, first, second, start, hi, row
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _find_edge(start, hi, row, eid, a, b):
     lo, up = min(a, b), max(a, b)
     if lo + 1 >= start.shape[0]:
