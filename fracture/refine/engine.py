@@ -44,6 +44,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from fracture.allocator import keep_freed_memory
 from fracture.exterior import Exterior
 from fracture.refine.collide import stop_collisions
 from fracture.refine.fans import closed_vertices
@@ -103,6 +104,7 @@ class Refiner:
     def __init__(self, mesh: RefineMesh, pyramid, BV: np.ndarray, BF: np.ndarray, params: RefineParams,
                  rng: np.random.Generator):
         self.mesh, self.pyramid, self.params, self.rng = mesh, pyramid, params, rng
+        keep_freed_memory()  # every iteration frees and allocates the same large arrays again
         self.h = float(np.min(pyramid.grid.spacing))
         self.log = IterationLog()
         # A negative psi would reward area: the flow would wrinkle without
