@@ -64,3 +64,27 @@ def test_few_large_among_many_small_boxes_from_either_side():
     i, j = np.triu_indices(3000, 1)
     hit = np.all(lo[i] <= hi[j], axis=1) & np.all(lo[j] <= hi[i], axis=1)
     assert sorted(map(tuple, found.tolist())) == sorted(zip(i[hit].tolist(), j[hit].tolist()))
+
+
+def test_crowded_buckets_are_sorted_by_lower_x_and_miss_no_pair():
+    """Many boxes in few cells (buckets of dozens of slots), and a copy of them far away whose cells
+    share the first copy's buckets (hash collisions): every bucket is in order of lower x, on
+    which the scans stop early, and the pairs are exactly the overlapping ones."""
+    rng = np.random.default_rng(5)
+    lo = rng.uniform(0.0, 3.0, (300, 3))
+    lo[rng.random(300) < 0.2, 0] = 1.5  # ties in lower x
+    hi = lo + rng.uniform(0.0, 0.9, (300, 3))
+    inv = 1.0 / hashgrid.cell_size(lo, hi, 1.0)
+    far = np.array([1024.0, 0.0, 0.0])  # a multiple of every table's period in x
+    lo, hi = np.r_[lo, lo + far], np.r_[hi, hi + far]
+    grid = hashgrid.build(lo, hi, inv)
+    start, items, key = grid[4], grid[5], grid[6]
+    sizes = np.diff(start)
+    assert sizes.max() > 40  # crowded
+    mixed = sum(len(np.unique(key[start[b]:start[b + 1]])) > 1 for b in range(len(sizes)))
+    assert mixed > 0  # some buckets hold two cells
+    for b in np.flatnonzero(sizes > 1):
+        assert (np.diff(lo[items[start[b]:start[b + 1]], 0]) >= 0.0).all()
+    found = {tuple(p) for p in hashgrid.pairs(grid).tolist()}
+    expected = {(a, b) for a in range(600) for b in range(a + 1, 600) if _overlapping(lo, hi, a, b)}
+    assert found == expected
