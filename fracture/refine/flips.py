@@ -322,7 +322,8 @@ def flip_edges(V: np.ndarray, F: np.ndarray, sides: np.ndarray, max_passes: int 
     group = _regions(len(F), done)
     is_changed = group >= 0
     changed = np.flatnonzero(is_changed)
-    if len(changed) > len(F) // 2:  # most: all at once (about 1 us per triangle, against 2 to 2.5 per changed one)
+    # many: all at once (about 0.5 us per triangle, against 1.6 to 1.8 per changed one)
+    if len(changed) > 0.3 * len(F):
         meets = _unsafe_all(V, F, is_changed, sure)
     else:
         meets = _unsafe(V, F, grid if grid is not None else triangle_grid(V, start), group, sure)
