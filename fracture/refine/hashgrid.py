@@ -52,6 +52,12 @@ def _key(ix, iy, iz):
 
 
 @numba.njit(cache=True, inline="always")
+def _key_x(key):
+    """The x cell coordinate that :func:`_key` packed into ``key``."""
+    return (key >> (2 * _BITS)) - _OFF
+
+
+@numba.njit(cache=True, inline="always")
 def _cell(x, s):
     return np.int64(np.floor(x * s))
 
@@ -183,8 +189,7 @@ def _sort_buckets(lo, scale, toff, start, items, key):
             if n > 8:
                 count[: 2 * n + 1] = 0
                 for i in range(n):
-                    ix = (key[s0 + i] >> (2 * _BITS)) - _OFF  # the slot's cell (see _key)
-                    u = (x[i] * s - ix + 1.0) * n
+                    u = (x[i] * s - _key_x(key[s0 + i]) + 1.0) * n
                     sub[i] = j = min(np.int64(u) if u > 0.0 else 0, 2 * n - 1)
                     count[j + 1] += 1
                 for j in range(2 * n):
