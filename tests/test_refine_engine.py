@@ -158,3 +158,38 @@ def test_closest_points_on_b_are_asked_again_only_for_vertices_that_moved():
     for a, b in zip(r.closest_on_b(np.r_[ids, len(mesh.V) - 1]), closest(mesh.V[np.r_[ids, len(mesh.V) - 1]])):
         assert np.array_equal(a, b)
     assert asked == [len(ids), 3, 1]
+
+
+def test_the_loop_ends_when_collisions_keep_a_boundary_vertex_off_b(monkeypatch):
+    """The loop waits for boundary vertices off B, but not for ever: here a collision blocks one in
+    every step (as if a sheet lay across its way), and the loop ends ``hold`` iterations after it
+    would have, saying why."""
+    import fracture.refine.engine as engine
+    pyramid = two_weak_sheets()
+    BV, BF = box([0, 0, 0], [1, 1, 1], (8, 8, 8))
+    mesh = flat_cut()
+    on_y0 = np.flatnonzero(mesh.V[:, 1] == 0.0)
+    v = on_y0[np.argmin(np.abs(mesh.V[on_y0, 2] - 0.5))]
+    mesh.V[v, 1] = 0.03
+    P = mesh.V[v].copy()  # blocked, v stays here (the loop renumbers the vertices)
+    real = engine.stop_collisions
+
+    def blocked(X0, X1, *args, **kwargs):
+        out = real(X0, X1, *args, **kwargs)
+        at = np.flatnonzero((X0 == P).all(axis=1))
+        X1[at] = X0[at]
+        out[0][at] = True
+        return out
+
+    monkeypatch.setattr(engine, "stop_collisions", blocked)
+    params = RefineParams(iterations=60, tolerance=0.05, max_triangles=400)
+    r = Refiner(mesh, pyramid, BV, BF, params, np.random.default_rng(0))
+    log = r.run()
+    would = next(i for i, m in enumerate(log.mean_move) if m < params.tolerance)
+    assert len(log.energy) == would + 1 + params.hold
+    assert log.stop.startswith("moves below tolerance; 1 boundary vertex stays off B")
+    assert abs(log.boundary_error[-1] - 0.03) < 1e-9
+    # without the block the same run ends with the boundary on B
+    monkeypatch.setattr(engine, "stop_collisions", real)
+    log = Refiner(flat_cut(), pyramid, BV, BF, params, np.random.default_rng(0)).run()
+    assert log.stop == "moves below tolerance" and log.boundary_error[-1] < 1e-12

@@ -31,7 +31,8 @@ One iteration:
 
 The loop ends when the mean move falls below ``tolerance``, or once the
 triangle budget is spent and an iteration raises the energy (see
-:meth:`Refiner.run`), but not while a boundary vertex is off B.
+:meth:`Refiner.run`), but not while a boundary vertex is off B, unless
+collisions keep it off for ``hold`` iterations more.
 
 The per-element work is compiled (:mod:`fracture.refine.kernels`); what is
 left in NumPy is O(m) array arithmetic and small sorts of the split candidates.
@@ -425,13 +426,18 @@ class Refiner:
         iterations with smaller steps only wander about it. Neither ends the
         loop while a boundary vertex is off B (a new vertex on a boundary edge
         whose first projection a collision stopped): such vertices are moved
-        onto B alone first (:meth:`settle_boundary`).
+        onto B alone first (:meth:`settle_boundary`). Should collisions still
+        block them ``hold`` iterations later (a vertex stopped by a collision
+        waits that long for the surface around it to move), the loop ends
+        all the same and ``log.stop`` says how many stay off B: iterating on
+        would only wait for them, at full cost per iteration.
         ``callback(it, refiner)`` is called after every iteration (the mesh
         may be numbered in spatial order then); the reason for stopping is
         ``log.stop``. The mesh ends numbered in creation order.
         """
         p, log = self.params, self.log
         log.stop = "iterations"
+        waited = 0  # iterations that would have stopped but for boundary vertices off B
         for it in range(p.iterations):
             move = self.iterate()
             clock = time.perf_counter()
@@ -452,6 +458,12 @@ class Refiner:
                 callback(it, self)
             if stop and off_b <= tol.on_b * self.h:  # else a boundary vertex is still off B: iterate on
                 log.stop = stop
+                break
+            waited = waited + 1 if stop else 0
+            if waited > p.hold:
+                off = int((self.closest_on_b(self.boundary)[0] > (tol.on_b * self.h) ** 2).sum())
+                which = "1 boundary vertex stays" if off == 1 else f"{off} boundary vertices stay"
+                log.stop = f"{stop}; {which} off B (up to {off_b / self.h:.3g} grid cells): collisions block the way"
                 break
         self._renumber(self.mesh.creation_order())  # the tree's order, coarse vertices first
         return self.log
