@@ -107,6 +107,7 @@ class Refiner:
         self.mesh, self.pyramid, self.params, self.rng = mesh, pyramid, params, rng
         keep_freed_memory()  # every iteration frees and allocates the same large arrays again
         self.h = float(np.min(pyramid.grid.spacing))
+        self.on_b = tol.on_b * self.h  # a boundary vertex this close to B is on it
         self.log = IterationLog()
         # A negative psi would reward area: the flow would wrinkle without
         # bound and explicit steps would be anti-diffusive. Shifting psi adds
@@ -234,7 +235,7 @@ class Refiner:
         if not len(ids):
             return 0.0
         d2, _, P = self.closest_on_b(ids)
-        off = d2 > (tol.on_b * self.h) ** 2
+        off = d2 > self.on_b ** 2
         if not off.any():
             return float(np.sqrt(d2.max()))
         X1 = m.V.copy()
@@ -271,7 +272,7 @@ class Refiner:
         verts, c = boundary_conormals(m.V, m.F, row_edges(m.F, rows), strict=False, face=rows // 3, by_length=True)
         v[verts] -= np.einsum("ij,ij->i", v[verts], c)[:, None] * c
         d2, tri, _ = self.closest_on_b(verts)
-        self.off_b = verts[d2 > (tol.on_b * self.h) ** 2]
+        self.off_b = verts[d2 > self.on_b ** 2]
         nb = self.B.normals[tri]
         v[verts] -= np.einsum("ij,ij->i", v[verts], nb)[:, None] * nb
         return v, psi, verts
@@ -446,7 +447,7 @@ class Refiner:
             stop = ("moves below tolerance" if move < p.tolerance else
                     "triangle budget spent and the energy rose" if self.full and rose else "")
             off_b = self.boundary_error(self.boundary)
-            if stop and off_b > tol.on_b * self.h:
+            if stop and off_b > self.on_b:
                 off_b = self.settle_boundary()
                 E = energy(self.mesh.V, self.mesh.F, self.psi)
             log.energy.append(E)
@@ -456,12 +457,12 @@ class Refiner:
             log.tick("bookkeeping", clock)
             if callback is not None:
                 callback(it, self)
-            if stop and off_b <= tol.on_b * self.h:  # else a boundary vertex is still off B: iterate on
+            if stop and off_b <= self.on_b:  # else a boundary vertex is still off B: iterate on
                 log.stop = stop
                 break
             waited = waited + 1 if stop else 0
             if waited > p.hold:
-                off = int((self.closest_on_b(self.boundary)[0] > (tol.on_b * self.h) ** 2).sum())
+                off = int((self.closest_on_b(self.boundary)[0] > self.on_b ** 2).sum())
                 which = "1 boundary vertex stays" if off == 1 else f"{off} boundary vertices stay"
                 log.stop = f"{stop}; {which} off B (up to {off_b / self.h:.3g} grid cells): collisions block the way"
                 break
