@@ -1,0 +1,114 @@
+"""Does the refinement find the weak material? Figures per scene and per synthetic weak sheet.
+
+For each config: run it up to the refine stage (into a temporary directory),
+then measure the coarse and the refined surface with
+:mod:`fracture.fidelity`: the share of their area in the weakest 10/20/30 % of
+zeta inside the object, mean zeta and psi, the distance of the refined
+surface to the coarse one (grid cells: mean and 90th percentile), iterations
+and seconds. For the synthetic weak sheets (:mod:`fields.synthetic`): the mean
+distance of the refined surface to the sheet and the share of its area within
+one voxel of it.
+
+    python benchmarks/fidelity.py                       # the scenes and the sheets
+    python benchmarks/fidelity.py --scenes example wall --set psi.stress_weight=2
+    python benchmarks/fidelity.py --sheets-only
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from fields.grid import Grid  # noqa: E402
+from fields.pyramid import StrengthPyramid  # noqa: E402
+from fields.synthetic import SHEETS, weak_sheet_case  # noqa: E402
+from fracture import runner  # noqa: E402
+from fracture.config import load_config  # noqa: E402
+from fracture.fidelity import area_samples, inside_thresholds, surface_figures  # noqa: E402
+from fracture.plyio import read_ply  # noqa: E402
+from fracture.refine.engine import Refiner, RefineParams  # noqa: E402
+from fracture.refine.mesh import RefineMesh  # noqa: E402
+
+SCENES = ["example", "wall", "bunny", "branch", "clay", "jello"]
+
+
+def scene_row(name: str, overrides: list[str]) -> dict:
+    cfg = load_config(ROOT / "configs" / f"{name}.yaml", overrides)
+    with tempfile.TemporaryDirectory() as tmp:
+        out = runner.run(cfg, Path(tmp) / "run", until="refine", progress=False)
+        return run_figures(out)
+
+
+def run_figures(out: Path) -> dict:
+    """The figures of a run directory (coarse and refined surfaces against its fields)."""
+    manifest = json.loads((out / "manifest.json").read_text())
+    grid = Grid.from_dict(json.loads((out / "fields/grid.json").read_text()))
+    zeta = np.load(out / "fields/zeta.npy").astype(np.float64)
+    psi = np.load(out / "fields/psi.npy").astype(np.float64)
+    BV, BF = read_ply(out / "coarse/exterior.ply")[:2]
+    CV, CF = read_ply(out / "coarse/fracture_surface.ply")[:2]
+    RV, RF = read_ply(out / "refined/fracture_surface.ply")[:2]
+    thresholds = inside_thresholds(grid, zeta, BV, BF)
+    coarse = surface_figures(CV, CF, grid, zeta, thresholds, psi)
+    refined = surface_figures(RV, RF, grid, zeta, thresholds, psi, reference=(CV, CF))
+    stats = manifest["stats"]["refine"]
+    return dict(coarse=coarse, refined=refined, triangles=len(RF), iterations=len(stats["functional"]) - 1,
+                seconds=manifest["stages"]["refine"]["seconds"], stop=stats["stopped_because"])
+
+
+def sheet_row(kind: str, offset: float, params: RefineParams) -> dict:
+    case = weak_sheet_case(kind, offset)
+    pyramid = StrengthPyramid(case.grid, case.zeta, levels=5, sigma=1.0)
+    mesh = RefineMesh.from_coarse(case.cut_V, case.cut_F, np.tile([0, 1], (len(case.cut_F), 1)))
+    start = time.perf_counter()
+    log = Refiner(mesh, pyramid, case.BV, case.BF, params, np.random.default_rng(0)).run()
+    seconds = time.perf_counter() - start
+    d = case.distance_to_sheet(area_samples(mesh.V, mesh.F))
+    d0 = case.distance_to_sheet(area_samples(case.cut_V, case.cut_F))
+    return dict(coarse=float(d0.mean()), mean=float(d.mean()), within=float(np.mean(d < 1.0)),
+                triangles=len(mesh.F), iterations=log.iterations, seconds=seconds)
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenes", nargs="*", default=SCENES)
+    ap.add_argument("--set", action="append", default=[], help="config override for the scenes, key=value")
+    ap.add_argument("--sheets-only", action="store_true")
+    ap.add_argument("--no-sheets", action="store_true")
+    args = ap.parse_args(argv)
+    if not args.sheets_only:
+        print("| scene | surface | weak 10 % | weak 20 % | weak 30 % | mean zeta | mean psi | distance mean (cells) "
+              "| distance p90 | triangles | iterations | seconds |")
+        print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+        for name in args.scenes:
+            r = scene_row(name, args.set)
+            for label, f in (("coarse", r["coarse"]), ("refined", r["refined"])):
+                refined = label == "refined"
+                print(f"| {name} | {label} | {100 * f['weak_share_10']:.1f} | {100 * f['weak_share_20']:.1f} "
+                      f"| {100 * f['weak_share_30']:.1f} | {f['mean_zeta']:.3f} | {f['mean_psi']:.3f} "
+                      + (f"| {f['distance_mean']:.2f} | {f['distance_p90']:.2f} | {r['triangles']} "
+                         f"| {r['iterations']} | {r['seconds']:.1f} |" if refined else "| | | | | |"), flush=True)
+    if not args.no_sheets:
+        print()
+        print("| weak sheet | cut offset (voxels) | coarse mean distance | refined mean distance | area within 1 voxel "
+              "| triangles | iterations | seconds |")
+        print("| --- | --- | --- | --- | --- | --- | --- | --- |")
+        params = RefineParams(max_triangles=20000)
+        for kind in SHEETS:
+            for offset in (2.0, 4.0, 8.0):
+                r = sheet_row(kind, offset, params)
+                print(f"| {kind} | {offset:g} | {r['coarse']:.2f} | {r['mean']:.3f} | {100 * r['within']:.1f} % "
+                      f"| {r['triangles']} | {r['iterations']} | {r['seconds']:.2f} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
