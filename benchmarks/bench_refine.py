@@ -51,7 +51,7 @@ def run_scene(name: str, iterations: int | None, repeat: int, out) -> None:
         runs.append((time.perf_counter() - t1, log.seconds.get("collisions", 0.0)))
     seconds, collisions = min(runs)
     out.put(dict(coarse=len(cf.F), refined=len(mesh.F), seconds=seconds, slowest=max(runs)[0], first=first,
-                 iterations=len(log.energy), collisions=collisions, crossings=self_intersections(mesh.V, mesh.F),
+                 iterations=log.iterations, collisions=collisions, crossings=self_intersections(mesh.V, mesh.F),
                  peak_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0))
 
 

@@ -87,10 +87,43 @@ class StrengthPyramid:
             mean_gradient += self.level_gradient_grid(k)
         mean_gradient /= levels
         self._table = np.ascontiguousarray(np.concatenate([psi[..., None], mean_gradient], axis=3))
+        self._coarse = (-1, None)  # the last table of coarse levels asked for (see coarse_field)
 
     @property
     def n_levels(self) -> int:
         return self.levels.shape[0]
+
+    def coarse_table(self, first: int) -> np.ndarray:
+        """``(nx, ny, nz, 5)``: ``[psi, psibar, d/dx, d/dy, d/dz psibar]`` with ``psibar`` the mean of
+        levels ``first .. n_levels - 1`` and its gradient the mean of their finite-difference gradients.
+
+        ``first = 0`` is the paper's field (every level); a larger ``first``
+        leaves out the finest levels: a smoother field whose valleys reach
+        further, for the coarse-to-fine schedule of the refinement. The mean of
+        the levels' gradients is the gradient of their mean (both linear), so
+        ``psibar`` is the field whose integral the flow on these levels minimises.
+        The last table asked for is kept.
+        """
+        if not 0 <= first < self.n_levels:
+            raise ValueError(f"first level must be in [0, {self.n_levels - 1}], got {first}")
+        if self._coarse[0] != first:
+            used = range(first, self.n_levels)
+            mean = self.levels[first:].mean(axis=0)
+            grad = sum(self.level_gradient_grid(k) for k in used) / len(used)
+            table = np.concatenate([self.levels[0][..., None], mean[..., None], grad], axis=3)
+            self._coarse = (first, np.ascontiguousarray(table))
+        return self._coarse[1]
+
+    def gradient_scale(self, first: int) -> float:
+        """Root mean square of the gradient of :meth:`coarse_table` over the grid (a scale of the field's
+        variation, for step sizes)."""
+        g = self.coarse_table(first)[..., 2:]
+        return float(np.sqrt(np.mean(np.einsum("...c,...c->...", g, g))))
+
+    def coarse_field(self, first: int, P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """psi, psibar and grad psibar of :meth:`coarse_table` at points, in one interpolation."""
+        out = trilinear(self.grid, self.coarse_table(first), P)
+        return out[:, 0], out[:, 1], out[:, 2:]
 
     def level_gradient_grid(self, k: int) -> np.ndarray:
         """Finite-difference gradient of level ``k`` on the grid, ``(nx, ny, nz, 3)``.

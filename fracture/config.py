@@ -73,18 +73,29 @@ SCHEMA: dict[str, Any] = {
         "sigma": Param(1.0, lo=0.01, hi=64.0, doc="width of level 1 in voxels; doubles per level"),
     },
     "refine": {
-        "iterations": Param(40, "int", lo=0, hi=10000, doc="largest number of iterations of the flow"),
-        "tolerance": Param(0.01, lo=0.0, hi=10.0,
-                           doc="stop when the mean vertex move of an iteration is below this (grid cells); "
-                               "the loop also stops once max_triangles is spent and an iteration raises the energy"),
-        "step": Param(0.25, lo=1e-4, hi=1.0, doc="move of a vertex of median speed per iteration (grid cells)"),
-        "max_move": Param(0.3, lo=1e-3, hi=0.5, doc="largest move of a vertex, as a fraction of its shortest edge "
-                          "(before its own gain, halved whenever its velocity turns back)"),
-        "split_distance": Param(0.02, lo=0.0, hi=10.0,
-                                doc="split where a sample leaves its triangle by this fraction of the step"),
+        "iterations": Param(60, "int", lo=0, hi=10000, doc="largest number of iterations of the flow, all stages"),
+        "stage_iterations": Param(15, "int", lo=1, hi=10000,
+                                  doc="largest number of iterations of one stage of the coarse-to-fine schedule"),
+        "coarse_levels": Param(2, "int", lo=1, hi=8,
+                               doc="the first stage follows the mean of this many coarsest pyramid levels; "
+                                   "each next stage adds a finer level, the last follows them all"),
+        "tolerance": Param(0.02, lo=0.0, hi=10.0,
+                           doc="a stage has settled when the mean vertex move of an iteration is below this "
+                               "(grid cells) and it split at most 0.5 % of the triangles"),
+        "step": Param(0.5, lo=1e-4, hi=10.0,
+                      doc="nominal move per iteration (grid cells) where grad psi has its root mean square"),
+        "max_move": Param(1.0, lo=1e-3, hi=10.0, doc="largest move of a vertex per iteration (grid cells)"),
+        "fold": Param(0.5, lo=1e-3, hi=0.9,
+                      doc="largest move of a triangle's corners relative to each other per iteration, as a "
+                          "fraction of its smallest altitude (no triangle turns over within a step)"),
+        "split_distance": Param(0.15, lo=0.0, hi=10.0,
+                                doc="split where a sample leaves its triangle by more than this in a nominal step "
+                                    "(grid cells): where psi varies across the triangle"),
         "tension": Param(0.05, lo=1e-4, hi=10.0,
                          doc="psi is shifted so its minimum is this fraction of its range (surface tension)"),
-        "min_edge": Param(0.1, lo=1e-4, hi=10.0, doc="samples closer than this to a corner are skipped (grid cells)"),
+        "min_edge": Param(0.1, lo=1e-4, hi=10.0,
+                          doc="samples closer than this to a corner are skipped in the last stage (grid cells; "
+                              "earlier stages keep half their finest level's width)"),
         "max_triangles": Param(200000, "int", lo=10, hi=20_000_000, doc="no splits beyond this many triangles"),
         "thickness": Param(1e-6, lo=0.0, hi=1.0, doc="closer than this counts as a collision (grid cells)"),
         "hold": Param(3, "int", lo=0, hi=100, doc="iterations a vertex stopped by a collision stays stopped"),

@@ -185,8 +185,8 @@ class RunData:
 
     @property
     def energy(self) -> list[float]:
-        """E(S) after each iteration; the first snapshot (the coarse surface) has none."""
-        return list(self.manifest.get("stats", {}).get("refine", {}).get("energy", []))
+        """The functional the flow minimises at each snapshot, the first (the coarse surface) included."""
+        return list(self.manifest.get("stats", {}).get("refine", {}).get("functional", []))
 
     def iteration(self, k: int) -> Surface:
         its = self.iterations

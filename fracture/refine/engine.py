@@ -1,41 +1,57 @@
-"""The refinement loop: gradient flow, adaptive splits, boundary and collision constraints (Sections 4.3, 4.4).
+"""The refinement: a coarse-to-fine gradient flow with adaptive splits and constraints (Sections 4.3, 4.4).
+
+The refiner composes the parts, each in its own module:
+
+* the flow of Eq. 3 (:mod:`fracture.refine.flow`);
+* the split plan of Sec. 4.4 (:mod:`fracture.refine.remesh`);
+* the step control: implicit area term, move limits, step size
+  (:mod:`fracture.refine.step`);
+* the collision constraints (:mod:`fracture.refine.collide`) and safe edge
+  flips (:mod:`fracture.refine.flips`);
+* the per-vertex state (:mod:`fracture.refine.state`), grown and renumbered as
+  a whole.
+
+Schedule. The paper's field averages the gradients of every pyramid level,
+so that a vertex sees a valley of psi from further than the finest level
+would show it (Sec. 4.3). A flow on that field from the start still refines
+the surface to the grid's scale before it has travelled: the finest levels'
+local minima hold it, and small triangles make it slow. So the refinement
+runs through stages, coarse to fine in both the field and the mesh. Stage
+``s`` follows ``psibar_s``, the mean of pyramid levels ``s .. L-1``: the first
+uses the ``coarse_levels`` smoothest levels, each next one adds the next finer
+level, and the last one is the paper's field (every level). A stage's triangles
+need not be finer than its field: samples closer than half the width of its
+finest level to a corner (at least ``min_edge``) are not split. A stage ends
+when it has settled: an iteration moved the surface by less than
+``tolerance`` grid cells on average (or lowered the functional by less than
+10^-4 of it) and split at most half a percent of the triangles (the paper's
+test, "the surface change in one iteration is sufficiently small"), or after
+``stage_iterations``.
 
 One iteration:
 
-1. psi and the level-averaged grad psi at every vertex (one interpolation),
-   the velocity of Eq. 3 (:mod:`fracture.refine.flow`) and the step size:
-   ``dt`` moves a vertex of median speed ``step`` grid cells (speeds below a
-   floor count as rest); boundary vertices move tangentially to B and do not
-   pull the sheet's boundary inward;
-2. one random sample per triangle (on its boundary or junction edge when it
-   has one) is moved by Eq. 3 with the triangle as its neighbourhood; where it
-   leaves the triangle by more than ``split_distance`` of the step, it becomes
-   a vertex (1-to-3 split, or an edge split through every triangle on the
-   edge). Samples closer than ``min_edge`` grid cells to a corner are skipped,
-   and so are boundary-edge samples whose projection onto B would turn one of
-   the new triangles over (:func:`split_folds`);
-3. the moves: no vertex moves more than ``max_move`` of its shortest edge nor
-   more than a grid cell (no vertex can overtake its neighbours), and each
-   vertex scales its move by its own gain: a vertex whose velocity turns back
-   from the last iteration's (it stepped over the bottom of its valley of psi,
-   or the area term of its small triangles overshot) halves its gain, the
-   others regrow theirs by 20 % up to 1. On the finest triangles the area
-   term is too stiff for any one step size (stable steps scale with the
-   squared edge length); the gains damp the vertices that oscillate and leave
-   the others at full speed;
-4. boundary vertices are projected onto the exterior B (libigl's AABB tree);
-5. continuous collision detection from the old to the new positions stops the
-   vertices of every colliding pair (:mod:`fracture.refine.collide`), so the
-   surface never passes through itself;
-6. edge flips remove slim triangles (:mod:`fracture.refine.flips`).
+1. psi, psibar_s and grad psibar_s at every vertex (one interpolation, only
+   where a vertex moved or is new), Eq. 3's velocity with psibar_s shifted to
+   be positive (``tension``: a small surface tension, so that the area term
+   never rewards area), and the boundary constraint: boundary vertices slide
+   on B and do not pull the sheet's boundary inward;
+2. the split plan of the samples, applied; boundary vertices off B (new
+   ones on boundary edges start on the chord) are moved onto B, and the
+   velocity is taken again where anything moved;
+3. the step: backward Euler on the area term
+   (:func:`~fracture.refine.step.implicit_step`), the boundary constraint again,
+   collision holds, the move limits, projection of the boundary onto B, no
+   other vertex carried out of the object, continuous collision detection
+   (stopped vertices stay where they were);
+   the step is taken only if it does not raise the minimised functional
+   ``E_s = integral of (psibar_s + offset)``, with the same quadrature as the
+   flow; otherwise ``tau`` is halved and the step tried again (three times,
+   then the surface stays where it is);
+4. safe edge flips remove slim triangles.
 
-The loop ends when the mean move falls below ``tolerance``, or once the
-triangle budget is spent and an iteration raises the energy (see
-:meth:`Refiner.run`), but not while a boundary vertex is off B, unless
-collisions keep it off for ``hold`` iterations more.
-
-The per-element work is compiled (:mod:`fracture.refine.kernels`); what is
-left in NumPy is O(m) array arithmetic and small sorts of the split candidates.
+The log holds, from iteration 0 (the coarse surface), the stage, the
+minimised functional before and after each step, the plain E(S) = integral
+of psi, the area, triangles, mean and largest move, and ``tau``.
 """
 
 from __future__ import annotations
@@ -50,25 +66,37 @@ from fracture.exterior import Exterior
 from fracture.refine.collide import stop_collisions
 from fracture.refine.fans import closed_vertices
 from fracture.refine.flips import flip_edges
-from fracture.refine.flow import energy, sample_displacement, velocity
-from fracture.refine.kernels import (EdgeTable, edge_table, first_per_group, limit_moves, row_edges, spatial_order,
-                                     split_wanted)
+from fracture.refine.flow import energy, energy_gradient
+from fracture.refine.kernels import EdgeTable, edge_table, row_edges, spatial_order
 from fracture.refine.mesh import RefineMesh
+from fracture.refine.remesh import plan_splits
+from fracture.refine.state import VertexState
+from fracture.refine.step import StepSize, implicit_step, limit_moves
 from fracture.tolerances import tol
 from fracture.topology import boundary_conormals
+
+# Attempts of a step that would raise the functional, each with half the tau of the last.
+_ATTEMPTS = 4
+# A stage has settled when its moves are small and an iteration splits at most this share of the triangles.
+_FEW_SPLITS = 0.005
+# ... and its moves are small, or its step lowered the functional by less than this fraction.
+_LITTLE_GAIN = 1e-4
 
 
 @dataclass
 class RefineParams:
-    """Thresholds of the loop; lengths are in grid cells of the finest pyramid level."""
+    """Thresholds of the refinement; lengths are in grid cells (the finest spacing)."""
 
-    iterations: int = 40
-    tolerance: float = 0.01  # stop when the mean vertex move is below this (see Refiner.run)
-    step: float = 0.25  # a vertex of median speed moves this far per iteration (grid cells)
-    max_move: float = 0.3  # ... and no vertex more than this fraction of its shortest edge
-    split_distance: float = 0.02  # split when a sample leaves its triangle by this fraction of the step
+    iterations: int = 60  # all stages together
+    stage_iterations: int = 15  # at most per stage
+    tolerance: float = 0.02  # a stage has settled when the mean move is below this and nothing split
+    step: float = 0.5  # at a stage's start a vertex of median speed moves this far per step
+    max_move: float = 1.0  # no vertex moves further per step
+    fold: float = 0.5  # ... nor the two ends of an edge relative to each other by more than this of its length
+    split_distance: float = 0.15  # split where a sample leaves its triangle by more than this in a step
     tension: float = 0.05  # psi is shifted so its minimum is this fraction of its range
-    min_edge: float = 0.1  # samples closer than this to a corner are skipped
+    min_edge: float = 0.1  # samples closer than this to a corner are skipped (the last stage)
+    coarse_levels: int = 2  # the first stage follows the mean of this many coarsest pyramid levels
     max_triangles: int = 200_000
     thickness: float = 1e-6  # closer than this counts as a collision
     hold: int = 3  # iterations a vertex stopped by a collision stays stopped
@@ -76,9 +104,19 @@ class RefineParams:
 
 @dataclass
 class IterationLog:
-    energy: list = field(default_factory=list)
-    mean_move: list = field(default_factory=list)
+    """Per iteration (entry 0: the coarse surface before any step)."""
+
+    stage: list = field(default_factory=list)  # first pyramid level of the stage's field
+    functional: list = field(default_factory=list)  # E_s after the step (what the flow minimises)
+    functional_before: list = field(default_factory=list)  # E_s after the splits, before the step
+    energy: list = field(default_factory=list)  # plain E(S) = integral of psi (level 0, unshifted)
+    area: list = field(default_factory=list)
     triangles: list = field(default_factory=list)
+    mean_move: list = field(default_factory=list)  # grid cells
+    max_move: list = field(default_factory=list)  # grid cells
+    tau: list = field(default_factory=list)
+    retries: list = field(default_factory=list)  # halvings of tau before the step was taken
+    splits: list = field(default_factory=list)
     boundary_error: list = field(default_factory=list)
     stopped: list = field(default_factory=list)  # vertices stopped by collisions
     seconds: dict = field(default_factory=dict)  # time per phase, summed over iterations
@@ -89,18 +127,13 @@ class IterationLog:
         self.seconds[phase] = self.seconds.get(phase, 0.0) + now - since
         return now
 
-
-def split_folds(T: np.ndarray, k: np.ndarray, Q: np.ndarray, N: np.ndarray) -> np.ndarray:
-    """Whether splitting edge ``k`` of triangles ``T (s, 3, 3)`` (unit normals ``N``) at a vertex that
-    then moves to ``Q`` turns one of the two new triangles over (its normal against its parent's)."""
-    ar = np.arange(len(T))
-    a, b, d = T[ar, k], T[ar, (k + 1) % 3], T[ar, (k + 2) % 3]
-    n1, n2 = np.cross(Q - a, d - a), np.cross(b - Q, d - Q)
-    return (np.einsum("ij,ij->i", n1, N) <= 0.0) | (np.einsum("ij,ij->i", n2, N) <= 0.0)
+    @property
+    def iterations(self) -> int:
+        return max(len(self.functional) - 1, 0)
 
 
 class Refiner:
-    """Evolves and refines a fracture surface toward low psi."""
+    """Evolves and refines a fracture surface toward low psi (module notes)."""
 
     def __init__(self, mesh: RefineMesh, pyramid, BV: np.ndarray, BF: np.ndarray, params: RefineParams,
                  rng: np.random.Generator):
@@ -109,66 +142,85 @@ class Refiner:
         self.h = float(np.min(pyramid.grid.spacing))
         self.on_b = tol.on_b * self.h  # a boundary vertex this close to B is on it
         self.log = IterationLog()
-        # A negative psi would reward area: the flow would wrinkle without
-        # bound and explicit steps would be anti-diffusive. Shifting psi adds
-        # a constant surface tension and leaves grad psi unchanged.
-        values = pyramid.levels[0]
-        self.offset = params.tension * float(np.ptp(values)) - float(values.min())
+        # A negative integrand would reward area: the flow would wrinkle without
+        # bound and the implicit matrix would lose its definiteness. Shifting
+        # psi adds a constant surface tension and leaves its gradient unchanged
+        # (smoothing keeps every level within the range of level 0, up to the
+        # odd reflection at the grid's faces: the minimum is taken over all).
+        span = float(np.ptp(pyramid.levels[0]))
+        self.offset = params.tension * span - float(pyramid.levels.min())
         self.B = Exterior(BV, BF)  # its AABB tree, built on the first query, serves every iteration
-        # speeds below this (psi changing by 1 % of its range per grid cell)
-        # count as at rest: dt stops growing, the moves shrink, the loop ends
-        self.slow = 0.01 * float(np.ptp(values)) / self.h
-        self.dt = 0.0
-        self.velocity = np.zeros_like(mesh.V)  # of the last step, per vertex (for snapshots)
-        self.gain = np.ones(len(mesh.V))  # per-vertex step factor (halved when a vertex turns back)
-        self.hold = np.zeros(len(mesh.V), np.int64)  # iterations a stopped vertex stays stopped
-        # psi (unshifted) and grad psi at the vertices, for the positions in _field_V: a vertex is
-        # evaluated again only when it moved or is new (see vertex_field)
-        self._field_V = np.zeros((0, 3))
-        self._psi, self._grad = np.zeros(0), np.zeros((0, 3))
-        # the last answers of closest_on_b: vertex ids, their positions then, and B's answers
-        self._near = (np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0), np.zeros(0, np.int64), np.zeros((0, 3)))
+        self.step = StepSize(params.step, self.h)
+        self.state = VertexState.empty(len(mesh.V))
+        self.first = self.stage_levels()[0]
+        self.near = self._near_for(self.first)
         self.boundary = np.zeros(0, np.int64)  # boundary vertices of the last iteration
         self.off_b = np.zeros(0, np.int64)  # boundary vertices off B at the last velocity
         self.full = False  # the triangle budget has stopped a wanted split
         self._ordered = 0  # vertex count when the mesh was last put in spatial order
 
-    def field(self, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        psi, grad = self.pyramid.value_and_gradient(P)
-        return psi + self.offset, grad
+    # -- schedule -------------------------------------------------------------------------
+    def stage_levels(self) -> list[int]:
+        """The first pyramid level of each stage's field, coarse to fine (module notes)."""
+        L = self.pyramid.n_levels
+        c = min(max(self.params.coarse_levels, 1), L)
+        return list(range(L - c, -1, -1))
 
-    def vertex_field(self) -> tuple[np.ndarray, np.ndarray]:
-        """psi (unshifted) and grad psi at the mesh's vertices, evaluated only where a vertex moved or is new."""
-        V, old = self.mesh.V, self._field_V
-        k = min(len(old), len(V))
-        todo = np.r_[np.flatnonzero((V[:k] != old[:k]).any(axis=1)), np.arange(k, len(V))]
-        if len(V) != len(old):
-            self._psi, self._grad = np.resize(self._psi, len(V)), np.resize(self._grad, (len(V), 3))
+    def _near_for(self, first: int) -> float:
+        """Samples closer than this to a corner are not split in the stage that starts at level ``first``:
+        half the width of its finest level, at least ``min_edge``."""
+        width = float(self.pyramid.sigmas[first][0] * self.pyramid.grid.spacing[0])  # world units, any axis
+        return max(self.params.min_edge * self.h, 0.5 * width)
+
+    def begin_stage(self, first: int) -> None:
+        """Follow the field of levels ``first .. L-1`` from now on."""
+        self.first = first
+        self.near = self._near_for(first)
+        self.state.forget_field()
+        self.step.begin(self.pyramid.gradient_scale(first))
+
+    # -- fields ---------------------------------------------------------------------------
+    def field(self, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The stage's shifted psibar and its gradient at points (what the flow follows)."""
+        _, psibar, grad = self.pyramid.coarse_field(self.first, P)
+        return psibar + self.offset, grad
+
+    def vertex_field(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """psi, psibar (both unshifted) and grad psibar at the vertices, evaluated only where a vertex
+        moved or is new."""
+        V, s = self.mesh.V, self.state
+        s.grow(len(V))
+        todo = np.flatnonzero((V != s.field_at).any(axis=1))
         if len(todo):
-            self._psi[todo], self._grad[todo] = self.pyramid.value_and_gradient(V[todo])
-        self._field_V = V.copy()
-        return self._psi, self._grad
+            s.psi[todo], s.psibar[todo], s.grad[todo] = self.pyramid.coarse_field(self.first, V[todo])
+            s.field_at[todo] = V[todo]
+        return s.psi, s.psibar, s.grad
 
     @property
     def psi(self) -> np.ndarray:
-        """Unshifted psi at the current vertices."""
+        """psi (level 0, unshifted) at the current vertices."""
         return self.vertex_field()[0]
+
+    @property
+    def velocity(self) -> np.ndarray:
+        """Eq. 3's velocity of the last step, per vertex."""
+        self.state.grow(len(self.mesh.V))
+        return self.state.velocity
+
+    def functional(self) -> float:
+        """E_s of the current surface: what the flow minimises (module notes)."""
+        return energy(self.mesh.V, self.mesh.F, self.vertex_field()[1] + self.offset)
+
+    def plain_energy(self) -> float:
+        """E(S) = integral of psi (level 0, unshifted) over the surface."""
+        return energy(self.mesh.V, self.mesh.F, self.vertex_field()[0])
 
     # -- memory order -----------------------------------------------------------------------
     def _renumber(self, vorder: np.ndarray, forder: np.ndarray | None = None) -> None:
         """Renumber the mesh (:meth:`RefineMesh.reorder`) and the per-vertex state with it."""
         new = self.mesh.reorder(vorder, forder)
-
-        def follow(a, fresh):  # per-vertex state that does not cover every vertex starts afresh
-            return a[vorder] if len(a) == len(vorder) else fresh
-
-        empty = np.zeros((0, 3))  # psi cached for no vertex: vertex_field evaluates them all
-        self._field_V, self._psi, self._grad = (follow(self._field_V, empty), follow(self._psi, np.zeros(0)),
-                                                follow(self._grad, empty))
-        self.hold = follow(self.hold, np.zeros(len(vorder), np.int64))
-        self._near = (new[self._near[0]],) + self._near[1:]
-        self.gain = follow(self.gain, np.ones(len(vorder)))
-        self.velocity = follow(self.velocity, self.velocity)
+        self.state.grow(len(vorder))
+        self.state.permute(vorder)
         self.boundary, self.off_b = new[self.boundary], new[self.off_b]
 
     def put_in_spatial_order(self) -> None:
@@ -189,32 +241,16 @@ class Refiner:
 
     # -- constraints -----------------------------------------------------------------------
     def closest_on_b(self, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """:meth:`Exterior.closest` of vertices ``ids`` (distinct) where they are: squared distances,
-        triangles of B and closest points.
-
-        B is asked only about the vertices that were not in the last call or
-        have moved since: the boundary's distances measured at the end of an
-        iteration serve the next one's velocity, and the velocity after the
-        splits asks only about the new boundary vertices. The answers are
-        kept for the next call: read them, do not edit them.
-        """
-        V = self.mesh.V
-        last, X, d2, tri, P = self._near
-        slot = np.full(len(V), -1)
-        slot[last] = np.arange(len(last))
-        slot = slot[ids]
-        known = np.flatnonzero(slot >= 0)
-        known = known[(V[ids[known]] == X[slot[known]]).all(axis=1)]
-        answer = (np.empty(len(ids)), np.empty(len(ids), np.int64), np.empty((len(ids), 3)))
-        for a, b in zip(answer, (d2, tri, P)):
-            a[known] = b[slot[known]]
-        ask = np.ones(len(ids), bool)
-        ask[known] = False
-        if ask.any():
-            for a, b in zip(answer, self.B.closest(V[ids[ask]])):
-                a[ask] = b
-        self._near = (ids.copy(), V[ids]) + answer
-        return answer
+        """:meth:`Exterior.closest` of vertices ``ids`` where they are: squared distances, triangles of B
+        and closest points. B is asked only about vertices that are new or moved since they were last
+        asked about (the answers are kept in the vertex state)."""
+        V, s = self.mesh.V, self.state
+        s.grow(len(V))
+        ask = ids[(V[ids] != s.near_at[ids]).any(axis=1)]
+        if len(ask):
+            s.near_d2[ask], s.near_tri[ask], s.near_point[ask] = self.B.closest(V[ask])
+            s.near_at[ask] = V[ask]
+        return s.near_d2[ids], s.near_tri[ids], s.near_point[ids]
 
     def project_to_exterior(self, ids: np.ndarray, V: np.ndarray) -> None:
         """Put vertices ``ids`` of positions ``V`` on B (in place)."""
@@ -226,10 +262,9 @@ class Refiner:
         collision stops them; returns the largest distance of a boundary vertex from B after that.
 
         A new vertex on a boundary edge starts on the edge's chord, off B, and a
-        collision may stop its first projection (and the hold keep it there).
-        Once the flow has settled, this step, which tests only the elements on
-        the few vertices it moves, replaces the whole iterations that would
-        otherwise wait for them.
+        collision may stop its first projection; at the end of a stage this
+        step, which tests only the elements on the few vertices it moves,
+        replaces the iterations that would otherwise wait for them.
         """
         m, ids = self.mesh, self.boundary
         if not len(ids):
@@ -242,7 +277,7 @@ class Refiner:
         X1[ids[off]] = P[off]
         stopped, _ = stop_collisions(m.V, X1, m.F, self.params.thickness * self.h, self.edges(),
                                      moving=ids[off])
-        self.hold[stopped] = self.params.hold
+        self.state.hold[stopped] = self.params.hold
         m.V = X1
         return self.boundary_error(ids)
 
@@ -251,220 +286,203 @@ class Refiner:
         ids = self.boundary_vertices() if ids is None else ids
         return float(np.sqrt(self.closest_on_b(ids)[0].max())) if len(ids) else 0.0
 
-    def _velocity(self, table: EdgeTable) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _velocity(self, table: EdgeTable):
         """Eq. 3 at every vertex with the boundary constraint.
 
-        Returns the velocity, the shifted psi at the vertices and the boundary vertices; records
-        those off B in ``off_b`` (from the same closest-point query).
+        Returns the velocity, the shifted psibar at the vertices (the flow's
+        integrand), the barycentric vertex areas, the boundary vertices and
+        the two directions their moves lose (the sheet's outward conormal and
+        B's normal); records the boundary vertices off B in ``off_b``.
         """
         m = self.mesh
-        psi, grad = self.vertex_field()
-        psi = psi + self.offset
-        v = velocity(m.V, m.F, psi, grad)
+        _, psibar, grad = self.vertex_field()
+        w = psibar + self.offset
+        dE, area = energy_gradient(m.V, m.F, w, grad)
+        v = -dE / np.maximum(area, 1e-300)[:, None]
+        rows = table.boundary_rows
+        if not len(rows):
+            self.off_b = np.zeros(0, np.int64)
+            return v, w, area, np.zeros(0, np.int64), (np.zeros((0, 3)), np.zeros((0, 3)))
         # boundary vertices slide on B: drop the part of their velocity that
         # points out of the sheet across its boundary (the area term of an
         # open sheet pulls its boundary inward; at a crease of B this pull is
         # not normal to B) and the part normal to B (projection undoes it)
-        rows = table.boundary_rows
-        if not len(rows):
-            self.off_b = np.zeros(0, np.int64)
-            return v, psi, np.zeros(0, np.int64)
         verts, c = boundary_conormals(m.V, m.F, row_edges(m.F, rows), strict=False, face=rows // 3, by_length=True)
-        v[verts] -= np.einsum("ij,ij->i", v[verts], c)[:, None] * c
         d2, tri, _ = self.closest_on_b(verts)
         self.off_b = verts[d2 > self.on_b ** 2]
         nb = self.B.normals[tri]
-        v[verts] -= np.einsum("ij,ij->i", v[verts], nb)[:, None] * nb
-        return v, psi, verts
+        _drop(v, verts, c, nb)
+        return v, w, area, verts, (c, nb)
 
     # -- one iteration --------------------------------------------------------------------
-    def _step_size(self, v: np.ndarray, used: np.ndarray) -> float:
-        speed = np.linalg.norm(v[used], axis=1)
-        typical = max(float(np.median(speed)) if len(speed) else 0.0, self.slow)
-        return self.params.step * self.h / typical
-
-    def remesh(self, table: EdgeTable, v: np.ndarray, psi: np.ndarray, dt: float) -> int:
-        """One round of sampled splits; returns the number of new vertices.
-
-        ``v`` and ``psi`` (shifted) are the velocity and psi at the vertices.
-        """
-        m, p = self.mesh, self.params
-        if len(m.F) >= p.max_triangles:
-            self.full = True
-            return 0
-        row_count = table.row_count
-        special = (row_count != 2).reshape(-1, 3)  # boundary or junction edges of every triangle
-        has_edge = special.any(axis=1)
-        k_edge = np.argmax(special, axis=1)
-        T = m.V[m.F]
-        # samples: random inside, away from the edges (every barycentric
-        # coordinate at least 0.1: a sample near an edge would make a sliver),
-        # or on the triangle's first special edge
-        bary = 0.1 + 0.7 * self.rng.dirichlet([1.0, 1.0, 1.0], size=len(m.F))
-        t = self.rng.uniform(0.2, 0.8, size=len(m.F))
-        rows = np.flatnonzero(has_edge)
-        bary[rows] = 0.0
-        bary[rows, k_edge[rows]] = 1.0 - t[rows]
-        bary[rows, (k_edge[rows] + 1) % 3] = t[rows]
-        P = np.einsum("fk,fkc->fc", bary, T)
-        psi_P, grad_P = self.field(P)
-        # how far the sample leaves its triangle (its own move minus the move the
-        # corners give it); samples too close to a corner are skipped, and needles
-        # are not split inside (their children would be needles too): the flips
-        # improve them first
-        d = sample_displacement(P, T, psi_P, grad_P, psi[m.F], dt)
-        want, N = split_wanted(T, P, bary, d, v, m.F, dt, k_edge, has_edge, (p.min_edge * self.h) ** 2,
-                               p.split_distance * p.step * self.h, 0.2)
-        self._keep_unfolded(want, table, P, T, N, k_edge)
-        # no splits beside a boundary vertex still off B (a collision stopped its
-        # projection): smaller triangles around it would make the move onto B
-        # fold them over, and it would never get there
-        beside = None
-        if len(self.off_b):
-            off = np.zeros(len(m.V), bool)
-            off[self.off_b] = True
-            beside = off[m.F].any(axis=1)
-            want &= ~beside
-        budget = max(0, (p.max_triangles - len(m.F)) // 2)
-        # edge splits: one per edge (a random one of its triangles' samples) ...
-        ef = np.flatnonzero(want & has_edge)
-        eid = table.eid[3 * ef + k_edge[ef]]
-        keep = first_per_group(eid, self.rng.random(len(ef)))
-        ef, eid = ef[keep], eid[keep]
-        # ... and a triangle takes part in one split at most: of two chosen
-        # edges on a triangle, the later one is dropped everywhere
-        good = table.independent(eid)
-        self.full |= int(good.sum()) > budget
-        good &= np.cumsum(good) <= budget
-        ef, eid = ef[good], eid[good]
-        on, which = table.rows_of(eid)
-        if beside is not None and len(eid):  # ... nor a junction edge with a triangle beside an off-B vertex
-            clear = np.bincount(which, weights=beside[on // 3], minlength=len(eid)) == 0
-            rows = clear[which]
-            ef, eid, on, which = ef[clear], eid[clear], on[rows], (np.cumsum(clear) - 1)[which[rows]]
-        busy = np.zeros(len(m.F), bool)
-        busy[on // 3] = True
-        E = np.stack([m.F[ef, k_edge[ef]], m.F[ef, (k_edge[ef] + 1) % 3]], 1)
-        new_edge = m.split_edges(E, t[ef], rows=on, which=which) if len(ef) else np.zeros(0, np.int64)
-        # 1-to-3 splits of the others
-        tf = np.flatnonzero(want & ~has_edge & ~busy)
-        self.full |= len(tf) > budget - len(ef)
-        tf = tf[: max(0, budget - len(ef))]
-        if len(tf):
-            m.split_triangles(tf, bary[tf])
-        return len(new_edge) + len(tf)
-
-    def _keep_unfolded(self, want, table, P, T, N, k_edge) -> None:
-        """Drop (in ``want``) the boundary-edge splits whose new vertex, once projected onto B, would
-        turn one of its two triangles over.
-
-        A sample on a boundary edge lies on the edge's chord, off B where B is
-        curved; the next projection moves it by the sagitta. On a thin triangle
-        that move can fold the new triangle over its neighbour: the collision
-        test then stops the vertex off B for good.
-        """
-        rows = np.flatnonzero(want & (table.row_count.reshape(-1, 3)[np.arange(len(want)), k_edge] == 1))
-        if not len(rows):
-            return
-        want[rows[split_folds(T[rows], k_edge[rows], self.B.closest(P[rows])[2], N[rows])]] = False
-
-    def iterate(self) -> float:
-        """One iteration (module notes); returns the mean move in grid cells."""
-        m, p, log = self.mesh, self.params, self.log
+    def iterate(self) -> tuple[float, int]:
+        """One iteration (module notes); returns the mean move in grid cells and the number of splits."""
+        m, p, log, s = self.mesh, self.params, self.log, self.state
         clock = time.perf_counter()
         self.put_in_spatial_order()
         clock = log.tick("order", clock)
         table = self.edges()
-        v, psi, boundary = self._velocity(table)
-        used = np.bincount(m.F.ravel(), minlength=len(m.V)) > 0
-        self.dt = dt = self._step_size(v, used)
+        v, w, area, boundary, frames = self._velocity(table)
         clock = log.tick("flow", clock)
-        if self.remesh(table, v, psi, dt):
-            clock = log.tick("remesh", clock)
+        plan = plan_splits(m.V, m.F, table, v, w, self.step.start, self.field, self.rng, near=self.near,
+                           far=p.split_distance * self.h, budget=p.max_triangles - len(m.F),
+                           project=lambda P: self.B.closest(P)[2], off_b=self.off_b)
+        self.full |= plan.full
+        made = plan.apply(m)
+        if made:
+            s.grow(len(m.V))
             table = self.edges()
-            v, psi, boundary = self._velocity(table)
-            used = np.r_[used, np.ones(len(m.V) - len(used), bool)]  # new vertices are on triangles
+            clock = log.tick("remesh", clock)
+        # the boundary constraint first: new vertices on boundary edges start on
+        # the chord, off B; the step is measured from the surface on B
+        self.boundary = np.unique(row_edges(m.F, table.boundary_rows))
+        if self.boundary_error(self.boundary) > self.on_b:
+            self.settle_boundary()
+            clock = log.tick("boundary", clock)
+        if made or not np.array_equal(m.V, s.field_at):
+            v, w, area, boundary, frames = self._velocity(table)
             clock = log.tick("flow", clock)
-        # per-vertex gains (module notes, 3): halved where the velocity turned back
-        prev = self.velocity
-        gain = np.r_[self.gain, np.ones(len(m.V) - len(self.gain))]
-        back = np.einsum("ij,ij->i", prev, v[: len(prev)]) < 0.0
-        gain[: len(prev)] = np.where(back, 0.5 * gain[: len(prev)], np.minimum(1.0, 1.2 * gain[: len(prev)]))
-        self.gain = gain
-        self.velocity = v
-        d = dt * v
-        # vertices stopped by a collision stay stopped for a few iterations:
-        # the flow that pushed them into contact still pushes, and a pair at
-        # rest costs the collision test nothing
-        self.hold = np.concatenate([self.hold, np.zeros(len(m.V) - len(self.hold), np.int64)])
-        d[self.hold > 0] = 0.0
-        self.hold = np.maximum(self.hold - 1, 0)
-        limit_moves(m.V, m.F, d, p.max_move, self.h)
-        d *= gain[:, None]
-        X1 = m.V + d
-        self.boundary = boundary  # flips keep the boundary: valid until the next splits
-        self.project_to_exterior(boundary, X1)
-        clock = log.tick("boundary", clock)
+        s.velocity = v
+        before = energy(m.V, m.F, w)
+        wf = w[m.F].mean(axis=1)
+        held = s.hold > 0
+        s.hold = np.maximum(s.hold - 1, 0)
         closed = closed_vertices(m.F, len(m.V), table)  # for the collision step and the flips
-        stopped, _, grid = stop_collisions(m.V, X1, m.F, p.thickness * self.h, table, return_grid=True,
-                                         closed=closed)
-        self.hold[stopped] = p.hold
-        clock = log.tick("collisions", clock)
+        X1, grid, after, retries, stopped = m.V, None, before, 0, np.zeros(len(m.V), bool)
+        for attempt in range(_ATTEMPTS):
+            tau = self.step.tau
+            d = implicit_step(m.V, m.F, wf, area, v, tau)
+            _drop(d, boundary, *frames)
+            d[held] = 0.0
+            limit_moves(m.V, m.F, d, p.fold, p.max_move * self.h)
+            trial = m.V + d
+            self.project_to_exterior(boundary, trial)
+            self._keep_inside(trial, boundary)
+            clock = log.tick("step", clock)
+            hit, _, grid = stop_collisions(m.V, trial, m.F, p.thickness * self.h, table, return_grid=True,
+                                           closed=closed)
+            clock = log.tick("collisions", clock)
+            _, psibar1, _ = self.pyramid.coarse_field(self.first, trial)
+            value = energy(trial, m.F, psibar1 + self.offset)
+            clock = log.tick("step", clock)
+            if value <= before + 1e-12 * abs(before):
+                X1, after, stopped = trial, value, hit
+                self.step.accepted()
+                break
+            retries += 1
+            grid = None  # the collision grid of a rejected trial does not fit the surface
+            if self.step.at_least:
+                break  # no descent at the smallest step: the surface is at a minimum
+            self.step.rejected()
+        s.hold[stopped] = p.hold
         moved = np.linalg.norm(X1 - m.V, axis=1)
         m.V = X1
+        self.boundary = boundary  # flips keep the boundary: valid until the next splits
         flip_edges(m.V, m.F, m.sides, max_passes=3, safe=True, grid=grid, table=table, closed=closed)
         clock = log.tick("flips", clock)
+        log.functional_before.append(before)
+        log.functional.append(after)
+        log.tau.append(tau)
+        log.retries.append(retries)
+        log.splits.append(made)
         log.stopped.append(int(stopped.sum()))
-        return float(moved[used].mean() / self.h) if used.any() else 0.0
+        log.max_move.append(float(moved.max() / self.h) if len(moved) else 0.0)
+        return (float(moved.mean() / self.h) if len(moved) else 0.0), made
+
+    def _keep_inside(self, X1: np.ndarray, boundary: np.ndarray) -> None:
+        """Send back (in ``X1``) the vertices off the boundary that a step would carry out of the object.
+
+        Only the boundary is tied to B (Sec. 4.4); a sheet moving a grid cell
+        per step near a concave part of B could otherwise leave the object,
+        and the pieces on its two sides would meet around it. Done before the
+        collision test, so that it tests the paths as they are.
+        """
+        moving = np.flatnonzero((X1 != self.mesh.V).any(axis=1))
+        if len(boundary):
+            moving = moving[~np.isin(moving, boundary)]
+        if len(moving):
+            out = moving[~self.B.inside(X1[moving])]
+            X1[out] = self.mesh.V[out]
+
+    def _record(self, move: float, boundary_error: float) -> None:
+        log = self.log
+        log.stage.append(self.first)
+        log.energy.append(self.plain_energy())
+        log.area.append(float(energy(self.mesh.V, self.mesh.F, np.ones(len(self.mesh.V)))))
+        log.triangles.append(len(self.mesh.F))
+        log.mean_move.append(move)
+        log.boundary_error.append(boundary_error)
 
     def run(self, callback=None) -> IterationLog:
-        """Iterate until the surface settles or ``iterations`` are done.
+        """Run the stages (module notes) until each has settled or ``iterations`` are done.
 
-        The surface has settled when the mean move is below ``tolerance``, or
-        when the triangle budget is spent and an iteration raised the energy:
-        the flow then oscillates about the minimum it can reach with these
-        triangles (steps on the finest triangles overshoot), and further
-        iterations with smaller steps only wander about it. Neither ends the
-        loop while a boundary vertex is off B (a new vertex on a boundary edge
-        whose first projection a collision stopped): such vertices are moved
-        onto B alone first (:meth:`settle_boundary`). Should collisions still
-        block them ``hold`` iterations later (a vertex stopped by a collision
-        waits that long for the surface around it to move), the loop ends
-        all the same and ``log.stop`` says how many stay off B: iterating on
-        would only wait for them, at full cost per iteration.
         ``callback(it, refiner)`` is called after every iteration (the mesh
         may be numbered in spatial order then); the reason for stopping is
-        ``log.stop``. The mesh ends numbered in creation order.
+        ``log.stop``. Boundary vertices still off B at the end of a stage (a
+        collision stopped their projection) are moved onto B alone
+        (:meth:`settle_boundary`). The mesh ends numbered in creation order.
         """
         p, log = self.params, self.log
-        log.stop = "iterations"
-        waited = 0  # iterations that would have stopped but for boundary vertices off B
-        for it in range(p.iterations):
-            move = self.iterate()
-            clock = time.perf_counter()
-            E = energy(self.mesh.V, self.mesh.F, self.psi)
-            rose = bool(log.energy) and E > log.energy[-1]
-            stop = ("moves below tolerance" if move < p.tolerance else
-                    "triangle budget spent and the energy rose" if self.full and rose else "")
-            off_b = self.boundary_error(self.boundary)
-            if stop and off_b > self.on_b:
-                off_b = self.settle_boundary()
-                E = energy(self.mesh.V, self.mesh.F, self.psi)
-            log.energy.append(E)
-            log.mean_move.append(move)
-            log.triangles.append(len(self.mesh.F))
-            log.boundary_error.append(off_b)
-            log.tick("bookkeeping", clock)
-            if callback is not None:
-                callback(it, self)
-            if stop and off_b <= self.on_b:  # else a boundary vertex is still off B: iterate on
-                log.stop = stop
+        self.begin_stage(self.first)
+        # iteration 0: the coarse surface
+        log.functional_before.append(self.functional())
+        log.functional.append(log.functional_before[0])
+        for key in ("tau", "max_move"):
+            getattr(log, key).append(0.0)
+        log.retries.append(0)
+        log.splits.append(0)
+        log.stopped.append(0)
+        self.boundary = self.boundary_vertices()
+        self._record(0.0, self.boundary_error(self.boundary))
+        if log.boundary_error[0] > self.on_b:  # the coarse surface onto B before the flow starts
+            self.settle_boundary()
+        done, unsettled = 0, []
+        for first in self.stage_levels():
+            if first != self.first:
+                self.begin_stage(first)
+            settled = False
+            for _ in range(p.stage_iterations):
+                if done >= p.iterations:
+                    break
+                move, made = self.iterate()
+                done += 1
+                clock = time.perf_counter()
+                gain = log.functional_before[-1] - log.functional[-1]
+                still = move < p.tolerance or gain < _LITTLE_GAIN * abs(log.functional[-1])
+                settled = still and (made <= _FEW_SPLITS * len(self.mesh.F) or self.full)
+                off_b = self.boundary_error(self.boundary)
+                if settled and off_b > self.on_b:
+                    off_b = self.settle_boundary()
+                    log.functional[-1] = self.functional()
+                self._record(move, off_b)
+                log.tick("bookkeeping", clock)
+                if callback is not None:
+                    callback(done - 1, self)
+                if settled:
+                    break
+            if not settled:
+                unsettled.append(first)
+            if done >= p.iterations:
                 break
-            waited = waited + 1 if stop else 0
-            if waited > p.hold:
-                off = int((self.closest_on_b(self.boundary)[0] > self.on_b ** 2).sum())
-                which = "1 boundary vertex stays" if off == 1 else f"{off} boundary vertices stay"
-                log.stop = f"{stop}; {which} off B (up to {off_b / self.h:.3g} grid cells): collisions block the way"
-                break
+        off_b = self.settle_boundary() if self.boundary_error(self.boundary) > self.on_b else 0.0
+        if off_b > self.on_b:
+            log.boundary_error[-1] = off_b
+        if done >= p.iterations and self.first != 0:
+            log.stop = f"iterations: {done} done before the last stage"
+        elif unsettled:
+            log.stop = f"stage iterations spent on the stages of levels {unsettled}"
+        else:
+            log.stop = "settled"
+        if off_b > self.on_b:
+            off = int((self.closest_on_b(self.boundary)[0] > self.on_b ** 2).sum())
+            which = "1 boundary vertex stays" if off == 1 else f"{off} boundary vertices stay"
+            log.stop += f"; {which} off B (up to {off_b / self.h:.3g} grid cells): collisions block the way"
         self._renumber(self.mesh.creation_order())  # the tree's order, coarse vertices first
         return self.log
+
+
+def _drop(d: np.ndarray, ids: np.ndarray, c: np.ndarray, nb: np.ndarray) -> None:
+    """Remove from the moves ``d[ids]`` their parts along ``c`` and then along ``nb`` (in place)."""
+    if len(ids):
+        d[ids] -= np.einsum("ij,ij->i", d[ids], c)[:, None] * c
+        d[ids] -= np.einsum("ij,ij->i", d[ids], nb)[:, None] * nb

@@ -17,13 +17,90 @@ cotangent Laplacian ``L``), and for a planar 1-ring and a linear psi with an
 in-plane gradient it vanishes, as the paper notes. The sum runs over every
 triangle at a vertex, however many sheets meet there, so vertices on
 non-manifold junctions move once and consistently for every component.
+
+Section 4.4 moves a sample point ``p`` inside a triangle by the same Eq. 3
+with the triangle as its neighbourhood: ``p`` splits it into three triangles
+and the sum runs over them. One compiled helper, :func:`_corner_term`, gives a
+triangle's contribution to a corner's ``dE/dx``; the vertex flow and the
+sample displacement both sum it.
 """
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
-from fracture.refine import kernels
+from fracture.refine.kernels import face_geometry
+
+
+@numba.njit(cache=True, inline="always")
+def _corner_term(area, pbar, nx, ny, nz, ex, ey, ez, gx, gy, gz):
+    """One triangle's part of ``dE/dx_i`` for its corner ``i``: ``area / 3 * grad psi(x_i)`` plus
+    ``pbar * 1/2 n x e`` (``n`` its unit normal, ``e`` its edge opposite ``i``, ``pbar`` the mean psi of
+    its corners); returned as three components."""
+    return (area / 3.0 * gx + 0.5 * pbar * (ny * ez - nz * ey),
+            area / 3.0 * gy + 0.5 * pbar * (nz * ex - nx * ez),
+            area / 3.0 * gz + 0.5 * pbar * (nx * ey - ny * ex))
+
+
+@numba.njit(cache=True)
+def _energy_gradient(V, F, psi, grad):
+    n = V.shape[0]
+    dE = np.zeros((n, 3))
+    area = np.zeros(n)
+    A, N = face_geometry(V, F)
+    for f in range(F.shape[0]):
+        pb = (psi[F[f, 0]] + psi[F[f, 1]] + psi[F[f, 2]]) / 3.0
+        for k in range(3):
+            i, j, l = F[f, k], F[f, (k + 1) % 3], F[f, (k + 2) % 3]
+            x, y, z = _corner_term(A[f], pb, N[f, 0], N[f, 1], N[f, 2], V[l, 0] - V[j, 0], V[l, 1] - V[j, 1],
+                                   V[l, 2] - V[j, 2], grad[i, 0], grad[i, 1], grad[i, 2])
+            dE[i, 0] += x
+            dE[i, 1] += y
+            dE[i, 2] += z
+            area[i] += A[f] / 3.0
+    return dE, area
+
+
+@numba.njit(cache=True)
+def _energy(V, F, psi):
+    A, _ = face_geometry(V, F)
+    total = 0.0
+    for f in range(F.shape[0]):
+        total += A[f] * (psi[F[f, 0]] + psi[F[f, 1]] + psi[F[f, 2]]) / 3.0
+    return total
+
+
+@numba.njit(cache=True)
+def _sample_displacement(P, T, psi_p, grad_p, psi_T, dt):
+    k = P.shape[0]
+    out = np.zeros((k, 3))
+    for s in range(k):
+        ux, uy, uz = T[s, 1, 0] - T[s, 0, 0], T[s, 1, 1] - T[s, 0, 1], T[s, 1, 2] - T[s, 0, 2]
+        vx, vy, vz = T[s, 2, 0] - T[s, 0, 0], T[s, 2, 1] - T[s, 0, 1], T[s, 2, 2] - T[s, 0, 2]
+        nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+        t = np.sqrt(nx * nx + ny * ny + nz * nz)
+        if t == 0.0:
+            continue
+        nx, ny, nz = nx / t, ny / t, nz / t
+        gx = gy = gz = 0.0
+        area = 0.0
+        for c in range(3):  # sub-triangle with p in place of corner c; its edge opposite p is T's edge opposite c
+            b, e = (c + 1) % 3, (c + 2) % 3
+            bx, by, bz = T[s, b, 0] - P[s, 0], T[s, b, 1] - P[s, 1], T[s, b, 2] - P[s, 2]
+            cx, cy, cz = T[s, e, 0] - P[s, 0], T[s, e, 1] - P[s, 1], T[s, e, 2] - P[s, 2]
+            wx, wy, wz = by * cz - bz * cy, bz * cx - bx * cz, bx * cy - by * cx
+            sub = 0.5 * np.sqrt(wx * wx + wy * wy + wz * wz)
+            pb = (psi_p[s] + psi_T[s, b] + psi_T[s, e]) / 3.0
+            x, y, z = _corner_term(sub, pb, nx, ny, nz, cx - bx, cy - by, cz - bz,
+                                   grad_p[s, 0], grad_p[s, 1], grad_p[s, 2])
+            gx += x
+            gy += y
+            gz += z
+            area += sub / 3.0
+        if area > 0.0:
+            out[s, 0], out[s, 1], out[s, 2] = -dt * gx / area, -dt * gy / area, -dt * gz / area
+    return out
 
 
 def energy_gradient(V: np.ndarray, F: np.ndarray, psi: np.ndarray, grad: np.ndarray
@@ -44,8 +121,7 @@ def energy_gradient(V: np.ndarray, F: np.ndarray, psi: np.ndarray, grad: np.ndar
     area : (n,) float
         Barycentric area of every vertex (0 for unused vertices).
     """
-    return kernels.energy_gradient(*_prepare(V, F), np.ascontiguousarray(psi, np.float64),
-                                   np.ascontiguousarray(grad, np.float64))
+    return _energy_gradient(*_prepare(V, F), _f64(psi), _f64(grad))
 
 
 def velocity(V: np.ndarray, F: np.ndarray, psi: np.ndarray, grad: np.ndarray) -> np.ndarray:
@@ -56,7 +132,7 @@ def velocity(V: np.ndarray, F: np.ndarray, psi: np.ndarray, grad: np.ndarray) ->
 
 def energy(V: np.ndarray, F: np.ndarray, psi: np.ndarray) -> float:
     """E(S): psi integrated over the surface (linear in each triangle)."""
-    return float(kernels.energy(*_prepare(V, F), np.ascontiguousarray(psi, np.float64)))
+    return float(_energy(*_prepare(V, F), _f64(psi)))
 
 
 def sample_displacement(P: np.ndarray, T: np.ndarray, psi_p: np.ndarray, grad_p: np.ndarray,
@@ -72,11 +148,12 @@ def sample_displacement(P: np.ndarray, T: np.ndarray, psi_p: np.ndarray, grad_p:
     psi_p, grad_p : psi and grad psi at the samples.
     psi_T : (k, 3) psi at the corners.
     """
-    f64 = np.float64
-    return kernels.sample_displacement(
-        np.ascontiguousarray(P, f64), np.ascontiguousarray(T, f64), np.ascontiguousarray(psi_p, f64),
-        np.ascontiguousarray(grad_p, f64), np.ascontiguousarray(psi_T, f64), float(dt))
+    return _sample_displacement(_f64(P), _f64(T), _f64(psi_p), _f64(grad_p), _f64(psi_T), float(dt))
+
+
+def _f64(a):
+    return np.ascontiguousarray(a, np.float64)
 
 
 def _prepare(V, F):
-    return np.ascontiguousarray(V, np.float64), np.ascontiguousarray(F, np.int64)
+    return _f64(V), np.ascontiguousarray(F, np.int64)

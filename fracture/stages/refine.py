@@ -44,7 +44,7 @@ def refine_stage(ctx: RunContext) -> None:
     snaps = Snapshots() if ctx.cfg["refine"]["snapshots"] else None
     if snaps is not None:
         snaps.add(refiner)
-    with ctx.bar(params.iterations, "refine") as bar:
+    with ctx.bar(params.iterations, "refine") as bar:  # an upper bound: stages end when they settle
         def progress(it, r):
             if snaps is not None:
                 snaps.add(r)
@@ -52,7 +52,7 @@ def refine_stage(ctx: RunContext) -> None:
             bar.update()
             if ctx.listener is not None:
                 ctx.tell("iteration", iteration=it + 1, positions=r.mesh.V.copy(), faces=r.mesh.F.copy(),
-                         psi=r.psi.copy(), speed=np.linalg.norm(r.velocity, axis=1), energy=r.log.energy[-1])
+                         psi=r.psi.copy(), speed=np.linalg.norm(r.velocity, axis=1), energy=r.log.functional[-1])
         log = refiner.run(progress)
     ctx.products["refined"] = mesh
 
@@ -74,12 +74,21 @@ def refine_stage(ctx: RunContext) -> None:
 
     crossings = self_intersections(mesh.V, mesh.F)
     ctx.counts.update(refined_fracture_triangles=int(len(mesh.F)), refined_fracture_vertices=int(len(mesh.V)),
-                      iterations=len(log.energy))
+                      iterations=log.iterations)
     ctx.stats["refine"] = {
         "stopped_because": log.stop,
+        # per iteration, entry 0 the coarse surface (see fracture.refine.engine.IterationLog)
+        "stage": [int(s) for s in log.stage],
+        "functional": [float(e) for e in log.functional],
+        "functional_before_step": [float(e) for e in log.functional_before],
         "energy": [float(e) for e in log.energy],
-        "mean_move_cells": [float(m) for m in log.mean_move],
+        "area": [float(a) for a in log.area],
         "triangles": [int(t) for t in log.triangles],
+        "mean_move_cells": [float(m) for m in log.mean_move],
+        "max_move_cells": [float(m) for m in log.max_move],
+        "tau": [float(t) for t in log.tau],
+        "step_retries": [int(r) for r in log.retries],
+        "splits": [int(s) for s in log.splits],
         "stopped_by_collisions": [int(s) for s in log.stopped],
         # the last iteration's (flips keep the boundary); measured afresh when no iteration ran
         "max_boundary_distance": float(log.boundary_error[-1] if log.boundary_error else refiner.boundary_error()),

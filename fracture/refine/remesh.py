@@ -1,0 +1,225 @@
+"""Adaptive fracture remeshing (Section 4.4): where to split, as a plan the engine applies.
+
+One random sample per triangle, inside it, or on its boundary or junction
+edge when it has one (the paper samples those edges so that the boundary and
+the non-manifold junctions refine too). The sample is moved by Eq. 3 with its
+triangle as its neighbourhood (:func:`fracture.refine.flow.sample_displacement`);
+where it leaves the triangle by more than ``far`` in one nominal step (its
+own move minus the move its corners give it: across the triangle's plane,
+or for an edge sample across the edge) it becomes a vertex: a 1-to-3 split of
+the triangle, or an edge split through every triangle on the edge.
+
+A sample leaves its triangle when grad psi's normal part at the sample
+differs from what the corners carry, that is where psi varies across the
+triangle: flat regions of psi keep their large triangles, and the budget
+goes to valleys, grains and brick edges. The threshold ``far`` is absolute
+(grid cells): a triangle stops splitting once the field is linear enough
+across it, not once it is small. Samples closer than ``near`` to a corner are
+skipped (the engine sets ``near`` per stage of its schedule: triangles need
+not be finer than the field they follow), and so are:
+
+* samples inside needles (their children would be needles too; the flips
+  improve them first);
+* boundary-edge samples whose projection onto B would turn one of the new
+  triangles over (:func:`split_folds`);
+* any split beside a boundary vertex still off B (a collision stopped its
+  projection): smaller triangles around it would fold when it moves onto B.
+
+A triangle takes part in one split at most per round; the triangle budget
+caps the round.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from fracture.refine.flow import sample_displacement
+from fracture.refine.kernels import EdgeTable, _unit_normal_into, first_per_group
+
+# Samples inside a triangle keep every barycentric coordinate at least this
+# (a sample near an edge would make a sliver); edge samples stay this far
+# from the edge's ends, as a fraction of the edge.
+_INSIDE, _ALONG = 0.1, 0.2
+# Needles (quality below this, 1 for an equilateral triangle) are not split inside.
+_MIN_QUALITY = 0.2
+
+
+@dataclass
+class SplitPlan:
+    """The splits of one round.
+
+    Attributes
+    ----------
+    edges : (k, 2) int
+        Edges to split, each at ``(1 - t) a + t b``.
+    t : (k,) float
+    rows, which : (r,) int
+        The directed triangle edges on the split edges and the split edge of each (for
+        :meth:`~fracture.refine.mesh.RefineMesh.split_edges`).
+    faces : (s,) int
+        Triangles to split 1-to-3 at barycentric points ``bary (s, 3)``.
+    full : bool
+        The triangle budget left out a wanted split.
+    """
+
+    edges: np.ndarray
+    t: np.ndarray
+    rows: np.ndarray
+    which: np.ndarray
+    faces: np.ndarray
+    bary: np.ndarray
+    full: bool
+
+    @property
+    def count(self) -> int:
+        return len(self.edges) + len(self.faces)
+
+    def apply(self, mesh) -> int:
+        """Split ``mesh`` (a :class:`~fracture.refine.mesh.RefineMesh`); returns the number of new vertices."""
+        if len(self.edges):
+            mesh.split_edges(self.edges, self.t, rows=self.rows, which=self.which)
+        if len(self.faces):
+            mesh.split_triangles(self.faces, self.bary)
+        return self.count
+
+
+def split_folds(T: np.ndarray, k: np.ndarray, Q: np.ndarray, N: np.ndarray) -> np.ndarray:
+    """Whether splitting edge ``k`` of triangles ``T (s, 3, 3)`` (unit normals ``N``) at a vertex that
+    then moves to ``Q`` turns one of the two new triangles over (its normal against its parent's)."""
+    ar = np.arange(len(T))
+    a, b, d = T[ar, k], T[ar, (k + 1) % 3], T[ar, (k + 2) % 3]
+    n1, n2 = np.cross(Q - a, d - a), np.cross(b - Q, d - Q)
+    return (np.einsum("ij,ij->i", n1, N) <= 0.0) | (np.einsum("ij,ij->i", n2, N) <= 0.0)
+
+
+def plan_splits(V, F, table: EdgeTable, v, psi, tau, field, rng, *, near, far, budget, project, off_b
+                ) -> SplitPlan:
+    """The split plan of one round (module notes).
+
+    Parameters
+    ----------
+    V, F, table : the surface and its edge table.
+    v, psi : (n, 3), (n,)
+        Velocity of Eq. 3 and the (shifted) psi the flow uses, at the vertices.
+    tau : float
+        The nominal step: a sample's move is ``tau`` times its velocity.
+    field : callable
+        ``field(P) -> (psi, grad psi)`` at points, as the flow uses them.
+    rng : numpy.random.Generator
+    near, far : float
+        Samples within ``near`` of a corner are skipped; a split is wanted where a sample leaves its
+        triangle by more than ``far``.
+    budget : int
+        Triangles that may still be made.
+    project : callable
+        ``project(P) -> closest points on B``.
+    off_b : (j,) int
+        Boundary vertices still off B.
+    """
+    m = len(F)
+    empty = SplitPlan(np.zeros((0, 2), np.int64), np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.int64),
+                      np.zeros(0, np.int64), np.zeros((0, 3)), budget <= 0)
+    if budget <= 0 or m == 0:
+        return empty
+    row_count = table.row_count
+    special = (row_count != 2).reshape(-1, 3)  # boundary or junction edges of every triangle
+    has_edge = special.any(axis=1)
+    k_edge = np.argmax(special, axis=1)
+    T = V[F]
+    bary = _INSIDE + (1.0 - 3.0 * _INSIDE) * rng.dirichlet([1.0, 1.0, 1.0], size=m)
+    t = rng.uniform(_ALONG, 1.0 - _ALONG, size=m)
+    rows = np.flatnonzero(has_edge)
+    bary[rows] = 0.0
+    bary[rows, k_edge[rows]] = 1.0 - t[rows]
+    bary[rows, (k_edge[rows] + 1) % 3] = t[rows]
+    P = np.einsum("fk,fkc->fc", bary, T)
+    psi_P, grad_P = field(P)
+    d = sample_displacement(P, T, psi_P, grad_P, psi[F], tau)
+    want, N = split_wanted(T, P, bary, d, v, F, tau, k_edge, has_edge, near * near, far, _MIN_QUALITY)
+    # boundary-edge samples whose projection onto B would fold a new triangle
+    on_b = np.flatnonzero(want & (row_count.reshape(-1, 3)[np.arange(m), k_edge] == 1))
+    if len(on_b):
+        want[on_b[split_folds(T[on_b], k_edge[on_b], project(P[on_b]), N[on_b])]] = False
+    beside = None
+    if len(off_b):
+        off = np.zeros(len(V), bool)
+        off[off_b] = True
+        beside = off[F].any(axis=1)
+        want &= ~beside
+    budget = budget // 2
+    full = False
+    # edge splits: one per edge (a random one of its triangles' samples) ...
+    ef = np.flatnonzero(want & has_edge)
+    eid = table.eid[3 * ef + k_edge[ef]]
+    keep = first_per_group(eid, rng.random(len(ef)))
+    ef, eid = ef[keep], eid[keep]
+    # ... and a triangle takes part in one split at most: of two chosen
+    # edges on a triangle, the later one is dropped everywhere
+    good = table.independent(eid)
+    full |= int(good.sum()) > budget
+    good &= np.cumsum(good) <= budget
+    ef, eid = ef[good], eid[good]
+    on, which = table.rows_of(eid)
+    if beside is not None and len(eid):  # ... nor a junction edge with a triangle beside an off-B vertex
+        clear = np.bincount(which, weights=beside[on // 3], minlength=len(eid)) == 0
+        kept = clear[which]
+        ef, eid, on, which = ef[clear], eid[clear], on[kept], (np.cumsum(clear) - 1)[which[kept]]
+    busy = np.zeros(m, bool)
+    busy[on // 3] = True
+    E = np.stack([F[ef, k_edge[ef]], F[ef, (k_edge[ef] + 1) % 3]], 1).reshape(-1, 2)
+    # 1-to-3 splits of the others
+    tf = np.flatnonzero(want & ~has_edge & ~busy)
+    full |= len(tf) > budget - len(ef)
+    tf = tf[: max(0, budget - len(ef))]
+    return SplitPlan(E, t[ef], on, which, tf, bary[tf], full)
+
+
+@numba.njit(cache=True)
+def split_wanted(T, P, bary, d, v, F, dt, k_edge, has_edge, near2, far, min_quality):
+    """Which samples ask for a split (module notes), and the unit
+    normals of the triangles ``T (m, 3, 3)``.
+
+    A sample ``P[f] = bary[f] . T[f]`` moving by ``d[f]`` leaves its triangle by its move minus the
+    move its corners (velocities ``v``, step ``dt``) give it: across the triangle's plane, or for a
+    sample on edge ``k_edge[f]`` (``has_edge``) across that edge. It asks for a split when that is
+    more than ``far``, it is not within ``sqrt(near2)`` of a corner, and a sample inside a triangle
+    lies in one of quality above ``min_quality`` (1 for an equilateral triangle).
+    """
+    m = T.shape[0]
+    want = np.zeros(m, np.bool_)
+    N = np.zeros((m, 3))
+    q = 4.0 * np.sqrt(3.0)
+    for f in range(m):
+        near = np.inf
+        for k in range(3):
+            x, y, z = T[f, k, 0] - P[f, 0], T[f, k, 1] - P[f, 1], T[f, k, 2] - P[f, 2]
+            near = min(near, x * x + y * y + z * z)
+        t = _unit_normal_into(T[f, 1, 0] - T[f, 0, 0], T[f, 1, 1] - T[f, 0, 1], T[f, 1, 2] - T[f, 0, 2],
+                              T[f, 2, 0] - T[f, 0, 0], T[f, 2, 1] - T[f, 0, 1], T[f, 2, 2] - T[f, 0, 2], N, f)
+        if near < near2:
+            continue
+        a, b, c = F[f, 0], F[f, 1], F[f, 2]
+        dx = d[f, 0] - (bary[f, 0] * (dt * v[a, 0]) + bary[f, 1] * (dt * v[b, 0]) + bary[f, 2] * (dt * v[c, 0]))
+        dy = d[f, 1] - (bary[f, 0] * (dt * v[a, 1]) + bary[f, 1] * (dt * v[b, 1]) + bary[f, 2] * (dt * v[c, 1]))
+        dz = d[f, 2] - (bary[f, 0] * (dt * v[a, 2]) + bary[f, 1] * (dt * v[b, 2]) + bary[f, 2] * (dt * v[c, 2]))
+        if has_edge[f]:
+            k = k_edge[f]
+            j = (k + 1) % 3
+            ex, ey, ez = T[f, j, 0] - T[f, k, 0], T[f, j, 1] - T[f, k, 1], T[f, j, 2] - T[f, k, 2]
+            length = max(np.sqrt(ex * ex + ey * ey + ez * ez), 1e-300)
+            ex, ey, ez = ex / length, ey / length, ez / length
+            along = dx * ex + dy * ey + dz * ez
+            ax, ay, az = dx - along * ex, dy - along * ey, dz - along * ez
+            want[f] = np.sqrt(ax * ax + ay * ay + az * az) > far
+        else:
+            sq = 0.0
+            for k in range(3):
+                i = (k + 2) % 3
+                x, y, z = T[f, k, 0] - T[f, i, 0], T[f, k, 1] - T[f, i, 1], T[f, k, 2] - T[f, i, 2]
+                sq += x * x + y * y + z * z
+            want[f] = (abs(dx * N[f, 0] + dy * N[f, 1] + dz * N[f, 2]) > far
+                       and q * 0.5 * t / max(sq, 1e-300) > min_quality)
+    return want, N

@@ -1,0 +1,104 @@
+"""The step control: backward Euler on the area term of Eq. 3, the move limits and the step size."""
+
+from __future__ import annotations
+
+import igl
+import numpy as np
+import pytest
+from test_flow import bumpy_sheet, icosphere
+
+from fracture.refine.flow import energy_gradient, velocity
+from fracture.refine.step import StepSize, implicit_step, limit_moves, weighted_cotangent_laplacian
+
+
+def test_weighted_laplacian_is_the_area_term_of_eq_3():
+    """(L_w x)_i = -sum_j w_j dA_j/dx_i: with grad psi = 0 and per-triangle weights equal to the mean psi
+    of the corners, the explicit flow is L_w x / A."""
+    V, F = bumpy_sheet()
+    psi = 0.5 + np.random.default_rng(0).random(len(V))
+    dE, area = energy_gradient(V, F, psi, np.zeros((len(V), 3)))
+    L = weighted_cotangent_laplacian(V, F, psi[F].mean(axis=1))
+    assert np.allclose(L @ V, -dE, atol=1e-12)
+    # psi = 1: libigl's cotangent Laplacian
+    assert np.allclose(weighted_cotangent_laplacian(V, F, np.ones(len(F))).toarray(), igl.cotmatrix(V, F).toarray())
+
+
+def test_non_manifold_edges_add_every_triangle():
+    """Three triangles on one edge: each adds its cotangent to the edge's weight."""
+    V = np.array([[0, 0, 0], [1, 0, 0], [0.5, 1, 0], [0.5, -1, 0], [0.5, 0, 1]], float)
+    F = np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4]])
+    L = weighted_cotangent_laplacian(V, F, np.array([1.0, 2.0, 3.0])).toarray()
+    cot = 0.75  # every apex sits 1 above the edge's midpoint, its halves 0.5 long: cot(2 atan 0.5) = 0.75
+    assert L[0, 1] == pytest.approx(0.5 * cot * (1 + 2 + 3))
+    assert np.allclose(L.sum(axis=1), 0.0)
+
+
+@pytest.mark.parametrize("mesh", [icosphere, bumpy_sheet], ids=["closed", "open"])
+def test_implicit_step_agrees_with_the_explicit_one_for_small_steps(mesh):
+    V, F = mesh()
+    rng = np.random.default_rng(1)
+    psi = 0.5 + rng.random(len(V))
+    grad = rng.standard_normal((len(V), 3))
+    dE, area = energy_gradient(V, F, psi, grad)
+    v = -dE / area[:, None]
+    w = psi[F].mean(axis=1)
+    errors = []
+    h2 = igl.avg_edge_length(V, F) ** 2  # the explicit step's stability limit scales with it
+    for tau in (1e-2 * h2, 1e-3 * h2):
+        d = implicit_step(V, F, w, area, v, tau)
+        errors.append(np.abs(d - tau * v).max() / np.abs(tau * v).max())
+    assert errors[1] < 1e-2
+    assert errors[1] < 0.2 * errors[0]  # first order: the difference shrinks like tau
+
+
+def test_implicit_step_is_stable_where_the_explicit_one_explodes():
+    """Mean-curvature flow of a sphere with a step 100 times the explicit limit: the implicit step
+    shrinks the sphere a little and keeps it round; the explicit one throws vertices far out."""
+    V, F = icosphere(3)
+    psi = np.ones(len(V))
+    dE, area = energy_gradient(V, F, psi, np.zeros((len(V), 3)))
+    v = -dE / area[:, None]
+    h = igl.avg_edge_length(V, F)
+    tau = 100 * h * h
+    d = implicit_step(V, F, np.ones(len(F)), area, v, tau)
+    r = np.linalg.norm(V + d, axis=1)
+    assert r.max() < 1.0 and r.std() < 0.02 * r.mean()
+    r_explicit = np.linalg.norm(V + tau * v, axis=1)
+    assert r_explicit.max() > 1.5
+
+
+def test_implicit_step_has_the_fixed_points_of_the_flow():
+    """A plane under a linear psi with an in-plane gradient: Eq. 3 vanishes, so does the step."""
+    from fracture.primitives import sheet
+    V, F = sheet(lambda u, v: np.stack([u, v, np.zeros_like(u)], 1), (0, 1), (0, 1), 7, 7)
+    g = np.array([0.7, -1.3, 0.0])
+    psi = 2.0 + V @ g
+    inner = (V[:, 0] > 0) & (V[:, 0] < 1) & (V[:, 1] > 0) & (V[:, 1] < 1)
+    v = velocity(V, F, psi, np.tile(g, (len(V), 1)))
+    v[~inner] = 0.0  # the sheet's rim is held (the engine's boundary constraint)
+    _, area = energy_gradient(V, F, psi, np.tile(g, (len(V), 1)))
+    d = implicit_step(V, F, psi[F].mean(axis=1), area, v, 10.0)
+    assert np.abs(d).max() < 1e-10
+
+
+def test_limit_moves_caps_length_and_relative_motion():
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float)
+    F = np.array([[0, 1, 2]])
+    d = np.array([[0, 0, 3.0], [0, 0, 3.0], [0, 0, 3.0]])  # a rigid move: only the cap applies
+    limit_moves(V, F, d, 0.5, 1.0)
+    assert np.allclose(d[:, 2], 1.0)
+    d = np.array([[0.9, 0, 0], [0, 0, 0], [0, 0, 0]])  # vertex 0 onto vertex 1: the fold limit
+    assert limit_moves(V, F, d, 0.5, 10.0) == 3  # every vertex of a limited edge (the others stand still)
+    altitude = 1.0 / np.sqrt(2.0)  # twice the area over the longest edge
+    assert np.allclose(d[0], [0.5 * altitude, 0, 0])
+
+
+def test_step_size_grows_shrinks_and_has_a_floor():
+    s = StepSize(0.5, h=0.1)
+    assert s.begin(2.0) == pytest.approx(0.025)
+    for _ in range(20):
+        s.accepted()
+    assert s.tau == pytest.approx(4 * 0.025)
+    for _ in range(20):
+        s.rejected()
+    assert s.at_least and s.tau == pytest.approx(0.025 / 64)
