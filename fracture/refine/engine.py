@@ -71,7 +71,7 @@ from fracture.refine.kernels import EdgeTable, edge_table, row_edges, spatial_or
 from fracture.refine.mesh import RefineMesh
 from fracture.refine.remesh import plan_splits
 from fracture.refine.state import VertexState
-from fracture.refine.step import StepSize, implicit_step, limit_moves
+from fracture.refine.step import BOUNDARY_MOVE, StepSize, implicit_step, limit_by_shortest_edge, limit_moves
 from fracture.tolerances import tol
 from fracture.topology import boundary_conormals
 
@@ -326,7 +326,8 @@ class Refiner:
         clock = log.tick("flow", clock)
         plan = plan_splits(m.V, m.F, table, v, w, self.step.start, self.field, self.rng, near=self.near,
                            far=p.split_distance * self.h, budget=p.max_triangles - len(m.F),
-                           project=lambda P: self.B.closest(P)[2], off_b=self.off_b)
+                           project=lambda P: self.B.closest(P)[2], off_b=self.off_b,
+                           near_b=p.min_edge * self.h)
         self.full |= plan.full
         made = plan.apply(m)
         if made:
@@ -355,6 +356,7 @@ class Refiner:
             _drop(d, boundary, *frames)
             d[held] = 0.0
             limit_moves(m.V, m.F, d, p.fold, p.max_move * self.h)
+            limit_by_shortest_edge(m.V, m.F, d, boundary, BOUNDARY_MOVE)
             trial = m.V + d
             self.project_to_exterior(boundary, trial)
             self._keep_inside(trial, boundary)

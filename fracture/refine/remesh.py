@@ -9,6 +9,13 @@ own move minus the move its corners give it: across the triangle's plane,
 or for an edge sample across the edge) it becomes a vertex: a 1-to-3 split of
 the triangle, or an edge split through every triangle on the edge.
 
+A sample on a boundary edge also asks for a split when B lies farther than
+``far`` from it: the boundary must stay on B, and a long chord across a
+curved B leaves a gap between the sheet and B through which the pieces on
+its two sides would meet (the paper samples boundary edges "to refine the
+fracture surface boundary"). This rule keeps to the last stage's ``near``
+whatever the stage: the boundary follows B, not the field.
+
 A sample leaves its triangle when grad psi's normal part at the sample
 differs from what the corners carry, that is where psi varies across the
 triangle: flat regions of psi keep their large triangles, and the budget
@@ -95,8 +102,8 @@ def split_folds(T: np.ndarray, k: np.ndarray, Q: np.ndarray, N: np.ndarray) -> n
     return (np.einsum("ij,ij->i", n1, N) <= 0.0) | (np.einsum("ij,ij->i", n2, N) <= 0.0)
 
 
-def plan_splits(V, F, table: EdgeTable, v, psi, tau, field, rng, *, near, far, budget, project, off_b
-                ) -> SplitPlan:
+def plan_splits(V, F, table: EdgeTable, v, psi, tau, field, rng, *, near, far, budget, project, off_b,
+                near_b=None) -> SplitPlan:
     """The split plan of one round (module notes).
 
     Parameters
@@ -112,6 +119,9 @@ def plan_splits(V, F, table: EdgeTable, v, psi, tau, field, rng, *, near, far, b
     near, far : float
         Samples within ``near`` of a corner are skipped; a split is wanted where a sample leaves its
         triangle by more than ``far``.
+    near_b : float, optional
+        A boundary-edge sample farther than ``far`` from B splits its edge unless it is within this of
+        the edge's ends (default ``near``).
     budget : int
         Triangles that may still be made.
     project : callable
@@ -120,6 +130,7 @@ def plan_splits(V, F, table: EdgeTable, v, psi, tau, field, rng, *, near, far, b
         Boundary vertices still off B.
     """
     m = len(F)
+    near_b = near if near_b is None else near_b
     empty = SplitPlan(np.zeros((0, 2), np.int64), np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.int64),
                       np.zeros(0, np.int64), np.zeros((0, 3)), budget <= 0)
     if budget <= 0 or m == 0:
@@ -127,7 +138,7 @@ def plan_splits(V, F, table: EdgeTable, v, psi, tau, field, rng, *, near, far, b
     row_count = table.row_count
     special = (row_count != 2).reshape(-1, 3)  # boundary or junction edges of every triangle
     has_edge = special.any(axis=1)
-    k_edge = np.argmax(special, axis=1)
+    k_edge = np.argmax(special * rng.random((m, 3)), axis=1)  # one of its special edges, at random
     T = V[F]
     bary = _INSIDE + (1.0 - 3.0 * _INSIDE) * rng.dirichlet([1.0, 1.0, 1.0], size=m)
     t = rng.uniform(_ALONG, 1.0 - _ALONG, size=m)
@@ -139,10 +150,15 @@ def plan_splits(V, F, table: EdgeTable, v, psi, tau, field, rng, *, near, far, b
     psi_P, grad_P = field(P)
     d = sample_displacement(P, T, psi_P, grad_P, psi[F], tau)
     want, N = split_wanted(T, P, bary, d, v, F, tau, k_edge, has_edge, near * near, far, _MIN_QUALITY)
-    # boundary-edge samples whose projection onto B would fold a new triangle
-    on_b = np.flatnonzero(want & (row_count.reshape(-1, 3)[np.arange(m), k_edge] == 1))
+    # boundary-edge samples: a chord farther than ``far`` from B splits too
+    # (the boundary follows B), unless its projection would fold a new triangle
+    on_b = np.flatnonzero(has_edge & (row_count.reshape(-1, 3)[np.arange(m), k_edge] == 1))
     if len(on_b):
-        want[on_b[split_folds(T[on_b], k_edge[on_b], project(P[on_b]), N[on_b])]] = False
+        Q = project(P[on_b])
+        ends = np.stack([T[on_b, k_edge[on_b]], T[on_b, (k_edge[on_b] + 1) % 3]], 1)
+        clear = (np.linalg.norm(ends - P[on_b, None], axis=2) >= near_b).all(axis=1)
+        want[on_b] |= clear & (np.linalg.norm(Q - P[on_b], axis=1) > far)
+        want[on_b[split_folds(T[on_b], k_edge[on_b], Q, N[on_b])]] = False
     beside = None
     if len(off_b):
         off = np.zeros(len(V), bool)
@@ -172,7 +188,6 @@ def plan_splits(V, F, table: EdgeTable, v, psi, tau, field, rng, *, near, far, b
     E = np.stack([F[ef, k_edge[ef]], F[ef, (k_edge[ef] + 1) % 3]], 1).reshape(-1, 2)
     # 1-to-3 splits of the others
     tf = np.flatnonzero(want & ~has_edge & ~busy)
-    full |= len(tf) > budget - len(ef)
     tf = tf[: max(0, budget - len(ef))]
     return SplitPlan(E, t[ef], on, which, tf, bary[tf], full)
 

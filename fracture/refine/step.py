@@ -22,7 +22,11 @@ cell: the field has no finer detail, and a thin weak layer must not be
 stepped over), and no two corners of a triangle moving relative to each
 other by more than ``fold`` of its smallest altitude (so no corner crosses
 its opposite edge and no triangle turns over within a step; a smooth move of
-a whole neighbourhood by many edge lengths is allowed).
+a whole neighbourhood by many edge lengths is allowed). Boundary vertices
+move at most ``BOUNDARY_MOVE`` of their shortest edge: they slide on B, where
+the boundary curves of two sheets can cross without their chords meeting in
+space (continuous collision detection cannot see it), so no boundary vertex
+may overtake a neighbour on B.
 
 The step size ``tau`` starts every stage of the schedule at its nominal
 value: a vertex where grad psi has its root mean square over the grid moves
@@ -40,6 +44,9 @@ import numba
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
+
+# Boundary vertices move at most this fraction of their shortest edge per step (module notes).
+BOUNDARY_MOVE = 0.3
 
 
 def weighted_cotangent_laplacian(V: np.ndarray, F: np.ndarray, w: np.ndarray) -> sp.csr_matrix:
@@ -122,6 +129,31 @@ def limit_moves(V, F, d, fold, cap):
             d[i, 1] *= scale[i]
             d[i, 2] *= scale[i]
     return limited
+
+
+@numba.njit(cache=True)
+def limit_by_shortest_edge(V, F, d, ids, fraction):
+    """Scale the moves ``d[ids]`` in place to at most ``fraction`` of each vertex's shortest edge."""
+    n = V.shape[0]
+    mark = np.zeros(n, np.bool_)
+    for i in ids:
+        mark[i] = True
+    shortest = np.full(n, np.inf)
+    for f in range(F.shape[0]):
+        for k in range(3):
+            a, b = F[f, k], F[f, (k + 1) % 3]
+            if mark[a] or mark[b]:
+                length = np.sqrt((V[b, 0] - V[a, 0]) ** 2 + (V[b, 1] - V[a, 1]) ** 2 + (V[b, 2] - V[a, 2]) ** 2)
+                shortest[a] = min(shortest[a], length)
+                shortest[b] = min(shortest[b], length)
+    for i in ids:
+        move = np.sqrt(d[i, 0] ** 2 + d[i, 1] ** 2 + d[i, 2] ** 2)
+        limit = fraction * shortest[i]
+        if move > limit:
+            s = limit / move
+            d[i, 0] *= s
+            d[i, 1] *= s
+            d[i, 2] *= s
 
 
 class StepSize:
