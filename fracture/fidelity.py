@@ -16,11 +16,11 @@ Samples are drawn with a fixed seed, so a surface always gets the same figures.
 
 from __future__ import annotations
 
-import igl
 import numpy as np
 
 from fields.grid import Grid
 from fields.interpolate import trilinear
+from fields.stress import distance_to_surface
 from fracture.exterior import Exterior
 
 PERCENTILES = (10, 20, 30)
@@ -71,8 +71,5 @@ def surface_figures(V, F, grid: Grid, zeta: np.ndarray, thresholds: dict[int, fl
 
 
 def distance_cells(P: np.ndarray, V: np.ndarray, F: np.ndarray, grid: Grid) -> np.ndarray:
-    """Distances from points to a triangle surface, in units of the smallest grid spacing (libigl AABB)."""
-    d2, _, _ = igl.point_mesh_squared_distance(np.ascontiguousarray(P, np.float64),
-                                               np.ascontiguousarray(V, np.float64),
-                                               np.ascontiguousarray(F, np.int64))
-    return np.sqrt(np.maximum(d2, 0.0)) / float(np.min(grid.spacing))
+    """Distances from points to a triangle surface, in units of the smallest grid spacing."""
+    return distance_to_surface(P, V, F) / float(np.min(grid.spacing))

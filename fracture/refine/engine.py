@@ -40,9 +40,8 @@ One iteration:
    velocity is taken again where anything moved;
 3. the step: backward Euler on the area term
    (:func:`~fracture.refine.step.implicit_step`), the boundary constraint again,
-   collision holds, the move limits, projection of the boundary onto B, no
-   other vertex carried out of the object, continuous collision detection
-   (stopped vertices stay where they were);
+   collision holds, the move limits, projection of the boundary onto B,
+   continuous collision detection (stopped vertices stay where they were);
    the step is taken only if it does not raise the minimised functional
    ``E_s = integral of (psibar_s + offset)``, with the same quadrature as the
    flow; otherwise ``tau`` is halved and the step tried again (three times,
@@ -71,7 +70,8 @@ from fracture.refine.kernels import EdgeTable, edge_table, row_edges, spatial_or
 from fracture.refine.mesh import RefineMesh
 from fracture.refine.remesh import plan_splits
 from fracture.refine.state import VertexState
-from fracture.refine.step import BOUNDARY_MOVE, StepSize, implicit_step, limit_by_shortest_edge, limit_moves
+from fracture.refine.step import (BOUNDARY_MOVE, StepSize, implicit_step, limit_by_shortest_edge, limit_moves,
+                                  weighted_cotangent_laplacian)
 from fracture.tolerances import tol
 from fracture.topology import boundary_conormals
 
@@ -92,7 +92,7 @@ class RefineParams:
     tolerance: float = 0.02  # a stage has settled when the mean move is below this and nothing split
     step: float = 0.5  # at a stage's start a vertex of median speed moves this far per step
     max_move: float = 1.0  # no vertex moves further per step
-    fold: float = 0.5  # ... nor the two ends of an edge relative to each other by more than this of its length
+    fold: float = 0.5  # ... nor two corners of a triangle relative to each other by more than this of its altitude
     split_distance: float = 0.15  # split where a sample leaves its triangle by more than this in a step
     tension: float = 0.05  # psi is shifted so its minimum is this fraction of its range
     min_edge: float = 0.1  # samples closer than this to a corner are skipped (the last stage)
@@ -257,14 +257,15 @@ class Refiner:
         if len(ids):
             V[ids] = self.B.closest(V[ids])[2]
 
-    def settle_boundary(self) -> float:
+    def settle_boundary(self, table: EdgeTable | None = None) -> float:
         """Move the boundary vertices that are off B onto it, the rest of the surface at rest, unless a
         collision stops them; returns the largest distance of a boundary vertex from B after that.
 
         A new vertex on a boundary edge starts on the edge's chord, off B, and a
         collision may stop its first projection; at the end of a stage this
         step, which tests only the elements on the few vertices it moves,
-        replaces the iterations that would otherwise wait for them.
+        replaces the iterations that would otherwise wait for them. ``table``
+        is the current edge table, if the caller has it.
         """
         m, ids = self.mesh, self.boundary
         if not len(ids):
@@ -275,7 +276,7 @@ class Refiner:
             return float(np.sqrt(d2.max()))
         X1 = m.V.copy()
         X1[ids[off]] = P[off]
-        stopped, _ = stop_collisions(m.V, X1, m.F, self.params.thickness * self.h, self.edges(),
+        stopped, _ = stop_collisions(m.V, X1, m.F, self.params.thickness * self.h, table or self.edges(),
                                      moving=ids[off])
         self.state.hold[stopped] = self.params.hold
         m.V = X1
@@ -337,10 +338,11 @@ class Refiner:
         # the boundary constraint first: new vertices on boundary edges start on
         # the chord, off B; the step is measured from the surface on B
         self.boundary = np.unique(row_edges(m.F, table.boundary_rows))
-        if self.boundary_error(self.boundary) > self.on_b:
-            self.settle_boundary()
+        settle = self.boundary_error(self.boundary) > self.on_b
+        if settle:
+            self.settle_boundary(table)
             clock = log.tick("boundary", clock)
-        if made or not np.array_equal(m.V, s.field_at):
+        if made or settle:
             v, w, area, boundary, frames = self._velocity(table)
             clock = log.tick("flow", clock)
         s.velocity = v
@@ -350,25 +352,30 @@ class Refiner:
         s.hold = np.maximum(s.hold - 1, 0)
         closed = closed_vertices(m.F, len(m.V), table)  # for the collision step and the flips
         X1, grid, after, retries, stopped = m.V, None, before, 0, np.zeros(len(m.V), bool)
+        L = weighted_cotangent_laplacian(m.V, m.F, wf)
         for attempt in range(_ATTEMPTS):
             tau = self.step.tau
-            d = implicit_step(m.V, m.F, wf, area, v, tau)
+            d = implicit_step(L, area, v, tau)
             _drop(d, boundary, *frames)
             d[held] = 0.0
             limit_moves(m.V, m.F, d, p.fold, p.max_move * self.h)
             limit_by_shortest_edge(m.V, m.F, d, boundary, BOUNDARY_MOVE)
             trial = m.V + d
             self.project_to_exterior(boundary, trial)
-            self._keep_inside(trial, boundary)
             clock = log.tick("step", clock)
             hit, _, grid = stop_collisions(m.V, trial, m.F, p.thickness * self.h, table, return_grid=True,
                                            closed=closed)
             clock = log.tick("collisions", clock)
-            _, psibar1, _ = self.pyramid.coarse_field(self.first, trial)
+            went = np.flatnonzero((trial != m.V).any(axis=1))  # the field is known where nothing moved
+            fresh = self.pyramid.coarse_field(self.first, trial[went])
+            psibar1 = s.psibar.copy()
+            psibar1[went] = fresh[1]
             value = energy(trial, m.F, psibar1 + self.offset)
             clock = log.tick("step", clock)
             if value <= before + 1e-12 * abs(before):
                 X1, after, stopped = trial, value, hit
+                s.psi[went], s.psibar[went], s.grad[went] = fresh  # the next iteration's field
+                s.field_at[went] = trial[went]
                 self.step.accepted()
                 break
             retries += 1
@@ -390,21 +397,6 @@ class Refiner:
         log.stopped.append(int(stopped.sum()))
         log.max_move.append(float(moved.max() / self.h) if len(moved) else 0.0)
         return (float(moved.mean() / self.h) if len(moved) else 0.0), made
-
-    def _keep_inside(self, X1: np.ndarray, boundary: np.ndarray) -> None:
-        """Send back (in ``X1``) the vertices off the boundary that a step would carry out of the object.
-
-        Only the boundary is tied to B (Sec. 4.4); a sheet moving a grid cell
-        per step near a concave part of B could otherwise leave the object,
-        and the pieces on its two sides would meet around it. Done before the
-        collision test, so that it tests the paths as they are.
-        """
-        moving = np.flatnonzero((X1 != self.mesh.V).any(axis=1))
-        if len(boundary):
-            moving = moving[~np.isin(moving, boundary)]
-        if len(moving):
-            out = moving[~self.B.inside(X1[moving])]
-            X1[out] = self.mesh.V[out]
 
     def _record(self, move: float, boundary_error: float) -> None:
         log = self.log

@@ -73,18 +73,18 @@ def weighted_cotangent_laplacian(V: np.ndarray, F: np.ndarray, w: np.ndarray) ->
     return off - sp.diags(np.asarray(off.sum(axis=1)).ravel())
 
 
-def implicit_step(V: np.ndarray, F: np.ndarray, w: np.ndarray, area: np.ndarray, v: np.ndarray, tau: float
-                  ) -> np.ndarray:
+def implicit_step(L: sp.csr_matrix, area: np.ndarray, v: np.ndarray, tau: float) -> np.ndarray:
     """The displacement ``d`` of ``(M - tau L_w) d = tau M v`` (module notes), ``(n, 3)``.
 
-    ``area`` is the barycentric vertex area ``A_i`` (the diagonal of ``M``), ``v`` the explicit
-    velocity of Eq. 3, ``w`` the triangles' weights. One sparse LU factorisation (SuperLU, a
-    symmetric fill-reducing order) serves the three coordinates: on refined surfaces, whose
-    needles make the matrix badly conditioned, it is 10 to 15 times faster than conjugate
-    gradients with a Jacobi preconditioner.
+    ``L`` is :func:`weighted_cotangent_laplacian` (it does not depend on ``tau``: a step tried again
+    with a smaller ``tau`` reuses it), ``area`` the barycentric vertex area ``A_i`` (the diagonal of
+    ``M``), ``v`` the explicit velocity of Eq. 3. One sparse LU factorisation (SuperLU, a symmetric
+    fill-reducing order) serves the three coordinates: on refined surfaces, whose needles make the
+    matrix badly conditioned, it is 10 to 15 times faster than conjugate gradients with a Jacobi
+    preconditioner.
     """
     M = np.maximum(area, 1e-300)
-    K = (sp.diags(M) - tau * weighted_cotangent_laplacian(V, F, w)).tocsc()
+    K = (sp.diags(M) - tau * L).tocsc()
     lu = sla.splu(K, permc_spec="MMD_AT_PLUS_A", options=dict(SymmetricMode=True))
     return lu.solve(np.ascontiguousarray(tau * M[:, None] * v))
 
