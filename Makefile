@@ -25,6 +25,7 @@ bench: install
 	$(BIN)/python benchmarks/bench_coarse.py
 	$(BIN)/python benchmarks/bench_refine.py --repeat 3 --rounds 2
 	$(BIN)/python benchmarks/bench_animate.py --triangles 200000
+	$(BIN)/python benchmarks/fidelity.py
 
 install: system-deps $(STAMP)
 
