@@ -6,7 +6,7 @@ import json
 
 import numpy as np
 import pytest
-from conftest import CONFIGS, SCENE_CASES, SHARED, scene_config
+from conftest import CONFIGS, SAMPLE, SCENE_CASES, scene_config
 
 from fracture import runner
 from fracture.config import load_config
@@ -209,5 +209,5 @@ def test_every_scene_animates_into_closed_pieces(name, tmp_path):
     assert len(names) == counts["pieces"] == counts["components"]
     assert len(V) == sum(len(read_ply(out / "pieces" / f"piece_{c:03d}.ply")[0]) for c in range(counts["pieces"]))
     if name == "blender_cube8":  # Blender's own object names, in and out
-        assert names == read_obj_objects(SHARED / "frame_0001.obj")[0]
+        assert names == read_obj_objects(SAMPLE / "frame_0001.obj")[0]
         assert len(frames) == 40

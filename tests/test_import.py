@@ -8,7 +8,7 @@ import igl
 import numpy as np
 import pytest
 
-from conftest import SHARED, mesh_area as area
+from conftest import SAMPLE, mesh_area as area
 from fracture import runner
 from fracture.coarse import special_edges
 from fracture.topology import signed_volume, unique_edges
@@ -16,8 +16,6 @@ from fracture.config import load_config
 from fracture.errors import InputError
 from fracture.mesh_sequence import load_coarse_sequence, read_sequence
 
-SAMPLE = SHARED
-pytestmark = pytest.mark.skipif(not SAMPLE.is_dir(), reason="the Blender sample (shared/data) is not beside the repo")
 
 
 @pytest.fixture(scope="module")
