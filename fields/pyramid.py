@@ -87,42 +87,56 @@ class StrengthPyramid:
             mean_gradient += self.level_gradient_grid(k)
         mean_gradient /= levels
         self._table = np.ascontiguousarray(np.concatenate([psi[..., None], mean_gradient], axis=3))
-        self._coarse = (-1, None)  # the last table of coarse levels asked for (see coarse_field)
+        self._coarse = ((-1, -1), None)  # the last table of a window of levels asked for (see coarse_table)
 
     @property
     def n_levels(self) -> int:
         return self.levels.shape[0]
 
-    def coarse_table(self, first: int) -> np.ndarray:
-        """``(nx, ny, nz, 5)``: ``[psi, psibar, d/dx, d/dy, d/dz psibar]`` with ``psibar`` the mean of
-        levels ``first .. n_levels - 1`` and its gradient the mean of their finite-difference gradients.
-
-        ``first = 0`` is the paper's field (every level); a larger ``first``
-        leaves out the finest levels: a smoother field whose valleys reach
-        further, for the coarse-to-fine schedule of the refinement. The mean of
-        the levels' gradients is the gradient of their mean (both linear), so
-        ``psibar`` is the field whose integral the flow on these levels minimises.
-        The last table asked for is kept.
-        """
+    def window(self, first: int, count: int) -> range:
+        """Levels ``first .. first + count - 1``, cut at the coarsest level."""
         if not 0 <= first < self.n_levels:
             raise ValueError(f"first level must be in [0, {self.n_levels - 1}], got {first}")
-        if self._coarse[0] != first:
-            used = range(first, self.n_levels)
-            mean = self.levels[first:].mean(axis=0)
+        if count < 1:
+            raise ValueError(f"a window holds at least one level, got {count}")
+        return range(first, min(first + count, self.n_levels))
+
+    def coarse_table(self, first: int, count: int | None = None) -> np.ndarray:
+        """``(nx, ny, nz, 5)``: ``[psi, psibar, d/dx, d/dy, d/dz psibar]`` with ``psibar`` the mean of
+        levels ``first .. first + count - 1`` (all from ``first`` on without ``count``) and its gradient
+        the mean of their finite-difference gradients.
+
+        ``first = 0`` with every level is the paper's field; a window of
+        coarser levels is a smoother field whose valleys reach further, and a
+        window of the finest levels keeps thin weak layers that the coarse
+        levels smear, for the coarse-to-fine schedule of the refinement. The
+        mean of the levels' gradients is the gradient of their mean (both
+        linear), so ``psibar`` is the field whose integral the flow on these
+        levels minimises. The last table asked for is kept.
+        """
+        used = self.window(first, self.n_levels if count is None else count)
+        if self._coarse[0] != (used.start, used.stop):
+            mean = self.levels[used.start:used.stop].mean(axis=0)
             grad = sum(self.level_gradient_grid(k) for k in used) / len(used)
             table = np.concatenate([self.levels[0][..., None], mean[..., None], grad], axis=3)
-            self._coarse = (first, np.ascontiguousarray(table))
+            self._coarse = ((used.start, used.stop), np.ascontiguousarray(table))
         return self._coarse[1]
 
-    def gradient_scale(self, first: int) -> float:
+    def window_range(self, first: int, count: int | None = None) -> tuple[float, float]:
+        """Smallest value and range of psibar of :meth:`coarse_table` over the grid."""
+        psibar = self.coarse_table(first, count)[..., 1]
+        return float(psibar.min()), float(np.ptp(psibar))
+
+    def gradient_scale(self, first: int, count: int | None = None) -> float:
         """Root mean square of the gradient of :meth:`coarse_table` over the grid (a scale of the field's
         variation, for step sizes)."""
-        g = self.coarse_table(first)[..., 2:]
+        g = self.coarse_table(first, count)[..., 2:]
         return float(np.sqrt(np.mean(np.einsum("...c,...c->...", g, g))))
 
-    def coarse_field(self, first: int, P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def coarse_field(self, first: int, P: np.ndarray, count: int | None = None
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """psi, psibar and grad psibar of :meth:`coarse_table` at points, in one interpolation."""
-        out = trilinear(self.grid, self.coarse_table(first), P)
+        out = trilinear(self.grid, self.coarse_table(first, count), P)
         return out[:, 0], out[:, 1], out[:, 2:]
 
     def level_gradient_grid(self, k: int) -> np.ndarray:

@@ -33,15 +33,20 @@ def distance_to_surface(P: np.ndarray, V: np.ndarray, F: np.ndarray) -> np.ndarr
 
 
 def stress_from_distance(d: np.ndarray, length: float) -> np.ndarray:
-    """The stress estimate ``xi = exp(-d^2 / (2 l^2))``.
+    """The stress estimate ``xi = exp(-d / l)``.
 
     Highest (1) on the coarse fracture surface, decaying with the distance
-    ``d`` to it over the length ``l``. Its gradient vanishes on the coarse
-    surface, so near it the pull back is proportional to the offset: a
-    material feature moves the refined surface by an amount that shrinks as
-    the stress weight grows.
+    ``d`` to it over the length ``l``. Its slope at the surface is ``1 / l``,
+    not zero: the pull back toward the coarse surface is as strong one voxel
+    away as it is ten voxels away (until ``l``), so the stress weight sets
+    how deep a weak feature must be to draw the surface away at all, and a
+    large weight holds the surface within a fraction of a voxel. (A Gaussian
+    of ``d``, flat at the surface, lets every feature pull the surface about
+    a voxel whatever the weight: measured on the example wall, weights 0.2
+    and 4 then differ by under 2x in how far the crack travels; with this
+    cone by about 5x.)
     """
-    return np.exp(-0.5 * (np.asarray(d, np.float64) / length) ** 2)
+    return np.exp(-np.asarray(d, np.float64) / length)
 
 
 def modified_strength(zeta: np.ndarray, xi: np.ndarray, strength_weight: float, stress_weight: float) -> np.ndarray:

@@ -199,7 +199,7 @@ def _fill_around_junctions(V: np.ndarray, F: np.ndarray, labels: np.ndarray) -> 
 
 
 def label_components(BV: np.ndarray, BF: np.ndarray, V: np.ndarray, F: np.ndarray, resolution: int = 96,
-                     what: str = "fracture surface") -> tuple[np.ndarray, np.ndarray, int]:
+                     what: str = "fracture surface", strict: bool = True) -> tuple[np.ndarray, np.ndarray, int]:
     """Components of the inside of B separated by the fracture surface ``(V, F)``.
 
     Parameters
@@ -208,6 +208,10 @@ def label_components(BV: np.ndarray, BF: np.ndarray, V: np.ndarray, F: np.ndarra
     V, F : fracture surface.
     resolution : int
         Voxels along the longest side of B's box.
+    strict : bool
+        Raise when a fracture triangle has the same component on both sides;
+        otherwise return such triangles with equal sides (for a caller that
+        judges them, e.g. triangles smaller than a voxel).
 
     Returns
     -------
@@ -272,7 +276,7 @@ def label_components(BV: np.ndarray, BF: np.ndarray, V: np.ndarray, F: np.ndarra
                              f"({int((lab == 0).sum())} such triangles); is the object thinner than "
                              f"{2 * h:.3g} there?")
     same = behind == front
-    if same.any():
+    if strict and same.any():
         f = int(np.flatnonzero(same)[0])
         raise InputError(f"{what}: triangle {f} has the same component on both sides ({int(same.sum())} such "
                          f"triangles): the surface does not split the object there (an incomplete cut?)")

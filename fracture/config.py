@@ -65,7 +65,7 @@ SCHEMA: dict[str, Any] = {
     },
     "psi": {
         "strength_weight": Param(1.0, lo=0.0, hi=100.0, doc="weight of zeta in psi"),
-        "stress_weight": Param(1.0, lo=0.0, hi=100.0,
+        "stress_weight": Param(0.4, lo=0.0, hi=100.0,
                                doc="weight of xi in psi; larger keeps the result closer to the coarse surface"),
     },
     "pyramid": {
@@ -77,8 +77,9 @@ SCHEMA: dict[str, Any] = {
         "stage_iterations": Param(15, "int", lo=1, hi=10000,
                                   doc="largest number of iterations of one stage of the coarse-to-fine schedule"),
         "coarse_levels": Param(2, "int", lo=1, hi=8,
-                               doc="the first stage follows the mean of this many coarsest pyramid levels; "
-                                   "each next stage adds a finer level, the last follows them all"),
+                               doc="every stage follows the mean of this many consecutive pyramid levels: the "
+                                   "first the coarsest, each next one a level finer, the last the finest; "
+                                   "pyramid.levels gives one stage on every level (the paper's field)"),
         "tolerance": Param(0.02, lo=0.0, hi=10.0,
                            doc="a stage has settled when the mean vertex move of an iteration is below this "
                                "(grid cells) and it split at most 0.5 % of the triangles"),

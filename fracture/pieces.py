@@ -220,7 +220,7 @@ def resolve_crossings(V: np.ndarray, F: np.ndarray, exterior: np.ndarray, volume
     libigl's exact boolean (the union of ``(V, F)`` with nothing) cuts the
     triangles along their crossing curves and keeps the boundary of the
     region of positive winding number. The result is refused (``None``)
-    unless it is closed, 2-manifold, outward and free of crossings, with a
+    when the boolean fails, and unless it is closed, 2-manifold, outward and free of crossings, with a
     volume within ``volume_tolerance`` of the input's (the pockets it drops
     are thin; a result that far off is not the same piece).
 
@@ -232,8 +232,11 @@ def resolve_crossings(V: np.ndarray, F: np.ndarray, exterior: np.ndarray, volume
     barycentric ``weights`` of the input triangle it lies on, an S triangle
     (``on_s``) where it lies on one.
     """
-    VC, FC, J = igl_cgal.mesh_boolean(np.ascontiguousarray(V, np.float64), np.ascontiguousarray(F, np.int64),
-                                      np.zeros((0, 3)), np.zeros((0, 3), np.int64), "union")
+    try:
+        VC, FC, J = igl_cgal.mesh_boolean(np.ascontiguousarray(V, np.float64), np.ascontiguousarray(F, np.int64),
+                                          np.zeros((0, 3)), np.zeros((0, 3), np.int64), "union")
+    except RuntimeError:  # CGAL gives up on some inputs (e.g. coincident crossing curves): refused as well
+        return None
     used = np.unique(FC)
     if len(used) < len(VC):  # every output vertex must be on a triangle (its birth triangle is read there)
         remap = np.full(len(VC), -1)

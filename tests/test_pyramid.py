@@ -32,6 +32,27 @@ def test_mean_gradient_equals_average_of_level_gradients():
     np.testing.assert_allclose(pyr.gradient(P), average, atol=1e-10)
 
 
+def test_a_window_of_levels_is_their_mean_and_its_gradient_the_mean_of_theirs():
+    grid = _grid()
+    psi = np.random.default_rng(3).normal(size=grid.shape)
+    pyr = StrengthPyramid(grid, psi, levels=5, sigma=1.0)
+    P = np.random.default_rng(4).uniform(grid.lo, grid.hi, (300, 3))
+    for first, count in [(3, 2), (0, 2), (1, 3), (4, 2), (0, 5)]:
+        used = range(first, min(first + count, 5))
+        value, psibar, grad = pyr.coarse_field(first, P, count)
+        np.testing.assert_allclose(value, pyr.value(P), atol=1e-12)
+        np.testing.assert_allclose(psibar, np.mean([pyr.level_value(k, P) for k in used], axis=0), atol=1e-10)
+        np.testing.assert_allclose(grad, np.mean([pyr.level_gradient(k, P) for k in used], axis=0), atol=1e-10)
+        lowest, span = pyr.window_range(first, count)
+        table = np.mean(pyr.levels[first:first + count], axis=0)
+        assert lowest == pytest.approx(table.min()) and span == pytest.approx(np.ptp(table))
+    np.testing.assert_allclose(pyr.coarse_field(0, P)[2], pyr.gradient(P), atol=1e-10)  # every level: the paper's
+    with pytest.raises(ValueError):
+        pyr.coarse_table(5, 1)
+    with pytest.raises(ValueError):
+        pyr.coarse_table(0, 0)
+
+
 def test_level_zero_is_the_field_and_levels_get_smoother():
     grid = _grid((32, 32, 32))
     psi = np.random.default_rng(3).normal(size=grid.shape)

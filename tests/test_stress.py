@@ -37,7 +37,7 @@ def test_stress_is_one_on_the_surface_and_decays():
     d = np.array([0.0, 0.05, 0.1, 0.3])
     xi = stress_from_distance(d, 0.1)
     assert xi[0] == 1.0 and np.all(np.diff(xi) < 0)
-    assert xi[2] == pytest.approx(np.exp(-0.5))
+    assert xi[2] == pytest.approx(np.exp(-1.0))
 
 
 def test_psi_is_monotone_in_the_stress_weight():

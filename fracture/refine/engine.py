@@ -17,9 +17,14 @@ would show it (Sec. 4.3). A flow on that field from the start still refines
 the surface to the grid's scale before it has travelled: the finest levels'
 local minima hold it, and small triangles make it slow. So the refinement
 runs through stages, coarse to fine in both the field and the mesh. Stage
-``s`` follows ``psibar_s``, the mean of pyramid levels ``s .. L-1``: the first
-uses the ``coarse_levels`` smoothest levels, each next one adds the next finer
-level, and the last one is the paper's field (every level). A stage's triangles
+``s`` follows ``psibar_s``, the mean of ``c = coarse_levels`` consecutive
+pyramid levels ``s .. s+c-1``: the first the ``c`` smoothest, each next one a
+level finer, the last the ``c`` finest. The coarse windows carry the valleys
+of psi far (the pyramid's purpose, Sec. 4.3); the last one keeps the thin weak
+layers (a brick's mortar boundary, a vein) that the mean over every level
+smears to a fraction of their depth, so the surface ends in them rather than
+beside them. ``coarse_levels`` equal to the pyramid's levels is the paper's
+field alone (one stage, the mean of every level). A stage's triangles
 need not be finer than its field: samples closer than half the width of its
 finest level to a corner (at least ``min_edge``) are not split. A stage ends
 when it has settled: an iteration moved the surface by less than
@@ -33,7 +38,9 @@ One iteration:
 1. psi, psibar_s and grad psibar_s at every vertex (one interpolation, only
    where a vertex moved or is new), Eq. 3's velocity with psibar_s shifted to
    be positive (``tension``: a small surface tension, so that the area term
-   never rewards area), and the boundary constraint: boundary vertices slide
+   never rewards area; the shift is the stage's own, set from the range of
+   its psibar: a blurred field's smaller contrast is not drowned by a shift
+   that a finer field needed), and the boundary constraint: boundary vertices slide
    on B and do not pull the sheet's boundary inward;
 2. the split plan of the samples, applied; boundary vertices off B (new
    ones on boundary edges start on the chord) are moved onto B, and the
@@ -68,7 +75,7 @@ from fracture.refine.flips import flip_edges
 from fracture.refine.flow import energy, energy_gradient
 from fracture.refine.kernels import EdgeTable, edge_table, row_edges, spatial_order
 from fracture.refine.mesh import RefineMesh
-from fracture.refine.remesh import plan_splits
+from fracture.refine.remesh import plan_chord_splits, plan_splits
 from fracture.refine.state import VertexState
 from fracture.refine.step import (BOUNDARY_MOVE, StepSize, implicit_step, limit_by_shortest_edge, limit_moves,
                                   weighted_cotangent_laplacian)
@@ -77,6 +84,10 @@ from fracture.topology import boundary_conormals
 
 # Attempts of a step that would raise the functional, each with half the tau of the last.
 _ATTEMPTS = 4
+# Chord splits (the boundary following B) may use the last 1/this of the triangle budget alone.
+_CHORD_RESERVE = 50
+# Rounds of chord splits per iteration (fit_chords).
+_CHORD_ROUNDS = 3
 # A stage has settled when its moves are small and an iteration splits at most this share of the triangles.
 _FEW_SPLITS = 0.005
 # ... and its moves are small, or its step lowered the functional by less than this fraction.
@@ -96,7 +107,7 @@ class RefineParams:
     split_distance: float = 0.15  # split where a sample leaves its triangle by more than this in a step
     tension: float = 0.05  # psi is shifted so its minimum is this fraction of its range
     min_edge: float = 0.1  # samples closer than this to a corner are skipped (the last stage)
-    coarse_levels: int = 2  # the first stage follows the mean of this many coarsest pyramid levels
+    coarse_levels: int = 2  # every stage follows the mean of this many consecutive pyramid levels
     max_triangles: int = 200_000
     thickness: float = 1e-6  # closer than this counts as a collision
     hold: int = 3  # iterations a vertex stopped by a collision stays stopped
@@ -142,18 +153,10 @@ class Refiner:
         self.h = float(np.min(pyramid.grid.spacing))
         self.on_b = tol.on_b * self.h  # a boundary vertex this close to B is on it
         self.log = IterationLog()
-        # A negative integrand would reward area: the flow would wrinkle without
-        # bound and the implicit matrix would lose its definiteness. Shifting
-        # psi adds a constant surface tension and leaves its gradient unchanged
-        # (smoothing keeps every level within the range of level 0, up to the
-        # odd reflection at the grid's faces: the minimum is taken over all).
-        span = float(np.ptp(pyramid.levels[0]))
-        self.offset = params.tension * span - float(pyramid.levels.min())
         self.B = Exterior(BV, BF)  # its AABB tree, built on the first query, serves every iteration
         self.step = StepSize(params.step, self.h)
         self.state = VertexState.empty(len(mesh.V))
-        self.first = self.stage_levels()[0]
-        self.near = self._near_for(self.first)
+        self.begin_stage(self.stage_levels()[0])  # sets first, near, offset and the step size
         self.boundary = np.zeros(0, np.int64)  # boundary vertices of the last iteration
         self.off_b = np.zeros(0, np.int64)  # boundary vertices off B at the last velocity
         self.full = False  # the triangle budget has stopped a wanted split
@@ -162,9 +165,12 @@ class Refiner:
     # -- schedule -------------------------------------------------------------------------
     def stage_levels(self) -> list[int]:
         """The first pyramid level of each stage's field, coarse to fine (module notes)."""
-        L = self.pyramid.n_levels
-        c = min(max(self.params.coarse_levels, 1), L)
-        return list(range(L - c, -1, -1))
+        return list(range(self.pyramid.n_levels - self.window, -1, -1))
+
+    @property
+    def window(self) -> int:
+        """Pyramid levels per stage (``coarse_levels``, at most the pyramid's)."""
+        return min(max(self.params.coarse_levels, 1), self.pyramid.n_levels)
 
     def _near_for(self, first: int) -> float:
         """Samples closer than this to a corner are not split in the stage that starts at level ``first``:
@@ -176,13 +182,19 @@ class Refiner:
         """Follow the field of levels ``first .. L-1`` from now on."""
         self.first = first
         self.near = self._near_for(first)
+        # A negative integrand would reward area: the flow would wrinkle without
+        # bound and the implicit matrix would lose its definiteness. Shifting
+        # psibar adds a constant surface tension and leaves its gradient
+        # unchanged; its minimum over the grid becomes ``tension`` of its range.
+        lowest, span = self.pyramid.window_range(first, self.window)
+        self.offset = self.params.tension * span - lowest
         self.state.forget_field()
-        self.step.begin(self.pyramid.gradient_scale(first))
+        self.step.begin(self.pyramid.gradient_scale(first, self.window))
 
     # -- fields ---------------------------------------------------------------------------
     def field(self, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The stage's shifted psibar and its gradient at points (what the flow follows)."""
-        _, psibar, grad = self.pyramid.coarse_field(self.first, P)
+        _, psibar, grad = self.pyramid.coarse_field(self.first, P, self.window)
         return psibar + self.offset, grad
 
     def vertex_field(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -192,7 +204,7 @@ class Refiner:
         s.grow(len(V))
         todo = np.flatnonzero((V != s.field_at).any(axis=1))
         if len(todo):
-            s.psi[todo], s.psibar[todo], s.grad[todo] = self.pyramid.coarse_field(self.first, V[todo])
+            s.psi[todo], s.psibar[todo], s.grad[todo] = self.pyramid.coarse_field(self.first, V[todo], self.window)
             s.field_at[todo] = V[todo]
         return s.psi, s.psibar, s.grad
 
@@ -282,6 +294,26 @@ class Refiner:
         m.V = X1
         return self.boundary_error(ids)
 
+    def fit_chords(self, table: EdgeTable, rounds: int = _CHORD_ROUNDS) -> tuple[int, EdgeTable]:
+        """Split boundary edges whose chords pass farther than ``split_distance`` from B and put the new
+        vertices on B (:func:`~fracture.refine.remesh.plan_chord_splits`), for a few rounds; returns the
+        number of splits and the current edge table."""
+        p, made = self.params, 0
+        for _ in range(rounds):
+            ids = np.unique(row_edges(self.mesh.F, table.boundary_rows))
+            off_b = ids[self.closest_on_b(ids)[0] > self.on_b ** 2]
+            plan = plan_chord_splits(self.mesh.V, self.mesh.F, table, far=p.split_distance * self.h,
+                                     near_b=p.min_edge * self.h, budget=p.max_triangles - len(self.mesh.F),
+                                     project=lambda P: self.B.closest(P)[2], off_b=off_b)
+            if not plan.count:
+                break
+            made += plan.apply(self.mesh)
+            self.state.grow(len(self.mesh.V))
+            table = self.edges()
+            self.boundary = np.unique(row_edges(self.mesh.F, table.boundary_rows))
+            self.settle_boundary(table)
+        return made, table
+
     def boundary_error(self, ids: np.ndarray | None = None) -> float:
         """Largest distance of the boundary vertices (or of ``ids``) from B."""
         ids = self.boundary_vertices() if ids is None else ids
@@ -328,13 +360,16 @@ class Refiner:
         plan = plan_splits(m.V, m.F, table, v, w, self.step.start, self.field, self.rng, near=self.near,
                            far=p.split_distance * self.h, budget=p.max_triangles - len(m.F),
                            project=lambda P: self.B.closest(P)[2], off_b=self.off_b,
-                           near_b=p.min_edge * self.h)
+                           near_b=p.min_edge * self.h, reserve=p.max_triangles // _CHORD_RESERVE)
         self.full |= plan.full
         made = plan.apply(m)
         if made:
             s.grow(len(m.V))
             table = self.edges()
             clock = log.tick("remesh", clock)
+        fitted, table = self.fit_chords(table)
+        made += fitted
+        clock = log.tick("boundary", clock)
         # the boundary constraint first: new vertices on boundary edges start on
         # the chord, off B; the step is measured from the surface on B
         self.boundary = np.unique(row_edges(m.F, table.boundary_rows))
@@ -367,7 +402,7 @@ class Refiner:
                                            closed=closed)
             clock = log.tick("collisions", clock)
             went = np.flatnonzero((trial != m.V).any(axis=1))  # the field is known where nothing moved
-            fresh = self.pyramid.coarse_field(self.first, trial[went])
+            fresh = self.pyramid.coarse_field(self.first, trial[went], self.window)
             psibar1 = s.psibar.copy()
             psibar1[went] = fresh[1]
             value = energy(trial, m.F, psibar1 + self.offset)
@@ -417,7 +452,6 @@ class Refiner:
         (:meth:`settle_boundary`). The mesh ends numbered in creation order.
         """
         p, log = self.params, self.log
-        self.begin_stage(self.first)
         # iteration 0: the coarse surface
         log.functional_before.append(self.functional())
         log.functional.append(log.functional_before[0])
@@ -430,6 +464,7 @@ class Refiner:
         self._record(0.0, self.boundary_error(self.boundary))
         if log.boundary_error[0] > self.on_b:  # the coarse surface onto B before the flow starts
             self.settle_boundary()
+        self.fit_chords(self.edges())
         done, unsettled = 0, []
         for first in self.stage_levels():
             if first != self.first:

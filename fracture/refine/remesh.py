@@ -33,7 +33,9 @@ not be finer than the field they follow), and so are:
   projection): smaller triangles around it would fold when it moves onto B.
 
 A triangle takes part in one split at most per round; the triangle budget
-caps the round.
+caps the round. Chord splits come first and may use the whole budget; the
+field's splits leave ``reserve`` triangles of it to them, so that a surface
+refined up to its budget still keeps its boundary on B.
 """
 
 from __future__ import annotations
@@ -103,7 +105,7 @@ def split_folds(T: np.ndarray, k: np.ndarray, Q: np.ndarray, N: np.ndarray) -> n
 
 
 def plan_splits(V, F, table: EdgeTable, v, psi, tau, field, rng, *, near, far, budget, project, off_b,
-                near_b=None) -> SplitPlan:
+                near_b=None, reserve=0) -> SplitPlan:
     """The split plan of one round (module notes).
 
     Parameters
@@ -124,6 +126,8 @@ def plan_splits(V, F, table: EdgeTable, v, psi, tau, field, rng, *, near, far, b
         the edge's ends (default ``near``).
     budget : int
         Triangles that may still be made.
+    reserve : int
+        Triangles of the budget that only chord splits (boundary edges far from B) may use.
     project : callable
         ``project(P) -> closest points on B``.
     off_b : (j,) int
@@ -150,6 +154,7 @@ def plan_splits(V, F, table: EdgeTable, v, psi, tau, field, rng, *, near, far, b
     psi_P, grad_P = field(P)
     d = sample_displacement(P, T, psi_P, grad_P, psi[F], tau)
     want, N = split_wanted(T, P, bary, d, v, F, tau, k_edge, has_edge, near * near, far, _MIN_QUALITY)
+    chord = np.zeros(m, bool)
     # boundary-edge samples: a chord farther than ``far`` from B splits too
     # (the boundary follows B), unless its projection would fold a new triangle
     on_b = np.flatnonzero(has_edge & (row_count.reshape(-1, 3)[np.arange(m), k_edge] == 1))
@@ -157,26 +162,31 @@ def plan_splits(V, F, table: EdgeTable, v, psi, tau, field, rng, *, near, far, b
         Q = project(P[on_b])
         ends = np.stack([T[on_b, k_edge[on_b]], T[on_b, (k_edge[on_b] + 1) % 3]], 1)
         clear = (np.linalg.norm(ends - P[on_b, None], axis=2) >= near_b).all(axis=1)
-        want[on_b] |= clear & (np.linalg.norm(Q - P[on_b], axis=1) > far)
-        want[on_b[split_folds(T[on_b], k_edge[on_b], Q, N[on_b])]] = False
+        chord[on_b] = clear & (np.linalg.norm(Q - P[on_b], axis=1) > far)
+        want[on_b] |= chord[on_b]
+        folds = on_b[split_folds(T[on_b], k_edge[on_b], Q, N[on_b])]
+        want[folds] = chord[folds] = False
     beside = None
     if len(off_b):
         off = np.zeros(len(V), bool)
         off[off_b] = True
         beside = off[F].any(axis=1)
         want &= ~beside
-    budget = budget // 2
+    budget, reserve = budget // 2, reserve // 2  # a split makes at least two triangles
     full = False
     # edge splits: one per edge (a random one of its triangles' samples) ...
     ef = np.flatnonzero(want & has_edge)
     eid = table.eid[3 * ef + k_edge[ef]]
     keep = first_per_group(eid, rng.random(len(ef)))
     ef, eid = ef[keep], eid[keep]
+    first = np.argsort(~chord[ef], kind="stable")  # chord splits first
+    ef, eid = ef[first], eid[first]
     # ... and a triangle takes part in one split at most: of two chosen
     # edges on a triangle, the later one is dropped everywhere
     good = table.independent(eid)
-    full |= int(good.sum()) > budget
-    good &= np.cumsum(good) <= budget
+    allowed = np.where(chord[ef], budget, budget - reserve)
+    full |= bool((np.cumsum(good) > allowed)[good].any())
+    good &= np.cumsum(good) <= allowed
     ef, eid = ef[good], eid[good]
     on, which = table.rows_of(eid)
     if beside is not None and len(eid):  # ... nor a junction edge with a triangle beside an off-B vertex
@@ -188,8 +198,47 @@ def plan_splits(V, F, table: EdgeTable, v, psi, tau, field, rng, *, near, far, b
     E = np.stack([F[ef, k_edge[ef]], F[ef, (k_edge[ef] + 1) % 3]], 1).reshape(-1, 2)
     # 1-to-3 splits of the others
     tf = np.flatnonzero(want & ~has_edge & ~busy)
-    tf = tf[: max(0, budget - len(ef))]
+    tf = tf[: max(0, budget - reserve - len(ef))]
     return SplitPlan(E, t[ef], on, which, tf, bary[tf], full)
+
+
+def plan_chord_splits(V, F, table: EdgeTable, *, far, near_b, budget, project, off_b) -> SplitPlan:
+    """Splits at the middle of every boundary edge whose chord passes farther than ``far`` from B.
+
+    The sampled rule of :func:`plan_splits` finds a long chord across a
+    crease of B over a few rounds; while the boundary slides on B in large
+    steps this plan, which tests every boundary edge at once, keeps the pieces
+    on the two sides of a sheet from meeting through the gap. Edges shorter
+    than ``2 near_b`` and splits whose projection would turn a new triangle
+    over are left alone, and so are edges on a vertex still off B (``off_b``:
+    a collision stopped its projection; its chords are off B with it).
+    """
+    rows = table.boundary_rows
+    none = SplitPlan(np.zeros((0, 2), np.int64), np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.int64),
+                     np.zeros(0, np.int64), np.zeros((0, 3)), budget <= 0)
+    if budget <= 0 or not len(rows):
+        return none
+    f, k = rows // 3, rows % 3
+    T = V[F[f]]
+    a, b = T[np.arange(len(f)), k], T[np.arange(len(f)), (k + 1) % 3]
+    P = 0.5 * (a + b)
+    Q = project(P)
+    n = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
+    N = n / np.maximum(np.linalg.norm(n, axis=1), 1e-300)[:, None]
+    want = (np.linalg.norm(Q - P, axis=1) > far) & (np.linalg.norm(b - a, axis=1) >= 2.0 * near_b)
+    want &= ~split_folds(T, k, Q, N)
+    if len(off_b):
+        off = np.zeros(len(V), bool)
+        off[off_b] = True
+        want &= ~(off[F[f, k]] | off[F[f, (k + 1) % 3]])
+    rows = rows[want]
+    eid = table.eid[rows]
+    good = table.independent(eid)
+    good &= np.cumsum(good) <= budget // 2
+    rows, eid = rows[good], eid[good]
+    on, which = table.rows_of(eid)
+    E = np.stack([F[rows // 3, rows % 3], F[rows // 3, (rows % 3 + 1) % 3]], 1).reshape(-1, 2)
+    return SplitPlan(E, np.full(len(E), 0.5), on, which, np.zeros(0, np.int64), np.zeros((0, 3)), False)
 
 
 @numba.njit(cache=True)
