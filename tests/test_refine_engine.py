@@ -195,3 +195,36 @@ def test_the_loop_ends_when_collisions_keep_a_boundary_vertex_off_b(monkeypatch)
     monkeypatch.setattr(engine, "stop_collisions", real)
     log = Refiner(flat_cut(), pyramid, BV, BF, params, np.random.default_rng(0)).run()
     assert "off B" not in log.stop and log.boundary_error[-1] < 1e-12
+
+
+def test_chord_splits_take_every_boundary_edge_far_from_b_and_only_those():
+    """plan_chord_splits: a boundary edge whose middle is farther than ``far`` from B is split at its middle,
+    long enough edges only, never one on a vertex off B, and no triangle carries two split edges."""
+    from fracture.refine.kernels import edge_table, row_edges
+    from fracture.refine.remesh import plan_chord_splits
+
+    mesh = flat_cut()  # the plane x = 0.52 across the unit box; B stands in as a projection
+    V, F = mesh.V, mesh.F
+    table = edge_table(F, len(V))
+
+    def project(P):  # "B" lies 0.2 off the sheet where y > 0.5
+        return P + np.where(P[:, 1:2] > 0.5, [0.2, 0.0, 0.0], [0.0, 0.0, 0.0])
+
+    E = row_edges(F, table.boundary_rows)
+    far_edges = {tuple(sorted(e)) for e in E if 0.5 * (V[e[0], 1] + V[e[1], 1]) > 0.5}
+    plan = plan_chord_splits(V, F, table, far=0.05, near_b=1e-3, budget=10_000, project=project,
+                             off_b=np.zeros(0, np.int64))
+    split = {tuple(sorted(e)) for e in plan.edges}
+    assert split and split <= far_edges and np.allclose(plan.t, 0.5)
+    assert len(np.unique(plan.rows // 3)) == len(plan.rows)  # a triangle carries one split edge at most
+    # every far edge is split or shares a triangle with one that is
+    faces_split = set((plan.rows // 3).tolist())
+    for e in far_edges - split:
+        faces = np.flatnonzero(np.isin(F, e).sum(axis=1) == 2)
+        assert faces_split & set(faces.tolist())
+    # not beside a vertex off B, nor shorter than 2 near_b
+    off = np.array(sorted({v for e in split for v in e})[:1])
+    plan = plan_chord_splits(V, F, table, far=0.05, near_b=1e-3, budget=10_000, project=project, off_b=off)
+    assert not np.isin(plan.edges, off).any()
+    assert plan_chord_splits(V, F, table, far=0.05, near_b=1.0, budget=10_000, project=project,
+                             off_b=np.zeros(0, np.int64)).count == 0
