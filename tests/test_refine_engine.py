@@ -136,7 +136,7 @@ def test_no_splits_beside_a_boundary_vertex_that_is_off_b():
     fan = mesh.F[(mesh.F == v).any(axis=1)].copy()
     m = len(mesh.F)
     plan = plan_splits(mesh.V, mesh.F, table, vel, w, 10.0 * r.step.start, r.field, r.rng, near=0.0, far=0.0,
-                       budget=10_000, project=lambda P: r.B.closest(P)[2], off_b=r.off_b)
+                       budget=10_000, off_b=r.off_b)
     assert plan.apply(mesh) > 0
     assert len(mesh.F) > m + len(fan)  # the rest did split ...
     assert np.array_equal(mesh.F[(mesh.F == v).any(axis=1)], fan)  # ... around v nothing did
@@ -228,3 +228,28 @@ def test_chord_splits_take_every_boundary_edge_far_from_b_and_only_those():
     assert not np.isin(plan.edges, off).any()
     assert plan_chord_splits(V, F, table, far=0.05, near_b=1.0, budget=10_000, project=project,
                              off_b=np.zeros(0, np.int64)).count == 0
+
+
+def test_inner_vertices_that_would_leave_b_are_found_and_only_near_ones_are_asked_about():
+    """leaving_b: an inner vertex moved out of the box (or onto it) is reported, one moved inside is not,
+    and B is asked only about vertices within a move of it."""
+    pyramid = two_weak_sheets()
+    BV, BF = box([0, 0, 0], [1, 1, 1], (8, 8, 8))
+    mesh = flat_cut()  # the plane x = 0.52; inner vertices from 1/6 to 5/6 in y and z
+    r = Refiner(mesh, pyramid, BV, BF, RefineParams(), np.random.default_rng(0))
+    inner = np.flatnonzero((np.abs(mesh.V[:, 1:] - 0.5) < 0.4).all(axis=1))
+    r.closest_on_b(inner)  # their distances to B are known now
+    X1 = mesh.V.copy()
+    edge, middle = inner[np.argmin(mesh.V[inner, 1])], inner[np.argmin(np.abs(mesh.V[inner, 1:] - 0.5).sum(axis=1))]
+    X1[edge, 1] = -0.01  # out through the face y = 0
+    X1[middle, 0] += 0.05  # inside, far from B
+    asked = []
+    closest = r.B.closest
+    r.B.closest = lambda P: (asked.append(len(P)), closest(P))[1]
+    reach = 0.25
+    out = r.leaving_b(X1, np.array([edge, middle]), reach)
+    assert out.tolist() == [edge] and asked == [1]  # the middle vertex is farther than its move from B
+    X1[edge, 1] = 0.0  # onto B: closer than the thickness
+    assert r.leaving_b(X1, np.array([edge]), reach).tolist() == [edge]
+    X1[edge, 1] = 0.02  # back inside
+    assert r.leaving_b(X1, np.array([edge]), reach).size == 0

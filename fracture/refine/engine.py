@@ -48,6 +48,7 @@ One iteration:
 3. the step: backward Euler on the area term
    (:func:`~fracture.refine.step.implicit_step`), the boundary constraint again,
    collision holds, the move limits, projection of the boundary onto B,
+   inner vertices that would leave B stopped (:meth:`Refiner.leaving_b`),
    continuous collision detection (stopped vertices stay where they were);
    the step is taken only if it does not raise the minimised functional
    ``E_s = integral of (psibar_s + offset)``, with the same quadrature as the
@@ -84,7 +85,7 @@ from fracture.topology import boundary_conormals
 
 # Attempts of a step that would raise the functional, each with half the tau of the last.
 _ATTEMPTS = 4
-# Chord splits (the boundary following B) may use the last 1/this of the triangle budget alone.
+# The field's splits leave the last 1/this of the triangle budget to chord splits (the boundary following B).
 _CHORD_RESERVE = 50
 # Rounds of chord splits per iteration (fit_chords).
 _CHORD_ROUNDS = 3
@@ -252,17 +253,40 @@ class Refiner:
         return np.unique(row_edges(self.mesh.F, self.edges().boundary_rows))
 
     # -- constraints -----------------------------------------------------------------------
-    def closest_on_b(self, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """:meth:`Exterior.closest` of vertices ``ids`` where they are: squared distances, triangles of B
-        and closest points. B is asked only about vertices that are new or moved since they were last
-        asked about (the answers are kept in the vertex state)."""
-        V, s = self.mesh.V, self.state
+    def closest_on_b(self, ids: np.ndarray, V: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`Exterior.closest` of vertices ``ids`` where they are (or at positions ``V``): squared
+        distances, triangles of B and closest points. B is asked only about vertices that are new or
+        moved since they were last asked about (the answers are kept in the vertex state)."""
+        V, s = (self.mesh.V if V is None else V), self.state
         s.grow(len(V))
         ask = ids[(V[ids] != s.near_at[ids]).any(axis=1)]
         if len(ask):
             s.near_d2[ask], s.near_tri[ask], s.near_point[ask] = self.B.closest(V[ask])
             s.near_at[ask] = V[ask]
         return s.near_d2[ids], s.near_tri[ids], s.near_point[ids]
+
+    def leaving_b(self, X1: np.ndarray, ids: np.ndarray, reach: float) -> np.ndarray:
+        """Of the inner vertices ``ids``, moved to ``X1`` by at most ``reach``, those that would leave the
+        object: outside B there, or closer to it than the collision thickness.
+
+        The paper stops colliding vertices (Sec. 4.4); B is one more obstacle:
+        a piece is the region of B on one side of the sheets, and an inner
+        vertex outside B makes the piece cross itself. A vertex's distance to
+        B changes by at most how far it moved, so B is asked only about
+        vertices whose last known distance, less their move since, is within
+        ``reach`` (:meth:`closest_on_b` keeps the answers); a vertex farther
+        than its move from B cannot have crossed it.
+        """
+        s = self.state
+        bound = np.sqrt(s.near_d2[ids]) - np.linalg.norm(X1[ids] - s.near_at[ids], axis=1)
+        near = ids[~(bound > reach)]  # NaN (never asked) counts as near
+        if not len(near):
+            return near
+        d2 = self.closest_on_b(near, X1)[0]
+        close = d2 < reach * reach
+        near, d2 = near[close], d2[close]
+        thin = self.params.thickness * self.h
+        return near[(d2 < thin * thin) | ~self.B.inside(X1[near])]
 
     def project_to_exterior(self, ids: np.ndarray, V: np.ndarray) -> None:
         """Put vertices ``ids`` of positions ``V`` on B (in place)."""
@@ -358,9 +382,8 @@ class Refiner:
         v, w, area, boundary, frames = self._velocity(table)
         clock = log.tick("flow", clock)
         plan = plan_splits(m.V, m.F, table, v, w, self.step.start, self.field, self.rng, near=self.near,
-                           far=p.split_distance * self.h, budget=p.max_triangles - len(m.F),
-                           project=lambda P: self.B.closest(P)[2], off_b=self.off_b,
-                           near_b=p.min_edge * self.h, reserve=p.max_triangles // _CHORD_RESERVE)
+                           far=p.split_distance * self.h, off_b=self.off_b,
+                           budget=p.max_triangles - p.max_triangles // _CHORD_RESERVE - len(m.F))
         self.full |= plan.full
         made = plan.apply(m)
         if made:
@@ -397,6 +420,10 @@ class Refiner:
             limit_by_shortest_edge(m.V, m.F, d, boundary, BOUNDARY_MOVE)
             trial = m.V + d
             self.project_to_exterior(boundary, trial)
+            inner = np.flatnonzero((d != 0.0).any(axis=1))
+            inner = inner[~np.isin(inner, boundary)]
+            out = self.leaving_b(trial, inner, p.max_move * self.h)
+            trial[out] = m.V[out]  # stopped, as a collision stops a vertex
             clock = log.tick("step", clock)
             hit, _, grid = stop_collisions(m.V, trial, m.F, p.thickness * self.h, table, return_grid=True,
                                            closed=closed)

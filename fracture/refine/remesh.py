@@ -9,12 +9,12 @@ own move minus the move its corners give it: across the triangle's plane,
 or for an edge sample across the edge) it becomes a vertex: a 1-to-3 split of
 the triangle, or an edge split through every triangle on the edge.
 
-A sample on a boundary edge also asks for a split when B lies farther than
-``far`` from it: the boundary must stay on B, and a long chord across a
-curved B leaves a gap between the sheet and B through which the pieces on
-its two sides would meet (the paper samples boundary edges "to refine the
-fracture surface boundary"). This rule keeps to the last stage's ``near``
-whatever the stage: the boundary follows B, not the field.
+The boundary must also stay on B: a long chord across a curved B leaves a
+gap between the sheet and B through which the pieces on its two sides would
+meet (the paper samples boundary edges "to refine the fracture surface
+boundary"). :func:`plan_chord_splits` tests the middle of every boundary
+edge for that, at the last stage's ``near`` whatever the stage: the boundary
+follows B, not the field.
 
 A sample leaves its triangle when grad psi's normal part at the sample
 differs from what the corners carry, that is where psi varies across the
@@ -27,15 +27,11 @@ not be finer than the field they follow), and so are:
 
 * samples inside needles (their children would be needles too; the flips
   improve them first);
-* boundary-edge samples whose projection onto B would turn one of the new
-  triangles over (:func:`split_folds`);
 * any split beside a boundary vertex still off B (a collision stopped its
   projection): smaller triangles around it would fold when it moves onto B.
 
 A triangle takes part in one split at most per round; the triangle budget
-caps the round. Chord splits come first and may use the whole budget; the
-field's splits leave ``reserve`` triangles of it to them, so that a surface
-refined up to its budget still keeps its boundary on B.
+caps the round.
 """
 
 from __future__ import annotations
@@ -46,7 +42,7 @@ import numba
 import numpy as np
 
 from fracture.refine.flow import sample_displacement
-from fracture.refine.kernels import EdgeTable, _unit_normal_into, first_per_group
+from fracture.refine.kernels import EdgeTable, _unit_normal_into, face_geometry, first_per_group
 
 # Samples inside a triangle keep every barycentric coordinate at least this
 # (a sample near an edge would make a sliver); edge samples stay this far
@@ -104,8 +100,7 @@ def split_folds(T: np.ndarray, k: np.ndarray, Q: np.ndarray, N: np.ndarray) -> n
     return (np.einsum("ij,ij->i", n1, N) <= 0.0) | (np.einsum("ij,ij->i", n2, N) <= 0.0)
 
 
-def plan_splits(V, F, table: EdgeTable, v, psi, tau, field, rng, *, near, far, budget, project, off_b,
-                near_b=None, reserve=0) -> SplitPlan:
+def plan_splits(V, F, table: EdgeTable, v, psi, tau, field, rng, *, near, far, budget, off_b) -> SplitPlan:
     """The split plan of one round (module notes).
 
     Parameters
@@ -121,20 +116,12 @@ def plan_splits(V, F, table: EdgeTable, v, psi, tau, field, rng, *, near, far, b
     near, far : float
         Samples within ``near`` of a corner are skipped; a split is wanted where a sample leaves its
         triangle by more than ``far``.
-    near_b : float, optional
-        A boundary-edge sample farther than ``far`` from B splits its edge unless it is within this of
-        the edge's ends (default ``near``).
     budget : int
         Triangles that may still be made.
-    reserve : int
-        Triangles of the budget that only chord splits (boundary edges far from B) may use.
-    project : callable
-        ``project(P) -> closest points on B``.
     off_b : (j,) int
         Boundary vertices still off B.
     """
     m = len(F)
-    near_b = near if near_b is None else near_b
     empty = SplitPlan(np.zeros((0, 2), np.int64), np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.int64),
                       np.zeros(0, np.int64), np.zeros((0, 3)), budget <= 0)
     if budget <= 0 or m == 0:
@@ -153,40 +140,25 @@ def plan_splits(V, F, table: EdgeTable, v, psi, tau, field, rng, *, near, far, b
     P = np.einsum("fk,fkc->fc", bary, T)
     psi_P, grad_P = field(P)
     d = sample_displacement(P, T, psi_P, grad_P, psi[F], tau)
-    want, N = split_wanted(T, P, bary, d, v, F, tau, k_edge, has_edge, near * near, far, _MIN_QUALITY)
-    chord = np.zeros(m, bool)
-    # boundary-edge samples: a chord farther than ``far`` from B splits too
-    # (the boundary follows B), unless its projection would fold a new triangle
-    on_b = np.flatnonzero(has_edge & (row_count.reshape(-1, 3)[np.arange(m), k_edge] == 1))
-    if len(on_b):
-        Q = project(P[on_b])
-        ends = np.stack([T[on_b, k_edge[on_b]], T[on_b, (k_edge[on_b] + 1) % 3]], 1)
-        clear = (np.linalg.norm(ends - P[on_b, None], axis=2) >= near_b).all(axis=1)
-        chord[on_b] = clear & (np.linalg.norm(Q - P[on_b], axis=1) > far)
-        want[on_b] |= chord[on_b]
-        folds = on_b[split_folds(T[on_b], k_edge[on_b], Q, N[on_b])]
-        want[folds] = chord[folds] = False
+    want, _ = split_wanted(T, P, bary, d, v, F, tau, k_edge, has_edge, near * near, far, _MIN_QUALITY)
     beside = None
     if len(off_b):
         off = np.zeros(len(V), bool)
         off[off_b] = True
         beside = off[F].any(axis=1)
         want &= ~beside
-    budget, reserve = budget // 2, reserve // 2  # a split makes at least two triangles
+    budget = budget // 2  # a split makes at least two triangles
     full = False
     # edge splits: one per edge (a random one of its triangles' samples) ...
     ef = np.flatnonzero(want & has_edge)
     eid = table.eid[3 * ef + k_edge[ef]]
     keep = first_per_group(eid, rng.random(len(ef)))
     ef, eid = ef[keep], eid[keep]
-    first = np.argsort(~chord[ef], kind="stable")  # chord splits first
-    ef, eid = ef[first], eid[first]
     # ... and a triangle takes part in one split at most: of two chosen
     # edges on a triangle, the later one is dropped everywhere
     good = table.independent(eid)
-    allowed = np.where(chord[ef], budget, budget - reserve)
-    full |= bool((np.cumsum(good) > allowed)[good].any())
-    good &= np.cumsum(good) <= allowed
+    full |= int(good.sum()) > budget
+    good &= np.cumsum(good) <= budget
     ef, eid = ef[good], eid[good]
     on, which = table.rows_of(eid)
     if beside is not None and len(eid):  # ... nor a junction edge with a triangle beside an off-B vertex
@@ -198,17 +170,17 @@ def plan_splits(V, F, table: EdgeTable, v, psi, tau, field, rng, *, near, far, b
     E = np.stack([F[ef, k_edge[ef]], F[ef, (k_edge[ef] + 1) % 3]], 1).reshape(-1, 2)
     # 1-to-3 splits of the others
     tf = np.flatnonzero(want & ~has_edge & ~busy)
-    tf = tf[: max(0, budget - reserve - len(ef))]
+    tf = tf[: max(0, budget - len(ef))]
     return SplitPlan(E, t[ef], on, which, tf, bary[tf], full)
 
 
 def plan_chord_splits(V, F, table: EdgeTable, *, far, near_b, budget, project, off_b) -> SplitPlan:
     """Splits at the middle of every boundary edge whose chord passes farther than ``far`` from B.
 
-    The sampled rule of :func:`plan_splits` finds a long chord across a
-    crease of B over a few rounds; while the boundary slides on B in large
-    steps this plan, which tests every boundary edge at once, keeps the pieces
-    on the two sides of a sheet from meeting through the gap. Edges shorter
+    Every boundary edge is tested at once (a random sample per edge finds a
+    long chord across a crease of B only over several rounds, while the
+    boundary slides on B in steps of a grid cell), so the pieces on the two
+    sides of a sheet do not meet through the gap. Edges shorter
     than ``2 near_b`` and splits whose projection would turn a new triangle
     over are left alone, and so are edges on a vertex still off B (``off_b``:
     a collision stopped its projection; its chords are off B with it).
@@ -223,8 +195,7 @@ def plan_chord_splits(V, F, table: EdgeTable, *, far, near_b, budget, project, o
     a, b = T[np.arange(len(f)), k], T[np.arange(len(f)), (k + 1) % 3]
     P = 0.5 * (a + b)
     Q = project(P)
-    n = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
-    N = n / np.maximum(np.linalg.norm(n, axis=1), 1e-300)[:, None]
+    N = face_geometry(V, F[f])[1]
     want = (np.linalg.norm(Q - P, axis=1) > far) & (np.linalg.norm(b - a, axis=1) >= 2.0 * near_b)
     want &= ~split_folds(T, k, Q, N)
     if len(off_b):
