@@ -6,6 +6,11 @@ PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
+# Blender as a Python module (bpy, Python 3.11 only) in a venv of its own: the tests
+# import the USD and OBJ outputs into real Blender with it. bpy 4.2 needs NumPy 1.
+BLENDER_VENV := .venv-blender
+BLENDER_STAMP := $(BLENDER_VENV)/.installed
+BPY := bpy==4.2.*
 # Shared libraries open3d loads (OpenGL, EGL, OpenMP, USB); Xvfb and xauth for the
 # viewer window on a machine with no display.
 DEBIAN_PACKAGES := libgl1 libegl1 libgomp1 libusb-1.0-0 xvfb xauth
@@ -27,7 +32,7 @@ bench: install
 	$(BIN)/python benchmarks/bench_animate.py --triangles 200000
 	$(BIN)/python benchmarks/fidelity.py
 
-install: system-deps $(STAMP)
+install: system-deps $(STAMP) $(BLENDER_STAMP)
 
 system-deps:
 	@if command -v dpkg >/dev/null 2>&1; then \
@@ -48,5 +53,10 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet -e '.[test]'
 	@touch $(STAMP)
 
+$(BLENDER_STAMP):
+	$(PYTHON) -m venv $(BLENDER_VENV)
+	$(BLENDER_VENV)/bin/python -m pip install --quiet '$(BPY)' 'numpy<2'
+	@touch $(BLENDER_STAMP)
+
 clean:
-	rm -rf $(VENV) runs .pytest_cache
+	rm -rf $(VENV) $(BLENDER_VENV) runs .pytest_cache

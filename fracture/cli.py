@@ -3,6 +3,7 @@
 ``fracref run CONFIG [--out DIR] [--set key.path=value ...] [--until STAGE] [--force]``
 ``fracref config CONFIG [--set ...]`` prints the resolved config.
 ``fracref stages`` lists the stages.
+``fracref export RUN_DIR --format usd [--out FILE]`` writes a finished run's animated pieces as USD.
 """
 
 from __future__ import annotations
@@ -32,6 +33,11 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY.PATH=VALUE")
 
     sub.add_parser("stages", help="list the pipeline stages")
+
+    e = sub.add_parser("export", help="write a finished run's animated pieces as one USD file")
+    e.add_argument("run_dir", type=Path, metavar="RUN_DIR")
+    e.add_argument("--format", default="usd", choices=["usd"], help="output format (default: usd)")
+    e.add_argument("--out", type=Path, help="output file (default: RUN_DIR/animation/pieces.usdc)")
 
     v = sub.add_parser("view", help="open the research viewer on a run directory or a config")
     v.add_argument("target", type=Path, metavar="CONFIG_OR_RUN_DIR",
@@ -70,6 +76,11 @@ def main(argv: list[str] | None = None) -> int:
             return 0
         if args.command == "render":
             return _render(args)
+        if args.command == "export":
+            from fracture.export import export_run
+
+            print(f"wrote {export_run(args.run_dir, args.format, args.out)}")
+            return 0
         if args.command == "view":
             return _view(args)
         cfg = load_config(args.config, args.overrides)

@@ -40,7 +40,7 @@ SCHEMA: dict[str, Any] = {
         "exterior": Param(None, "path", nullable=True, doc="mesh file of the exterior surface B (closed)"),
         "fracture": Param(None, "path", nullable=True, doc="mesh file of the coarse fracture surface"),
         "path": Param(None, "dir", nullable=True, doc="mesh_sequence: folder of per-frame OBJ/PLY files"),
-        "glob": Param("*.obj", "str", doc="mesh_sequence: file name pattern of the frames (sorted by name)"),
+        "glob": Param("*.obj", "str", doc="mesh_sequence: file name pattern of the frames (ordered by the number in their names)"),
         "lattice": Param(2, "int", lo=2, hi=16,
                          doc="mesh_sequence: lattice nodes per axis fitted to a piece that deforms"),
         "separation": Param(1e-3, lo=1e-7, hi=0.5,
@@ -105,6 +105,9 @@ SCHEMA: dict[str, Any] = {
     "animate": {
         "obj_frames": Param(True, "bool", doc="write frames/frame_NNNN.obj (one object per piece, for Blender)"),
         "ply_frames": Param(False, "bool", doc="also write frames/frame_NNNN.ply (all pieces, face property piece)"),
+        "usd": Param(True, "bool", doc="write animation/pieces.usdc: one mesh per piece, points per frame, "
+                     "interior and exterior materials (Blender: File > Import > Universal Scene Description)"),
+        "fps": Param(24.0, lo=0.1, hi=1000.0, doc="frame rate recorded in the USD file"),
         "check_samples": Param(20000, "int", lo=0, hi=10_000_000,
                                doc="random points for the piece overlap check (0: skip)"),
         "check_intersections": Param(True, "bool", doc="find and resolve self-crossing pieces, and count the "

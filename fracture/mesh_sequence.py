@@ -1,7 +1,9 @@
 """Per-frame mesh files of a coarse fracture animation (Blender Cell Fracture + rigid bodies).
 
-A sequence is a directory of OBJ (or PLY) files, one per frame, sorted by name;
-the first is the rest pose. In an OBJ every piece is an object (``o name``)
+A sequence is a directory of OBJ (or PLY) files, one per frame, ordered by the
+frame number in their names (the last run of digits: ``frame_0001.obj``,
+Blender's ``frame1.obj ... frame40.obj``; :func:`frame_paths`); the first is
+the rest pose. In an OBJ every piece is an object (``o name``)
 and faces may be n-gons; in a PLY, which has no objects, the pieces are the
 connected components of the mesh, named ``piece_000``, ``piece_001``, ... in
 the order of their first vertex. Every frame must have the same pieces, the
@@ -10,6 +12,7 @@ same vertices in the same order and the same faces.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -98,6 +101,42 @@ def read_frame(path: str | Path) -> MeshFrame:
     return frame
 
 
+def frame_paths(directory: Path, pattern: str) -> list[Path]:
+    """The frame files of ``directory`` matching ``pattern``, ordered by their frame numbers.
+
+    The frame number is the last run of digits in a file's name (without its
+    suffix). Frames must follow at a constant step (Blender may export every
+    n-th frame); a file without a number, two files of one frame, or a gap in
+    the numbers is an error naming the files.
+    """
+    paths = [p for p in directory.glob(pattern) if p.is_file()]
+    if not paths:
+        raise InputError(f"{directory}: no frame files match {pattern!r}")
+    numbered = []
+    for p in paths:
+        digits = re.findall(r"\d+", p.stem)
+        if not digits:
+            raise InputError(f"{p}: no frame number in the file name (expected e.g. frame_0001{p.suffix} or "
+                             f"frame1{p.suffix}, as Blender writes them)")
+        numbered.append((int(digits[-1]), p.name, p))
+    numbered.sort()
+    numbers = [n for n, _, _ in numbered]
+    for (a, na, _), (b, nb, _) in zip(numbered, numbered[1:]):
+        if a == b:
+            raise InputError(f"{directory}: {na} and {nb} are both frame {a}")
+    if len(numbers) > 2:
+        step = min(b - a for a, b in zip(numbers, numbers[1:]))
+        for (a, na, _), (b, nb, _) in zip(numbered, numbered[1:]):
+            if b - a == step:
+                continue
+            if (b - a) % step:
+                raise InputError(f"{directory}: frames do not follow at a constant step: {na} (frame {a}) then "
+                                 f"{nb} (frame {b}), elsewhere every {step}")
+            missing = ", ".join(str(k) for k in range(a + step, b, step))
+            raise InputError(f"{directory}: frame {missing} missing between {na} and {nb}")
+    return [p for _, _, p in numbered]
+
+
 def read_sequence(directory: str | Path, pattern: str = "*.obj") -> list[MeshFrame]:
     """Read and cross-check all frames of a sequence.
 
@@ -111,9 +150,7 @@ def read_sequence(directory: str | Path, pattern: str = "*.obj") -> list[MeshFra
     directory = Path(directory)
     if not directory.is_dir():
         raise InputError(f"{directory}: mesh sequence directory not found")
-    paths = sorted(p for p in directory.glob(pattern) if p.is_file())
-    if not paths:
-        raise InputError(f"{directory}: no frame files match {pattern!r}")
+    paths = frame_paths(directory, pattern)
     frames = [read_frame(paths[0])]
     rest = frames[0]
     for number, path in enumerate(paths[1:], 2):

@@ -98,6 +98,13 @@ class Transfer:
         return X[self.offsets[c]:self.offsets[c + 1]]
 
 
+def frame_points(transfer: Transfer):
+    """Per frame, the list of every piece's points (a generator: one frame in memory at a time)."""
+    for t in range(transfer.n_frames):
+        X = transfer.positions(t)
+        yield [transfer.piece(X, c) for c in range(len(transfer.offsets) - 1)]
+
+
 @numba.njit(cache=True, fastmath=True)
 def _apply(indptr, indices, data, X, M, rows, out):
     """``out[rows[i]] = (sum_p data[p] M[indices[p]]) @ [X[rows[i]], 1]`` for every row ``i`` of the CSR weights.

@@ -203,3 +203,46 @@ def test_missing_directory_and_no_frames(tmp_path):
         read_sequence(tmp_path / "nope")
     with pytest.raises(InputError, match="no frame files match"):
         read_sequence(tmp_path)
+
+
+def _renamed_sample(tmp_path, name_of):
+    """The sample's frames copied under new names ``name_of(t)`` (t from 1)."""
+    d = tmp_path / "renamed"
+    d.mkdir()
+    for t in range(1, 41):
+        shutil.copy(SAMPLE / f"frame_{t:04d}.obj", d / name_of(t))
+    return d
+
+
+def test_frames_are_ordered_by_their_number_not_their_text(tmp_path):
+    d = _renamed_sample(tmp_path, lambda t: f"frame{t}.obj")  # Blender's exporter: frame1 ... frame40
+    frames = read_sequence(d)
+    want = read_sequence(SAMPLE)
+    assert [f.path.name for f in frames] == [f"frame{t}.obj" for t in range(1, 41)]
+    for a, b in zip(frames, want):
+        assert np.array_equal(a.V, b.V)
+
+
+@pytest.mark.parametrize("drop, rename, words", [
+    ([7], {}, ["frame 7 missing between frame6.obj and frame8.obj"]),
+    ([7, 8], {}, ["frame 7, 8 missing"]),
+    ([], {12: "frame_12.obj"}, ["frame12.obj and frame_12.obj are both frame 12"]),
+    ([], {5: "rest.obj"}, ["rest.obj", "no frame number"]),
+])
+def test_a_missing_duplicate_or_unnumbered_frame_is_named(tmp_path, drop, rename, words):
+    d = _renamed_sample(tmp_path, lambda t: f"frame{t}.obj")
+    for t in drop:
+        (d / f"frame{t}.obj").unlink()
+    for t, new in rename.items():
+        shutil.copy(d / f"frame{t}.obj", d / new)
+        if not new.startswith("frame_"):
+            (d / f"frame{t}.obj").unlink()
+    with pytest.raises(InputError) as err:
+        read_sequence(d)
+    for w in words:
+        assert w in str(err.value), str(err.value)
+
+
+def test_frames_exported_every_other_frame_are_accepted(tmp_path):
+    d = _renamed_sample(tmp_path, lambda t: f"frame{2 * t - 1}.obj")
+    assert len(read_sequence(d)) == 40

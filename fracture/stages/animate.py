@@ -9,6 +9,9 @@ Outputs:
   piece as an object named like the coarse piece, ready for Blender's OBJ
   import; with ``animate.ply_frames`` also ``frames/frame_NNNN.ply`` (all
   pieces, face property ``piece``);
+* ``animation/pieces.usdc`` (``animate.usd``): every piece as a USD mesh
+  with its points per frame and the interior (fracture) and exterior faces
+  bound to two materials (:mod:`fracture.usd`);
 * ``animation/transfer.npz``: the sparse transfer and the per-frame maps,
   from which a viewer computes any frame with one sparse product.
 
@@ -33,7 +36,8 @@ from fracture.pieces import build_pieces, mesh_checks, overlap_and_gap
 from fracture.plyio import write_ply
 from fracture.runner import RunContext, stage
 from fracture.topology import signed_volume
-from fracture.transfer import Transfer, build_transfer
+from fracture.transfer import Transfer, build_transfer, frame_points
+from fracture.usd import write_pieces_usd
 
 
 @stage("animate")
@@ -81,6 +85,9 @@ def animate_stage(ctx: RunContext) -> None:
                 write_ply(ctx.path(f"frames/frame_{t + 1:04d}.ply"), X, all_F, face_data={"piece": piece_of})
             bar.update()
         checks["early_gap_max"] = gap.worst
+        if opts["usd"]:
+            write_pieces_usd(ctx.path("animation/pieces.usdc"), cf.names,
+                             [F for _, _, F in local], pieces.exterior, frame_points(transfer), fps=opts["fps"])
 
     ctx.products["pieces"] = pieces
     ctx.products["transfer"] = transfer

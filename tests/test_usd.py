@@ -1,0 +1,173 @@
+"""The USD output: what the file holds (usd-core), and what real Blender (bpy) makes of it."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from conftest import REPO, scene_config
+from fracture.usd import prim_name, write_pieces_usd
+
+BLENDER_PYTHON = REPO / ".venv-blender" / "bin" / "python"
+CHECK = REPO / "tools" / "blender_check_usd.py"
+
+
+def _tetra(shift):
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float) + shift
+    F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    return V, F
+
+
+def _two_tetras_falling(n_frames):
+    """Two tetrahedra; per frame the first falls along -z, the second slides along +x."""
+    (A, FA), (B, FB) = _tetra([0, 0, 0]), _tetra([2, 0, 0])
+    frames = [[A - [0, 0, 0.5 * t], B + [0.25 * t, 0, 0]] for t in range(n_frames)]
+    return (FA, FB), frames
+
+
+def test_prim_names_are_valid_and_unique():
+    taken: set[str] = set()
+    got = [prim_name(n, taken) for n in ["source_cell.001", "source_cell_001", "1st piece", "", "a/b"]]
+    assert got == ["source_cell_001", "source_cell_001_1", "_1st_piece", "piece", "a_b"]
+
+
+def test_the_file_holds_topology_once_points_per_frame_and_two_material_subsets(tmp_path):
+    from pxr import Usd, UsdGeom, UsdShade
+
+    faces, frames = _two_tetras_falling(5)
+    exterior = [np.array([1, 1, 0, 0], bool), np.array([0, 1, 1, 1], bool)]
+    out = write_pieces_usd(tmp_path / "p.usdc", ["cell.000", "cell.001"], faces, exterior, frames, start_frame=3,
+                           fps=30.0)
+    stage = Usd.Stage.Open(str(out))
+    assert UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.z
+    assert UsdGeom.GetStageMetersPerUnit(stage) == 1.0
+    assert (stage.GetStartTimeCode(), stage.GetEndTimeCode(), stage.GetFramesPerSecond()) == (3, 7, 30)
+    for k, path in enumerate(["/Fracture/cell_000", "/Fracture/cell_001"]):
+        mesh = UsdGeom.Mesh(stage.GetPrimAtPath(path))
+        assert mesh.GetPrim().GetAttribute("fracref:sourceName").Get() == f"cell.00{k}"
+        assert not mesh.GetFaceVertexIndicesAttr().GetNumTimeSamples()  # topology once
+        assert np.array_equal(np.array(mesh.GetFaceVertexIndicesAttr().Get()).reshape(-1, 3), faces[k])
+        assert mesh.GetPointsAttr().GetTimeSamples() == [3, 4, 5, 6, 7]
+        for t in range(5):
+            np.testing.assert_allclose(np.array(mesh.GetPointsAttr().Get(3 + t)), frames[t][k], atol=1e-6)
+        subsets = {s.GetPrim().GetName(): s for s in UsdGeom.Subset.GetGeomSubsets(mesh)}
+        assert set(subsets) == {"interior", "exterior"}
+        assert UsdGeom.Subset.ValidateSubsets(list(subsets.values()), 4, UsdGeom.Tokens.partition)[0]
+        for kind, want in (("exterior", exterior[k]), ("interior", ~exterior[k])):
+            assert sorted(subsets[kind].GetIndicesAttr().Get()) == np.flatnonzero(want).tolist()
+            bound = UsdShade.MaterialBindingAPI(subsets[kind].GetPrim()).ComputeBoundMaterial()[0]
+            assert bound.GetPath() == f"/Fracture/Materials/{kind}"
+
+
+def test_a_failed_write_keeps_the_earlier_file_and_leaves_nothing(tmp_path):
+    faces, frames = _two_tetras_falling(3)
+    ext = [np.ones(4, bool)] * 2
+    out = write_pieces_usd(tmp_path / "p.usdc", ["a", "b"], faces, ext, frames)
+    before = out.read_bytes()
+
+    def broken():
+        yield frames[0]
+        raise RuntimeError("killed")
+
+    with pytest.raises(RuntimeError):
+        write_pieces_usd(out, ["a", "b"], faces, ext, broken())
+    with pytest.raises(ValueError, match="frame 2: 1 point arrays for 2 pieces"):
+        write_pieces_usd(out, ["a", "b"], faces, ext, [frames[0], frames[1][:1]])
+    assert out.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["p.usdc"]
+
+
+def _blender(path: Path) -> dict:
+    """What Blender (the bpy module) sees when it imports ``path``."""
+    assert BLENDER_PYTHON.is_file(), "Blender's Python is missing: run `make install` (it creates .venv-blender)"
+    env = {k: v for k, v in os.environ.items() if not k.startswith("PYTHON")}
+    done = subprocess.run([str(BLENDER_PYTHON), str(CHECK), str(path)], capture_output=True, text=True,
+                          timeout=600, env=env, cwd=path.parent)
+    assert done.returncode == 0, done.stderr[-2000:]
+    line = [x for x in done.stdout.splitlines() if x.startswith("FRACREF-JSON ")]
+    assert line, done.stdout[-2000:]
+    return json.loads(line[0][len("FRACREF-JSON "):])
+
+
+@pytest.fixture(scope="module")
+def cube8_run(tmp_path_factory):
+    """The shipped Blender Cell Fracture sample, run end to end at a small budget."""
+    from fracture import runner
+
+    out = tmp_path_factory.mktemp("usd") / "run"
+    cfg = scene_config("blender_cube8", ["refine.max_triangles=6000", "animate.check_samples=0"])
+    return runner.run(cfg, out, progress=False)
+
+
+@pytest.mark.slow
+def test_blender_imports_the_run_usd_with_names_closed_pieces_materials_and_motion(cube8_run):
+    from fracture.plyio import read_ply
+    from fracture.transfer import load_transfer
+
+    names = json.loads((cube8_run / "coarse/components.json").read_text())["names"]
+    got = _blender(cube8_run / "animation/pieces.usdc")
+    tr = load_transfer(cube8_run / "animation/transfer.npz")
+    assert (got["frame_start"], got["frame_end"]) == (1, tr.n_frames)
+    objects = {o["name"]: o for o in got["objects"]}
+    taken: set[str] = set()
+    assert sorted(objects) == sorted(prim_name(n, taken) for n in names)
+    taken = set()
+    first, last = tr.positions(0), tr.positions(tr.n_frames - 1)
+    assert np.abs(last - first).max() > 0.5  # the pieces fall: the frames differ
+    for c, name in enumerate(names):
+        o = objects[prim_name(name, taken)]
+        _, F, _, face_data = read_ply(cube8_run / f"pieces/piece_{c:03d}.ply")
+        ext = face_data["exterior"].astype(bool)
+        assert o["closed"] and o["faces"] == len(F)
+        assert o["materials"] == {"exterior": int(ext.sum()), "interior": int((~ext).sum())}
+        np.testing.assert_allclose(o["first"], tr.piece(first, c), atol=1e-5)
+        np.testing.assert_allclose(o["last"], tr.piece(last, c), atol=1e-5)
+
+
+@pytest.mark.slow
+def test_blender_imports_an_obj_frame_with_the_z_up_axes_the_readme_gives(cube8_run):
+    from fracture.transfer import load_transfer
+
+    names = json.loads((cube8_run / "coarse/components.json").read_text())["names"]
+    tr = load_transfer(cube8_run / "animation/transfer.npz")
+    t = tr.n_frames
+    got = {o["name"]: o for o in _blender(cube8_run / f"frames/frame_{t:04d}.obj")["objects"]}
+    assert sorted(got) == sorted(names)
+    X = tr.positions(t - 1)
+    for c, name in enumerate(names):
+        assert got[name]["closed"]
+        np.testing.assert_allclose(np.sort(np.array(got[name]["first"]), axis=0), np.sort(tr.piece(X, c), axis=0),
+                                   atol=1e-5)
+
+
+@pytest.mark.slow
+def test_fracref_export_rewrites_the_same_usd_elsewhere(cube8_run, tmp_path):
+    from pxr import Usd, UsdGeom
+
+    from fracture.cli import main
+
+    assert main(["export", str(cube8_run), "--format", "usd", "--out", str(tmp_path / "again.usda")]) == 0
+    a = Usd.Stage.Open(str(cube8_run / "animation/pieces.usdc"))
+    b = Usd.Stage.Open(str(tmp_path / "again.usda"))
+    pa = [p.GetPath() for p in a.Traverse()]
+    assert pa == [p.GetPath() for p in b.Traverse()]
+    for p in pa:
+        if a.GetPrimAtPath(p).IsA(UsdGeom.Mesh):
+            for t in (1, a.GetEndTimeCode()):
+                assert np.array_equal(np.array(UsdGeom.Mesh(a.GetPrimAtPath(p)).GetPointsAttr().Get(t)),
+                                      np.array(UsdGeom.Mesh(b.GetPrimAtPath(p)).GetPointsAttr().Get(t)))
+
+
+def test_fracref_export_refuses_what_is_not_a_finished_run(tmp_path, capsys):
+    from fracture.cli import main
+
+    assert main(["export", str(tmp_path / "nowhere")]) == 2
+    assert "not a run directory" in capsys.readouterr().err
+    (tmp_path / "half").mkdir()
+    assert main(["export", str(tmp_path / "half")]) == 2
+    assert "coarse/components.json is missing" in capsys.readouterr().err
