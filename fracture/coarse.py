@@ -186,6 +186,8 @@ class CoarseFracture:
         (zero for built-in animations).
     notes : list of str
         What was repaired or assumed on import.
+    up_axis : str
+        The axis pointing up in the input ("x", "y" or "z"), for the outputs' up axis.
     """
 
     exterior_V: np.ndarray
@@ -201,6 +203,7 @@ class CoarseFracture:
     virtual: np.ndarray
     fit_residual: np.ndarray
     notes: list[str] = field(default_factory=list)
+    up_axis: str = "z"
 
     @property
     def n_components(self) -> int:

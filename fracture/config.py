@@ -41,6 +41,9 @@ SCHEMA: dict[str, Any] = {
         "fracture": Param(None, "path", nullable=True, doc="mesh file of the coarse fracture surface"),
         "path": Param(None, "dir", nullable=True, doc="mesh_sequence: folder of per-frame OBJ/PLY files"),
         "glob": Param("*.obj", "str", doc="mesh_sequence: file name pattern of the frames (ordered by the number in their names)"),
+        "up_axis": Param("auto", "str", choices=("auto", "x", "y", "z"),
+                         doc="mesh_sequence: the axis pointing up (auto: the one the pieces fall down; Blender's "
+                             "OBJ exporter writes y by default); the USD output records it"),
         "lattice": Param(2, "int", lo=2, hi=16,
                          doc="mesh_sequence: lattice nodes per axis fitted to a piece that deforms"),
         "separation": Param(1e-3, lo=1e-7, hi=0.5,

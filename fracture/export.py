@@ -3,7 +3,7 @@
 Reads the run directory (``coarse/components.json`` for the piece names,
 ``pieces/piece_NNN.ply`` for their triangles and exterior flags,
 ``animation/transfer.npz`` for the frames, ``config.yaml`` for the frame
-rate) and writes one file. The run itself writes the USD file already
+rate, ``manifest.json`` for the up axis) and writes one file. The run itself writes the USD file already
 (``animate.usd``); this exports it again elsewhere, or for a run made without it.
 """
 
@@ -58,9 +58,12 @@ def export_run(run: str | Path, fmt: str = "usd", out: str | Path | None = None)
         exterior.append(np.asarray(face_data["exterior"]).astype(bool))
     cfg = yaml.safe_load(_need(run, "config.yaml").read_text())
     fps = float(cfg.get("animate", {}).get("fps", 24.0))
+    manifest = json.loads(_need(run, "manifest.json").read_text())
+    up = manifest.get("stats", {}).get("coarse", {}).get("up_axis", "z")
     out = Path(out) if out is not None else run / "animation" / "pieces.usdc"
     if out.suffix not in (".usd", ".usdc", ".usda"):
         raise InputError(f"export: {out}: a USD file name ends in .usd, .usdc or .usda")
     if not out.parent.is_dir():
         raise InputError(f"export: {out.parent} is not a directory")
-    return write_pieces_usd(out, names, faces, exterior, frame_points(transfer), fps=fps)
+    return write_pieces_usd(out, names, faces, exterior, frame_points(transfer), fps=fps,
+                            up_axis="Y" if up == "y" else "Z")

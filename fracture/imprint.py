@@ -25,6 +25,8 @@ of B. It touches only the triangles along the cut.
 
 from __future__ import annotations
 
+import heapq
+
 from dataclasses import dataclass
 
 import numpy as np
@@ -32,6 +34,7 @@ import numpy as np
 from fracture.errors import InputError
 from fracture.exterior import Exterior
 from fracture.refine.kernels import edge_table, row_edges
+from fracture.refine.crossings_on_b import splits_would_cross
 from fracture.refine.mesh import RefineMesh
 
 # A point within this barycentric distance of an edge (or two edges) of a B
@@ -225,7 +228,55 @@ def _trace(surf: _Surface, p: int, q: int, claimed: set, cut: set, where: str) -
     their mean normal, walked vertex to vertex: from each vertex, the plane
     leaves through one edge of the fan ahead (farther along ``q - p``),
     which is split there (or the walk steps onto a vertex of B it meets).
+    Where the section cannot be walked (B folds between ``p`` and ``q``, or
+    the section meets another curve), the path is the shortest chain of B's
+    edges from ``p`` to ``q`` that touches no other curve
+    (:func:`_edge_path`); the splits the walk made stay (they only refine B).
     """
+    added: list[int] = []
+    try:
+        return _walk_section(surf, p, q, claimed, cut, where, added)
+    except InputError:
+        claimed.difference_update(added)
+        path = _edge_path(surf, p, q, claimed, cut)
+        if path is None:
+            raise
+        claimed.update(path[1:-1])
+        return path
+
+
+def _edge_path(surf: _Surface, p: int, q: int, claimed: set, cut: set) -> list[int] | None:
+    """The shortest chain of B edges from ``p`` to ``q`` through no claimed vertex and along no cut edge
+    (Dijkstra over B's half-edges, searched near ``p`` and ``q`` first), or None."""
+    P, Q = np.asarray(surf.V[p]), np.asarray(surf.V[q])
+    mid, span = 0.5 * (P + Q), float(np.linalg.norm(Q - P))
+    for reach in (2.0 * span, 8.0 * span, np.inf):
+        dist, prev, heap = {p: 0.0}, {}, [(0.0, p)]
+        while heap:
+            d, u = heapq.heappop(heap)
+            if u == q:
+                path = [q]
+                while path[-1] != p:
+                    path.append(prev[path[-1]])
+                return path[::-1]
+            if d > dist.get(u, np.inf):
+                continue
+            U = np.asarray(surf.V[u])
+            for _, a, _ in surf.fan(u):
+                if (a in claimed and a != q) or (min(u, a), max(u, a)) in cut:
+                    continue
+                A = np.asarray(surf.V[a])
+                if np.linalg.norm(A - mid) > reach:
+                    continue
+                nd = d + float(np.linalg.norm(A - U))
+                if nd < dist.get(a, np.inf):
+                    dist[a], prev[a] = nd, u
+                    heapq.heappush(heap, (nd, a))
+    return None
+
+
+def _walk_section(surf: _Surface, p: int, q: int, claimed: set, cut: set, where: str, added: list) -> list[int]:
+    """The plane section walk of :func:`_trace`; the vertices it claims are appended to ``added``."""
     P, Q = np.asarray(surf.V[p]), np.asarray(surf.V[q])
     d = Q - P
     m = np.cross(d, _fan_normal(surf, p) + _fan_normal(surf, q))  # the plane's normal
@@ -264,6 +315,8 @@ def _trace(surf: _Surface, p: int, q: int, claimed: set, cut: set, where: str) -
             u = surf.split_edge(a, b, A[k] + t * (B[k] - A[k]))
         progress = max(progress, float(score[k]))
         chain.append(u)
+        if u not in claimed:
+            added.append(u)
         claimed.add(u)
     raise InputError(f"{where}: tracing the fracture boundary on B did not reach its end")
 
@@ -349,6 +402,7 @@ def subdivide_boundary(mesh: RefineMesh, exterior: Exterior, tolerance: float, m
         far = np.flatnonzero(d2 > tolerance ** 2)
         # one split edge per triangle per round
         far = far[np.unique(face[far], return_index=True)[1]]
+        far = far[~splits_would_cross(mesh.V, E, far, closest[far], lambda P: exterior.normals[exterior.closest(P)[1]])]
         if not len(far):
             break
         new = mesh.split_edges(E[far], np.full(len(far), 0.5), rows=rows[far], which=np.arange(len(far)))

@@ -49,24 +49,41 @@ class MeshFrame:
 
 
 def _read_ply_pieces(path: Path) -> MeshFrame:
-    import igl
+    """A PLY frame (ASCII or binary, any polygon sizes, as Blender writes it) read with plyfile: the
+    pieces are the connected components of its faces."""
+    from plyfile import PlyData, PlyParseError
 
     try:
-        V, F = igl.read_triangle_mesh(str(path))
-    except Exception as exc:
-        raise InputError(f"{path}: cannot read mesh ({exc})") from None
-    if len(F) == 0:
-        return MeshFrame(path, [], np.asarray(V, np.float64).reshape(-1, 3), [])
+        ply = PlyData.read(str(path))
+        vert = ply["vertex"]
+        V = np.stack([np.asarray(vert[c], np.float64) for c in ("x", "y", "z")], 1)
+        face = ply["face"] if "face" in ply else None
+        names = face.data.dtype.names if face is not None else ()
+        key = next((k for k in ("vertex_indices", "vertex_index") if k in names), None)
+        if face is not None and key is None:
+            raise InputError(f"{path}: the face element has no vertex_indices list")
+        polys = [np.asarray(f, np.int64) for f in face[key]] if face is not None else []
+    except InputError:
+        raise
+    except (PlyParseError, KeyError, ValueError, OSError) as exc:
+        raise InputError(f"{path}: cannot read PLY ({exc})") from None
+    if not polys:
+        return MeshFrame(path, [], V.reshape(-1, 3), [])
+    for i, f in enumerate(polys):
+        if len(f) < 3 or f.min() < 0 or f.max() >= len(V):
+            raise InputError(f"{path}: face {i} has {len(f)} corners or a corner outside the "
+                             f"{len(V)} vertices")
     n = len(V)
-    E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]]])
-    A = coo_matrix((np.ones(len(E)), (E[:, 0], E[:, 1])), shape=(n, n))
+    flat = np.concatenate(polys)
+    first = np.repeat(np.array([f[0] for f in polys]), [len(f) for f in polys])
+    A = coo_matrix((np.ones(len(flat)), (first, flat)), shape=(n, n))
     _, label = connected_components(A, directed=False)
-    face_label = label[F[:, 0]]
+    face_label = label[[f[0] for f in polys]]
     # connected_components numbers components by their lowest vertex, which
     # is the "order of the first vertex" rule; keep only labels with faces.
     labels = np.unique(face_label)
-    polys = [list(F[face_label == lab]) for lab in labels]
-    return MeshFrame(path, [f"piece_{i:03d}" for i in range(len(labels))], np.asarray(V, np.float64), polys)
+    pieces = [[f for f, lab in zip(polys, face_label) if lab == want] for want in labels]
+    return MeshFrame(path, [f"piece_{i:03d}" for i in range(len(labels))], V, pieces)
 
 
 def read_frame(path: str | Path) -> MeshFrame:
@@ -180,8 +197,20 @@ def _compact(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return V[used], inverse.reshape(F.shape)
 
 
+def up_axis_of(frames: list[MeshFrame]) -> str | None:
+    """The up axis of an animation of falling pieces: the axis along which their centroids moved most,
+    provided they moved down it by more than 1 % of the object's size; None when they did not."""
+    first, last = frames[0].V, frames[-1].V
+    d = (last - first).mean(axis=0)
+    size = float(np.linalg.norm(first.max(axis=0) - first.min(axis=0)))
+    k = int(np.argmax(np.abs(d)))
+    if d[k] >= -0.01 * size:
+        return None
+    return "xyz"[k]
+
+
 def load_coarse_sequence(directory: str | Path, pattern: str = "*.obj", lattice: int = 2,
-                         separation: float = 1e-3):
+                         separation: float = 1e-3, up_axis: str = "auto"):
     """Import a per-frame mesh sequence as a :class:`~fracture.coarse.CoarseFracture`.
 
     Parameters
@@ -196,36 +225,29 @@ def load_coarse_sequence(directory: str | Path, pattern: str = "*.obj", lattice:
     separation : float
         Two sides of a fracture location have separated once they are this
         far apart, relative to the object's box diagonal.
+    up_axis : str
+        "x", "y" or "z", or "auto": the axis the pieces fall down (:func:`up_axis_of`), else "z".
     """
     from fracture.animation import CoarseAnimation, fit_lattice, lattice_box
-    from fracture.coarse import flood_fill_patches, make_coarse, special_edges
-    from fracture.tiling import shared_surface
+    from fracture.coarse import make_coarse
+    from fracture.label_tiling import label_tiling
     from fracture.tolerances import tol
 
     frames = read_sequence(directory, pattern)
     rest = frames[0]
     diag = float(np.linalg.norm(rest.V.max(axis=0) - rest.V.min(axis=0)))
-    shared = shared_surface(rest.V, rest.polygons, rest.names, source=str(rest.path))
-    # each exterior patch cut out by the fracture boundary belongs to one piece
-    # (on the shared vertex ids, before the two surfaces are compacted apart)
-    sp = special_edges(shared.fracture_F, len(shared.V))
-    patches = flood_fill_patches(shared.exterior_F, sp.edges[sp.boundary])
+    shared = label_tiling(rest.V, rest.polygons, rest.names, source=str(rest.path))
+    names = [rest.names[p] for p in shared.kept]
     V, F = _compact(shared.V, shared.fracture_F)
     BV, BF = _compact(shared.V, shared.exterior_F)
-    for patch in np.unique(patches):
-        owners = np.unique(shared.exterior_piece[patches == patch])
-        if len(owners) > 1:
-            names = ", ".join(repr(rest.names[o]) for o in owners)
-            raise InputError(f"{rest.path}: the outer surfaces of pieces {names} are not separated by the "
-                             f"fracture surface (a cut does not reach the surface)")
 
-    n_pieces, n_frames = len(rest.names), len(frames)
+    n_pieces, n_frames = len(names), len(frames)
     lo, hi = np.empty((n_pieces, 3)), np.empty((n_pieces, 3))
     nodes = np.empty((n_frames, n_pieces, lattice, lattice, lattice, 3))
     residual = np.zeros((n_pieces, n_frames))
     rigid = np.zeros((n_pieces, n_frames))
-    for p in range(n_pieces):
-        vids = rest.piece_vertices(p)
+    for p, source in enumerate(shared.kept.tolist()):
+        vids = rest.piece_vertices(source)
         X = rest.V[vids]
         lo[p], hi[p] = lattice_box(X)
         for t, frame in enumerate(frames):
@@ -236,7 +258,13 @@ def load_coarse_sequence(directory: str | Path, pattern: str = "*.obj", lattice:
     deforming = np.flatnonzero(rigid.max(axis=1) > tol.rigid_fit * diag)
     if len(deforming):
         notes.append(f"pieces that do not move rigidly, fitted with a {lattice}^3 lattice: "
-                     + ", ".join(rest.names[p] for p in deforming))
-    cf = make_coarse(BV, BF, shared.exterior_piece, V, F, shared.sides, rest.names, animation, separation,
+                     + ", ".join(names[p] for p in deforming))
+    if up_axis == "auto":
+        found = up_axis_of(frames)
+        if found is None:
+            notes.append("the pieces do not fall: the up axis is taken to be z")
+        up_axis = found or "z"
+    cf = make_coarse(BV, BF, shared.exterior_piece, V, F, shared.sides, names, animation, separation,
                      fit_residual=residual, notes=notes)
-    return cf, {"rigid_residual": rigid, "piece_fracture_area": shared.piece_fracture_area}
+    cf.up_axis = up_axis
+    return cf, {"rigid_residual": rigid, "tiling_cells": shared.cells}

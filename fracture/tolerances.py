@@ -15,29 +15,9 @@ tol = SimpleNamespace(
     field_range=1e-12,
     # Absolute zero for lengths and areas in material units (object size ~1).
     zero=1e-12,
-    # --- Importing piece meshes (relative to the rest pose's box diagonal) ---
-    # Corners closer than this are one point. Files round to 6 decimals, and
-    # Cell Fracture's cells disagree on shared corners by up to ~4e-4 of the
-    # diagonal (the Blender sample: 1e-4 to 2.2e-3 for a diagonal of 3.46,
-    # distinct corners from 1e-2 on).
-    weld=8e-4,
-    # A corner this close to an edge of another face is a T-junction on it.
-    on_edge=8e-4,
-    # A face whose samples lie this close to another piece's opposite face
-    # is shared with that piece (real exports are not exactly coplanar:
-    # Cell Fracture output deviates by up to ~3e-3 of the diagonal).
-    gap_repair=5e-3,
-    # Facing faces of two pieces farther apart than gap_repair but closer
-    # than this are reported as a gap between the pieces.
-    gap_detect=2e-2,
-    # Normals of two shared faces point against each other at least this much (cosine).
-    facing=0.9,
-    # Areas below this (relative to diagonal^2) are empty.
-    area=1e-9,
+    # --- Importing piece meshes ---
     # |sum of area vectors| / total area above this: the piece is not closed.
     closure=1e-5,
-    # Pieces whose volumes add up to more than the object's by this fraction overlap.
-    volume=1e-4,
 )
 
 # Imported motion: a rigid fit this close (relative to the diagonal) is taken

@@ -6,7 +6,7 @@ import json
 
 import numpy as np
 import pytest
-from conftest import CONFIGS, SAMPLE, SCENE_CASES, scene_config
+from conftest import BUDGETS, CONFIGS, SAMPLE, SCENE_CASES, scene_config
 
 from fracture import runner
 from fracture.config import load_config
@@ -192,7 +192,7 @@ def test_the_example_run_writes_pieces_and_frames(tmp_path):
 
 @pytest.mark.parametrize("name", SCENE_CASES)
 def test_every_scene_animates_into_closed_pieces(name, tmp_path):
-    cfg = scene_config(name, ["refine.max_triangles=6000", "refine.iterations=8", "animate.check_samples=4000"])
+    cfg = scene_config(name, [f"refine.max_triangles={BUDGETS.get(name, 6000)}", "refine.iterations=8", "animate.check_samples=4000"])
     out = runner.run(cfg, tmp_path / "run", progress=False)
     manifest = json.loads((out / "manifest.json").read_text())
     a, counts = manifest["stats"]["animate"], manifest["counts"]

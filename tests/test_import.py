@@ -11,7 +11,7 @@ import pytest
 from conftest import SAMPLE, mesh_area as area
 from fracture import runner
 from fracture.coarse import special_edges
-from fracture.topology import signed_volume, unique_edges
+from fracture.topology import fan, signed_volume, unique_edges
 from fracture.config import load_config
 from fracture.errors import InputError
 from fracture.mesh_sequence import load_coarse_sequence, read_sequence
@@ -32,8 +32,10 @@ def test_sample_imports_into_eight_consistent_components(imported):
     assert np.all(cf.sides[:, 0] != cf.sides[:, 1])
     key = np.sort(cf.F, axis=1)
     assert len(np.unique(key, axis=0)) == len(key)
-    # the shared surface's area is half of what the pieces' own fracture faces cover
-    assert area(cf.V, cf.F) == pytest.approx(0.5 * extra["piece_fracture_area"].sum(), rel=1e-3)
+    # the shared surface's area is half of what the pieces cover inside the object (their areas less B's)
+    frame = read_sequence(SAMPLE)[0]
+    pieces = sum(area(frame.V, fan([np.asarray(f) for f in polys])[0]) for polys in frame.polygons)
+    assert area(cf.V, cf.F) == pytest.approx(0.5 * (pieces - 24.0), rel=0.03)
     # the pieces move rigidly: the rigid fit is exact up to the files' 6 decimals
     assert extra["rigid_residual"].max() < 1e-5 and cf.fit_residual.max() < 1e-5
 
@@ -42,15 +44,25 @@ def test_exterior_is_the_closed_cube_and_holds_the_cut_boundary(imported):
     cf, _ = imported
     BV, BF = cf.exterior_V, cf.exterior_F
     assert np.all(unique_edges(BF)[1] == 2)
-    assert area(BV, BF) == pytest.approx(24.0, rel=1e-6)
-    assert signed_volume(BV, BF) == pytest.approx(8.0, rel=1e-4)
+    # the cube, its edges cut by less than a grid cell
+    assert area(BV, BF) == pytest.approx(24.0, rel=0.02)
+    assert signed_volume(BV, BF) == pytest.approx(8.0, rel=0.01)
+    assert np.abs(BV).max(axis=0)[:2] == pytest.approx([1.0, 1.0], abs=1e-3)
     sp = special_edges(cf.F, len(cf.V))
     assert sp.boundary.any() and sp.nonmanifold.any()
     d2, _, _ = igl.point_mesh_squared_distance(cf.V[sp.boundary_vertices], BV, BF)
     assert np.sqrt(d2).max() < 1e-9  # boundary vertices are vertices of B
     interior = ~sp.boundary_vertices
     d2, _, _ = igl.point_mesh_squared_distance(cf.V[interior], BV, BF)
-    assert np.sqrt(d2).min() > 1e-3
+    assert np.sqrt(d2).min() > 1e-6
+    # every fracture triangle lies between its two pieces: on both pieces' surfaces, within a grid cell
+    frame = read_sequence(SAMPLE)[0]
+    C = cf.V[cf.F].mean(axis=1)
+    for p in range(8):
+        PV, PF = frame.V, fan([np.asarray(f) for f in frame.polygons[p]])[0]
+        mine = (cf.sides == p).any(axis=1)
+        d = np.sqrt(igl.point_mesh_squared_distance(C[mine], PV, PF)[0])
+        assert np.median(d) < 0.1 * 2.0 / 32 and d.max() < 2.0 / 32
 
 
 def test_flood_fill_gives_one_exterior_patch_per_piece(imported):
@@ -94,7 +106,7 @@ def test_runner_coarse_stage(tmp_path):
     assert manifest["counts"] == {"components": 8, "coarse_fracture_triangles": manifest["counts"]["coarse_fracture_triangles"],
                                   "frames": 40}
     assert manifest["counts"]["coarse_fracture_triangles"] > 8
-    assert any("sliver" in n for n in manifest["notes"])
+    assert any("slits and dents" in n for n in manifest["notes"])
     from fracture.plyio import read_ply
 
     V, F, vdata, fdata = read_ply(out / "coarse/fracture_surface.ply")
@@ -158,7 +170,6 @@ def _remove_object(lines, name):
     ("missing piece", [2], lambda l: _remove_object(l, "source_cell.007"), ["frame_0002.obj", "'source_cell.007'", "missing"]),
     ("nan", [4], lambda l: _set_nan(l, "source_cell.003"), ["frame_0004.obj", "'source_cell.003'", "NaN"]),
     ("empty file", [6], lambda l: [], ["frame_0006.obj", "empty"]),
-    ("open piece", list(range(1, 41)), lambda l: _drop_face(l, "source_cell.002"), ["frame_0001.obj", "'source_cell.002'", "not a closed surface"]),
     ("moved piece", [1], lambda l: _shift_piece(l, "source_cell.005", (0.05, 0.05, 0.05)), ["frame_0001.obj", "'source_cell.005'", "must tile"]),
 ])
 def test_bad_sequences_are_rejected_with_their_place(tmp_path, case, frames, edit, words):
@@ -182,20 +193,41 @@ def test_bad_sequences_are_rejected_with_their_place(tmp_path, case, frames, edi
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
 
 
-def test_gap_between_pieces_is_reported(tmp_path):
+def test_a_narrow_slit_between_pieces_is_filled_and_noted(tmp_path):
     d = _copy_sample(tmp_path)
     # move one corner piece away from its neighbours along the cube's diagonal
-    _edit(d / "frame_0001.obj", lambda l: _shift_piece(l, "source_cell", (-0.02, -0.02, -0.02)))
-    with pytest.raises(InputError, match="gap|overlap|closed surface"):
-        load_coarse_sequence(d)
+    _edit(d / "frame_0001.obj", lambda l: _shift_piece(l, "source_cell", (-0.01, -0.01, -0.01)))
+    cf, _ = load_coarse_sequence(d)
+    assert cf.n_components == 8
+    assert any("'source_cell' and" in n and "leave a slit" in n for n in cf.notes), cf.notes
+    assert signed_volume(cf.exterior_V, cf.exterior_F) == pytest.approx(8.0, rel=0.01)
 
 
-def test_tiny_gap_is_repaired_and_noted(tmp_path):
+def test_a_wide_gap_between_pieces_stays_a_gap(tmp_path):
+    d = _copy_sample(tmp_path)
+    _edit(d / "frame_0001.obj", lambda l: _shift_piece(l, "source_cell", (-0.1, -0.1, -0.1)))
+    cf, _ = load_coarse_sequence(d)
+    assert cf.n_components == 8
+    # the corner piece is apart: B runs around it, through the gap (whose walls add to its area)
+    assert np.all(unique_edges(cf.exterior_F)[1] == 2)
+    assert cf.exterior_V.min(axis=0)[:2] == pytest.approx([-1.1, -1.1], abs=1e-3)
+    assert area(cf.exterior_V, cf.exterior_F) > 24.0 + 2.0
+
+
+def test_a_tiny_gap_or_overlap_is_accepted(tmp_path):
     d = _copy_sample(tmp_path)
     _edit(d / "frame_0001.obj", lambda l: _shift_piece(l, "source_cell.006", (0.0015, 0.0, 0.0)))
     cf, _ = load_coarse_sequence(d)
+    assert cf.n_components == 8 and np.all(unique_edges(cf.exterior_F)[1] == 2)
+
+
+def test_an_open_piece_is_taken_by_its_winding_number_and_noted(tmp_path):
+    d = _copy_sample(tmp_path)
+    for t in range(1, 41):
+        _edit(d / f"frame_{t:04d}.obj", lambda l: _drop_face(l, "source_cell.002"))
+    cf, _ = load_coarse_sequence(d)
     assert cf.n_components == 8
-    assert any("welded corners" in n for n in cf.notes)
+    assert any("'source_cell.002' is not a closed surface" in n for n in cf.notes)
 
 
 def test_missing_directory_and_no_frames(tmp_path):

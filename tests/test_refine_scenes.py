@@ -6,7 +6,7 @@ import json
 
 import numpy as np
 import pytest
-from conftest import CONFIGS, SCENE_CASES, scene_config
+from conftest import BUDGETS, CONFIGS, SCENE_CASES, scene_config
 
 from fracture import runner
 from fracture.components import label_components
@@ -23,7 +23,7 @@ from fracture.stages.refine import load_snapshots
 
 @pytest.mark.parametrize("name", SCENE_CASES)
 def test_refined_surface_is_clean_on_b_and_separates_the_components(name, tmp_path):
-    cfg = scene_config(name, ["refine.max_triangles=6000", "refine.iterations=8"])
+    cfg = scene_config(name, [f"refine.max_triangles={BUDGETS.get(name, 6000)}", "refine.iterations=8"])
     out = runner.run(cfg, tmp_path / "run", until="refine", progress=False)
     manifest = json.loads((out / "manifest.json").read_text())
     stats, counts = manifest["stats"]["refine"], manifest["counts"]

@@ -71,6 +71,7 @@ import numpy as np
 from fracture.allocator import keep_freed_memory
 from fracture.exterior import Exterior
 from fracture.refine.collide import stop_collisions
+from fracture.refine.crossings_on_b import crossing_pairs
 from fracture.refine.fans import closed_vertices
 from fracture.refine.flips import flip_edges
 from fracture.refine.flow import energy, energy_gradient
@@ -83,6 +84,8 @@ from fracture.refine.step import (BOUNDARY_MOVE, StepSize, implicit_step, limit_
 from fracture.tolerances import tol
 from fracture.topology import boundary_conormals
 
+# Boundary curves keep this far apart on B (grid cells): imprinting them moves their vertices a little.
+_CURVE_GAP = 0.05
 # Attempts of a step that would raise the functional, each with half the tau of the last.
 _ATTEMPTS = 4
 # The field's splits leave the last 1/this of the triangle budget to chord splits (the boundary following B).
@@ -265,6 +268,34 @@ class Refiner:
             s.near_at[ask] = V[ask]
         return s.near_d2[ids], s.near_tri[ids], s.near_point[ids]
 
+    def normal_on_b(self, P: np.ndarray) -> np.ndarray:
+        """B's unit outward normal at the points of B closest to ``P``."""
+        return self.B.normals[self.B.closest(P)[1]]
+
+    def stop_crossings_on_b(self, X1: np.ndarray, table: EdgeTable, rounds: int = 4) -> int:
+        """Keep in place (in ``X1``) the boundary vertices of edges that the step to ``X1`` would make cross
+        (or come closer than ``_CURVE_GAP`` to) another boundary edge on B (:mod:`fracture.refine.crossings_on_b`); returns how many were kept.
+
+        Pairs that cross already where the surface is stay as they are (they are not made worse by
+        this step's own crossings only)."""
+        E = row_edges(self.mesh.F, table.boundary_rows)
+        if not len(E):
+            return 0
+        gap = _CURVE_GAP * self.h
+        before = {tuple(x) for x in crossing_pairs(self.mesh.V, E, self.normal_on_b, gap).tolist()}
+        kept = 0
+        for _ in range(rounds):
+            pairs = [x for x in crossing_pairs(X1, E, self.normal_on_b, gap).tolist() if tuple(x) not in before]
+            if not pairs:
+                break
+            ids = np.unique(E[np.asarray(pairs).ravel()])
+            ids = ids[(X1[ids] != self.mesh.V[ids]).any(axis=1)]
+            if not len(ids):
+                break
+            X1[ids] = self.mesh.V[ids]
+            kept += len(ids)
+        return kept
+
     def leaving_b(self, X1: np.ndarray, ids: np.ndarray, reach: float) -> np.ndarray:
         """Of the inner vertices ``ids``, moved to ``X1`` by at most ``reach``, those that would leave the
         object: outside B there, or closer to it than the collision thickness.
@@ -328,7 +359,8 @@ class Refiner:
             off_b = ids[self.closest_on_b(ids)[0] > self.on_b ** 2]
             plan = plan_chord_splits(self.mesh.V, self.mesh.F, table, far=p.split_distance * self.h,
                                      near_b=p.min_edge * self.h, budget=p.max_triangles - len(self.mesh.F),
-                                     project=lambda P: self.B.closest(P)[2], off_b=off_b)
+                                     project=lambda P: self.B.closest(P)[2], off_b=off_b,
+                                     normal_at=self.normal_on_b)
             if not plan.count:
                 break
             made += plan.apply(self.mesh)
@@ -424,6 +456,7 @@ class Refiner:
             inner = inner[~np.isin(inner, boundary)]
             out = self.leaving_b(trial, inner, p.max_move * self.h)
             trial[out] = m.V[out]  # stopped, as a collision stops a vertex
+            self.stop_crossings_on_b(trial, table)
             clock = log.tick("step", clock)
             hit, _, grid = stop_collisions(m.V, trial, m.F, p.thickness * self.h, table, return_grid=True,
                                            closed=closed)

@@ -41,6 +41,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from fracture.refine.crossings_on_b import splits_would_cross
 from fracture.refine.flow import sample_displacement
 from fracture.refine.kernels import EdgeTable, _unit_normal_into, face_geometry, first_per_group
 
@@ -174,7 +175,7 @@ def plan_splits(V, F, table: EdgeTable, v, psi, tau, field, rng, *, near, far, b
     return SplitPlan(E, t[ef], on, which, tf, bary[tf], full)
 
 
-def plan_chord_splits(V, F, table: EdgeTable, *, far, near_b, budget, project, off_b) -> SplitPlan:
+def plan_chord_splits(V, F, table: EdgeTable, *, far, near_b, budget, project, off_b, normal_at=None) -> SplitPlan:
     """Splits at the middle of every boundary edge whose chord passes farther than ``far`` from B.
 
     Every boundary edge is tested at once (a random sample per edge finds a
@@ -183,7 +184,10 @@ def plan_chord_splits(V, F, table: EdgeTable, *, far, near_b, budget, project, o
     sides of a sheet do not meet through the gap. Edges shorter
     than ``2 near_b`` and splits whose projection would turn a new triangle
     over are left alone, and so are edges on a vertex still off B (``off_b``:
-    a collision stopped its projection; its chords are off B with it).
+    a collision stopped its projection; its chords are off B with it), and,
+    given B's normals (``normal_at``), splits whose new vertex on B would make
+    the boundary cross another boundary curve there
+    (:func:`~fracture.refine.crossings_on_b.splits_would_cross`).
     """
     rows = table.boundary_rows
     none = SplitPlan(np.zeros((0, 2), np.int64), np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.int64),
@@ -202,6 +206,10 @@ def plan_chord_splits(V, F, table: EdgeTable, *, far, near_b, budget, project, o
         off = np.zeros(len(V), bool)
         off[off_b] = True
         want &= ~(off[F[f, k]] | off[F[f, (k + 1) % 3]])
+    if normal_at is not None and want.any():
+        Eall = np.stack([F[f, k], F[f, (k + 1) % 3]], 1)
+        idx = np.flatnonzero(want)
+        want[idx[splits_would_cross(V, Eall, idx, Q[idx], normal_at)]] = False
     rows = rows[want]
     eid = table.eid[rows]
     good = table.independent(eid)

@@ -87,7 +87,8 @@ def animate_stage(ctx: RunContext) -> None:
         checks["early_gap_max"] = gap.worst
         if opts["usd"]:
             write_pieces_usd(ctx.path("animation/pieces.usdc"), cf.names,
-                             [F for _, _, F in local], pieces.exterior, frame_points(transfer), fps=opts["fps"])
+                             [F for _, _, F in local], pieces.exterior, frame_points(transfer), fps=opts["fps"],
+                             up_axis="Y" if cf.up_axis == "y" else "Z")
 
     ctx.products["pieces"] = pieces
     ctx.products["transfer"] = transfer

@@ -42,7 +42,8 @@ def coarse_stage(ctx: RunContext) -> None:
     extra = {}
     with ctx.bar(1, f"coarse: {inp['kind']}") as bar:
         if inp["kind"] == "mesh_sequence":
-            cf, extra = load_coarse_sequence(inp["path"], inp["glob"], inp["lattice"], inp["separation"])
+            cf, extra = load_coarse_sequence(inp["path"], inp["glob"], inp["lattice"], inp["separation"],
+                                             inp["up_axis"])
         elif inp["kind"] == "scene":
             from fracture.scenes import build_scene
 
@@ -64,6 +65,7 @@ def coarse_stage(ctx: RunContext) -> None:
         "separated_triangles": int(separated.sum()),
         "virtual_triangles": int(cf.virtual.sum()),
         "first_separation_frame": int(cf.face_fracture_time.min()) + 1 if separated.any() else None,
+        "up_axis": cf.up_axis,
     }
     if "rigid_residual" in extra:
         ctx.stats["coarse"]["rigid_fit_residual_max"] = float(extra["rigid_residual"].max())

@@ -1,0 +1,90 @@
+"""Boundary curves that cross on B.
+
+The boundary vertices of the fracture surface slide on B. Two boundary
+curves (of two sheets, or two parts of one) can cross there without their
+chords meeting in space: a chord sags below a curved B, and two chords that
+cross on B's surface pass each other at different depths, which continuous
+collision detection cannot see. Crossing curves make the pieces of Sec. 5
+ill-defined (B cannot be cut along both), so a step that would make two
+curves cross is not taken for the vertices involved, as a collision stops a
+vertex (Sec. 4.4).
+
+Two boundary edges cross on B when they are near each other in space and,
+seen along B's normal there, their segments cross. Written here because no
+library tests segments for crossing on a surface.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+
+def crossing_pairs(X: np.ndarray, E: np.ndarray, normal_at, gap: float = 0.0) -> np.ndarray:
+    """Pairs ``(k, 2)`` of boundary edges ``E`` (rows of vertex ids into ``X``) that cross on B, or come
+    closer than ``gap`` there.
+
+    ``normal_at(P)`` gives B's unit normal near points ``P (k, 3)``. Edges that
+    share a vertex never count (they meet at it).
+    """
+    if len(E) < 2:
+        return np.zeros((0, 2), np.int64)
+    A, B = X[E[:, 0]], X[E[:, 1]]
+    M, L = 0.5 * (A + B), np.linalg.norm(B - A, axis=1)
+    pairs = cKDTree(M).query_pairs(float(L.max()) + gap, output_type="ndarray")
+    if not len(pairs):
+        return np.zeros((0, 2), np.int64)
+    i, j = pairs[:, 0], pairs[:, 1]
+    near = np.linalg.norm(M[i] - M[j], axis=1) <= 0.5 * (L[i] + L[j]) + gap
+    share = (E[i, 0, None] == E[j]).any(axis=1) | (E[i, 1, None] == E[j]).any(axis=1)
+    keep = near & ~share
+    i, j = i[keep], j[keep]
+    if not len(i):
+        return np.zeros((0, 2), np.int64)
+    n = normal_at(0.5 * (M[i] + M[j]))
+    # a frame of B's tangent plane at each pair
+    helper = np.where((np.abs(n[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+    u = np.cross(n, helper)
+    u /= np.linalg.norm(u, axis=1)[:, None]
+    v = np.cross(n, u)
+
+    def flat(P):
+        return np.stack([np.einsum("ij,ij->i", P, u), np.einsum("ij,ij->i", P, v)], 1)
+
+    a, b, c, d = flat(A[i]), flat(B[i]), flat(A[j]), flat(B[j])
+
+    def side(p, q, r):  # sign of the turn p -> q -> r
+        return np.sign((q[:, 0] - p[:, 0]) * (r[:, 1] - p[:, 1]) - (q[:, 1] - p[:, 1]) * (r[:, 0] - p[:, 0]))
+
+    cross = (side(a, b, c) * side(a, b, d) < 0) & (side(c, d, a) * side(c, d, b) < 0)
+    if gap > 0.0:
+        close = np.minimum.reduce([_point_segment(a, c, d), _point_segment(b, c, d), _point_segment(c, a, b),
+                                   _point_segment(d, a, b)]) < gap
+        cross |= close
+    return np.stack([i[cross], j[cross]], 1)
+
+
+def _point_segment(p, a, b):
+    """Distances ``(k,)`` of 2D points ``p`` from segments ``a b``."""
+    ab = b - a
+    t = np.clip(np.einsum("ij,ij->i", p - a, ab) / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-300), 0.0, 1.0)
+    return np.linalg.norm(a + t[:, None] * ab - p, axis=1)
+
+
+def splits_would_cross(V: np.ndarray, E: np.ndarray, which: np.ndarray, M: np.ndarray, normal_at) -> np.ndarray:
+    """Which of the splits of boundary edges ``E[which]`` at points ``M`` (on B) would make their halves
+    cross another boundary edge on B (a midpoint projected across a nearby curve), ``(len(which),)``."""
+    k = len(which)
+    if not k:
+        return np.zeros(0, bool)
+    X = np.concatenate([V, M])
+    m = len(V) + np.arange(k)
+    halves = np.concatenate([np.stack([E[which, 0], m], 1), np.stack([m, E[which, 1]], 1)])
+    keep = np.ones(len(E), bool)
+    keep[which] = False
+    first_new = int(keep.sum())
+    pairs = crossing_pairs(X, np.concatenate([E[keep], halves]), normal_at)
+    bad = np.zeros(k, bool)
+    for side in pairs.T:
+        bad[(side[side >= first_new] - first_new) % k] = True
+    return bad

@@ -1,0 +1,230 @@
+"""Make coarse fracture animations with Blender's Cell Fracture add-on and rigid bodies.
+
+Runs inside Blender (Debian's ``blender`` package, 3.4, ships the add-on)::
+
+    blender -b --factory-startup --python tools/make_cellfracture.py -- --out examples/cellfracture
+    blender -b --factory-startup --python tools/make_cellfracture.py -- --out /tmp/c --case torus_12 --frames 30
+
+For every case (an object, a number of cells, a seed, a pose) it builds the
+object, fractures it with Cell Fracture (cells seeded by random points inside
+the object, noise, margin 0, the add-on's defaults otherwise), makes each
+piece an active rigid body (convex hull, mass 1) over a passive ground plane,
+lets them fall, and writes the frames three ways, as artists export them:
+
+* ``CASE/sample/frame_0001.obj ...``: world coordinates, Z up, one ``o`` per
+  piece, n-gons, indices global to the file (like ``examples/blender_cellfracture_cube8``);
+* ``CASE/blender_obj/frameN.obj``: Blender's own OBJ exporter with its
+  defaults (animation on, Y up, forward -Z, ``.mtl``, normals, UVs);
+* ``CASE/ply/frame_0001.ply ...``: one ASCII PLY per frame, all pieces in one
+  mesh, n-gons kept (as Blender's PLY export keeps them), Z up.
+
+``CASE/case.json`` records the case, Blender's version and the export axes.
+Everything is deterministic for a given Blender build (seeded point sets,
+the rigid-body solver's fixed steps).
+"""
+
+import argparse
+import json
+import math
+import random
+import sys
+from pathlib import Path
+
+import bpy
+import addon_utils
+from mathutils import Euler, Matrix, Vector
+
+# name: (primitive, cells, seed, rotation in degrees, height of the centre above the ground)
+CASES = {
+    "cube_rotated_8": ("cube", 8, 1, (20.0, 35.0, 10.0), 3.0),
+    "cube_12": ("cube", 12, 2, (0.0, 0.0, 0.0), 3.0),
+    "cube_20": ("cube", 20, 3, (0.0, 10.0, 45.0), 3.5),
+    "cylinder_10": ("cylinder", 10, 4, (90.0, 0.0, 0.0), 3.0),
+    "icosphere_10": ("icosphere", 10, 5, (0.0, 0.0, 0.0), 3.0),
+    "icosphere_16": ("icosphere", 16, 6, (10.0, 0.0, 30.0), 3.5),
+    "torus_8": ("torus", 8, 7, (30.0, 0.0, 0.0), 3.0),
+    "torus_12": ("torus", 12, 8, (0.0, 0.0, 0.0), 3.0),
+    "suzanne_10": ("suzanne", 10, 9, (0.0, 0.0, 0.0), 3.0),
+    "suzanne_6": ("suzanne", 6, 10, (0.0, 0.0, 60.0), 3.0),
+}
+
+
+def _args():
+    argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
+    ap = argparse.ArgumentParser(prog="make_cellfracture.py")
+    ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--case", action="append", choices=sorted(CASES), help="default: every case")
+    ap.add_argument("--frames", type=int, default=30)
+    ap.add_argument("--formats", default="sample,blender_obj,ply")
+    return ap.parse_args(argv)
+
+
+def _clear():
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    addon_utils.enable("object_fracture_cell", default_set=True)
+
+
+def _primitive(kind: str):
+    if kind == "cube":
+        bpy.ops.mesh.primitive_cube_add(size=2.0)
+    elif kind == "cylinder":
+        bpy.ops.mesh.primitive_cylinder_add(vertices=16, radius=1.0, depth=2.0)
+    elif kind == "icosphere":
+        bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=2, radius=1.2)
+    elif kind == "torus":
+        bpy.ops.mesh.primitive_torus_add(major_segments=24, minor_segments=10, major_radius=1.0, minor_radius=0.4)
+    elif kind == "suzanne":  # remeshed: Suzanne is open and self-intersecting, the voxel remesh closes it
+        bpy.ops.mesh.primitive_monkey_add(size=2.0)
+        obj = bpy.context.active_object
+        mod = obj.modifiers.new("remesh", "REMESH")
+        mod.mode, mod.voxel_size = "VOXEL", 0.12
+        bpy.ops.object.modifier_apply(modifier=mod.name)
+        bpy.ops.object.mode_set(mode="EDIT")
+        bpy.ops.mesh.select_all(action="SELECT")
+        bpy.ops.mesh.decimate(ratio=0.3)
+        bpy.ops.object.mode_set(mode="OBJECT")
+    else:
+        raise ValueError(kind)
+    return bpy.context.active_object
+
+
+def _seed_points(obj, cells: int, seed: int):
+    """A child point cloud of ``cells`` random points inside ``obj``'s bounding box (Cell Fracture's VERT_CHILD)."""
+    rng = random.Random(seed)
+    lo = Vector([min(v.co[i] for v in obj.data.vertices) for i in range(3)])
+    hi = Vector([max(v.co[i] for v in obj.data.vertices) for i in range(3)])
+    pts = [Vector([rng.uniform(0.8 * lo[i], 0.8 * hi[i]) for i in range(3)]) for _ in range(cells)]
+    mesh = bpy.data.meshes.new("seeds")
+    mesh.from_pydata([tuple(p) for p in pts], [], [])
+    seeds = bpy.data.objects.new("seeds", mesh)
+    bpy.context.scene.collection.objects.link(seeds)
+    seeds.parent = obj
+    return seeds
+
+
+def build(case: str, frames: int):
+    kind, cells, seed, rot, height = CASES[case]
+    _clear()
+    scene = bpy.context.scene
+    scene.frame_start, scene.frame_end = 1, frames
+    obj = _primitive(kind)
+    obj.name = "source"
+    seeds = _seed_points(obj, cells, seed)
+    bpy.ops.object.select_all(action="DESELECT")
+    obj.select_set(True)
+    bpy.context.view_layer.objects.active = obj
+    bpy.ops.object.add_fracture_cell_objects(source={"VERT_CHILD"}, source_limit=cells, source_noise=0.0,
+                                             margin=0.0, use_recenter=True, use_remove_original=True,
+                                             collection_name="", use_smooth_faces=False)
+    bpy.data.objects.remove(seeds)
+    if obj.name in scene.objects:  # the add-on leaves the original behind when its seeds are a child
+        bpy.data.objects.remove(obj)
+    pieces = sorted((o for o in scene.objects if o.type == "MESH"), key=lambda o: o.name)
+    # pose the whole object: rotate about the origin, lift
+    R = Euler([math.radians(a) for a in rot]).to_matrix().to_4x4()
+    T = Matrix.Translation((0.0, 0.0, height))
+    for o in pieces:
+        o.matrix_world = T @ R @ o.matrix_world
+    bpy.ops.object.select_all(action="DESELECT")
+    for o in pieces:
+        o.select_set(True)
+    bpy.context.view_layer.objects.active = pieces[0]
+    bpy.ops.object.transform_apply(location=False, rotation=True, scale=True)
+    bpy.ops.rigidbody.world_add()
+    world = scene.rigidbody_world
+    world.point_cache.frame_start, world.point_cache.frame_end = 1, frames
+    for o in pieces:
+        bpy.context.view_layer.objects.active = o
+        bpy.ops.rigidbody.object_add(type="ACTIVE")
+        o.rigid_body.collision_shape = "CONVEX_HULL"
+        o.rigid_body.mass = 1.0
+        # the pieces touch: Bullet's default 4 cm collision margin would make them overlap and burst apart
+        o.rigid_body.use_margin = True
+        o.rigid_body.collision_margin = 0.0
+    return pieces
+
+
+def build_with_ground(case: str, frames: int):
+    """The fractured object's pieces as active rigid bodies over a passive ground plane at z = 0."""
+    pieces = build(case, frames)
+    scene = bpy.context.scene
+    bpy.ops.mesh.primitive_plane_add(size=40.0, location=(0.0, 0.0, 0.0))
+    ground = bpy.context.active_object
+    ground.name = "ground"
+    bpy.ops.rigidbody.object_add(type="PASSIVE")
+    ground.hide_render = True
+    scene.frame_set(1)
+    return pieces, ground
+
+
+def _world_polygons(o):
+    M = o.matrix_world
+    dg = bpy.context.evaluated_depsgraph_get()
+    ev = o.evaluated_get(dg)
+    me = ev.to_mesh()
+    V = [tuple(M @ v.co) for v in me.vertices]
+    P = [tuple(p.vertices) for p in me.polygons]
+    ev.to_mesh_clear()
+    return V, P
+
+
+def write_sample_obj(path: Path, pieces, frame: int):
+    lines = [f"# frame {frame}"]
+    base = 1
+    for o in pieces:
+        V, P = _world_polygons(o)
+        lines.append(f"o {o.name}")
+        lines += [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in V]
+        lines += ["f " + " ".join(str(base + i) for i in p) for p in P]
+        base += len(V)
+    path.write_text("\n".join(lines) + "\n")
+
+
+def write_ply(path: Path, pieces, frame: int):
+    Vs, Ps, base = [], [], 0
+    for o in pieces:
+        V, P = _world_polygons(o)
+        Vs += V
+        Ps += [tuple(base + i for i in p) for p in P]
+        base += len(V)
+    head = ["ply", "format ascii 1.0", f"comment frame {frame}", f"element vertex {len(Vs)}",
+            "property float x", "property float y", "property float z", f"element face {len(Ps)}",
+            "property list uchar uint vertex_indices", "end_header"]
+    body = [f"{x:.6f} {y:.6f} {z:.6f}" for x, y, z in Vs] + [f"{len(p)} " + " ".join(map(str, p)) for p in Ps]
+    path.write_text("\n".join(head + body) + "\n")
+
+
+def main():
+    args = _args()
+    formats = set(args.formats.split(","))
+    for case in args.case or sorted(CASES):
+        pieces, ground = build_with_ground(case, args.frames)
+        out = args.out / case
+        scene = bpy.context.scene
+        for sub in formats:
+            (out / sub).mkdir(parents=True, exist_ok=True)
+        for f in range(1, args.frames + 1):
+            scene.frame_set(f)
+            if "sample" in formats:
+                write_sample_obj(out / "sample" / f"frame_{f:04d}.obj", pieces, f)
+            if "ply" in formats:
+                write_ply(out / "ply" / f"frame_{f:04d}.ply", pieces, f)
+        if "blender_obj" in formats:
+            bpy.ops.object.select_all(action="DESELECT")
+            for o in pieces:
+                o.select_set(True)
+            scene.frame_set(1)
+            bpy.ops.wm.obj_export(filepath=str(out / "blender_obj" / "frame.obj"), export_animation=True,
+                                  start_frame=1, end_frame=args.frames, export_selected_objects=True)
+        kind, cells, seed, rot, height = CASES[case]
+        (out / "case.json").write_text(json.dumps({
+            "case": case, "object": kind, "cells": cells, "pieces": len(pieces), "seed": seed,
+            "rotation_degrees": rot, "height": height, "frames": args.frames,
+            "blender": bpy.app.version_string,
+            "formats": {"sample": "Z up, world coordinates, n-gons", "blender_obj": "Blender's OBJ exporter "
+                        "defaults: Y up, forward -Z", "ply": "ASCII, Z up, all pieces in one mesh, n-gons"},
+        }, indent=1))
+        print(f"{case}: {len(pieces)} pieces, {args.frames} frames -> {out}")
+
+
+main()
