@@ -106,7 +106,8 @@ SCHEMA: dict[str, Any] = {
         "snapshots": Param(True, "bool", doc="save every iteration for the viewer (refined/iterations.*)"),
     },
     "animate": {
-        "obj_frames": Param(True, "bool", doc="write frames/frame_NNNN.obj (one object per piece, for Blender)"),
+        "obj_frames": Param(False, "bool", doc="also write frames/frame_NNNN.obj (one object per piece, faces in "
+                            "the materials exterior and interior; the USD file holds every frame already)"),
         "ply_frames": Param(False, "bool", doc="also write frames/frame_NNNN.ply (all pieces, face property piece)"),
         "usd": Param(True, "bool", doc="write animation/pieces.usdc: one mesh per piece, points per frame, "
                      "interior and exterior materials (Blender: File > Import > Universal Scene Description)"),

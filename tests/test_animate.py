@@ -172,7 +172,7 @@ def test_obj_frames_round_trip(tmp_path):
 
 
 def test_the_example_run_writes_pieces_and_frames(tmp_path):
-    cfg = load_config(CONFIGS / "example.yaml", ["animate.ply_frames=true"])
+    cfg = load_config(CONFIGS / "example.yaml", ["animate.ply_frames=true", "animate.obj_frames=true"])
     out = runner.run(cfg, tmp_path / "run", progress=False)
     manifest = json.loads((out / "manifest.json").read_text())
     a = manifest["stats"]["animate"]
@@ -188,11 +188,16 @@ def test_the_example_run_writes_pieces_and_frames(tmp_path):
     frames = sorted((out / "frames").glob("frame_*.obj"))
     assert len(frames) == manifest["counts"]["frames"] and frames[0].name == "frame_0001.obj"
     assert (out / "frames" / "frame_0001.ply").is_file()
+    # the faces in two materials: the object's surface and the fracture
+    text = frames[0].read_text()
+    assert text.count("usemtl exterior") == n and text.count("usemtl interior") == n
+    assert "mtllib materials.mtl" in text and "newmtl interior" in (out / "frames" / "materials.mtl").read_text()
 
 
 @pytest.mark.parametrize("name", SCENE_CASES)
 def test_every_scene_animates_into_closed_pieces(name, tmp_path):
-    cfg = scene_config(name, [f"refine.max_triangles={BUDGETS.get(name, 6000)}", "refine.iterations=8", "animate.check_samples=4000"])
+    cfg = scene_config(name, [f"refine.max_triangles={BUDGETS.get(name, 6000)}", "refine.iterations=8", "animate.check_samples=4000",
+                              "animate.obj_frames=true"])
     out = runner.run(cfg, tmp_path / "run", progress=False)
     manifest = json.loads((out / "manifest.json").read_text())
     a, counts = manifest["stats"]["animate"], manifest["counts"]

@@ -100,7 +100,8 @@ def cube8_run(tmp_path_factory):
     from fracture import runner
 
     out = tmp_path_factory.mktemp("usd") / "run"
-    cfg = scene_config("blender_cube8", ["refine.max_triangles=15000", "animate.check_samples=0"])
+    cfg = scene_config("blender_cube8", ["refine.max_triangles=15000", "animate.check_samples=0",
+                                         "animate.obj_frames=true"])
     return runner.run(cfg, out, progress=False)
 
 

@@ -68,7 +68,10 @@ def animate_stage(ctx: RunContext) -> None:
                       vertex_data={"fracture_time": transfer.time[rows].astype(np.float32)},
                       face_data={"exterior": pieces.exterior[c].astype(np.uint8)})
         _save_transfer(ctx, transfer)
-        writer = ObjFrames(cf.names, [F for _, _, F in local], [len(ids) for ids, _, _ in local])
+        writer = ObjFrames(cf.names, [F for _, _, F in local], [len(ids) for ids, _, _ in local],
+                           exterior=pieces.exterior)
+        if opts["obj_frames"]:
+            writer.write_materials(ctx.path(f"frames/{writer.materials}"))
         if opts["ply_frames"]:  # rows of piece c start at transfer.offsets[c]
             all_F = np.concatenate([F + transfer.offsets[c] for c, (_, _, F) in enumerate(local)])
             piece_of = np.repeat(np.arange(pieces.n_pieces, dtype=np.int32), [len(F) for _, _, F in local])
