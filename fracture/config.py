@@ -31,19 +31,21 @@ SCHEMA: dict[str, Any] = {
     "name": Param(None, "str", nullable=True, doc="experiment name; null: the config file's name"),
     "seed": Param(0, "int", lo=0, hi=2**32 - 1, doc="seed of every random choice of the run"),
     "input": {
-        "kind": Param("meshes", "str", choices=("meshes", "mesh_sequence", "scene"),
+        "kind": Param("meshes", "str", choices=("meshes", "mesh_sequence", "usd", "scene"),
                       doc="meshes: exterior + coarse fracture surface files (no motion); mesh_sequence: "
-                          "per-frame piece meshes; scene: a built-in example"),
+                          "per-frame piece meshes; usd: one USD file of animated pieces; scene: a built-in example"),
         "scene": Param("wall", "str", choices=("bunny", "branch", "wall", "clay", "jello"),
                        doc="scene: which built-in example"),
         "frames": Param(40, "int", lo=4, hi=2000, doc="scene: frames of the coarse animation"),
         "exterior": Param(None, "path", nullable=True, doc="mesh file of the exterior surface B (closed)"),
         "fracture": Param(None, "path", nullable=True, doc="mesh file of the coarse fracture surface"),
         "path": Param(None, "dir", nullable=True, doc="mesh_sequence: folder of per-frame OBJ/PLY files"),
+        "usd": Param(None, "path", nullable=True, doc="usd: the USD file (a mesh per piece, time-sampled transforms "
+                     "or points, as Blender and Houdini write them)"),
         "glob": Param("*.obj", "str", doc="mesh_sequence: file name pattern of the frames (ordered by the number in their names)"),
         "up_axis": Param("auto", "str", choices=("auto", "x", "y", "z"),
-                         doc="mesh_sequence: the axis pointing up (auto: the one the pieces fall down; Blender's "
-                             "OBJ exporter writes y by default); the USD output records it"),
+                         doc="mesh_sequence, usd: the axis pointing up (auto: a USD file's own, else the one the "
+                             "pieces fall down; Blender's OBJ exporter writes y by default); the USD output records it"),
         "lattice": Param(2, "int", lo=2, hi=16,
                          doc="mesh_sequence: lattice nodes per axis fitted to a piece that deforms"),
         "separation": Param(1e-3, lo=1e-7, hi=0.5,
@@ -297,6 +299,9 @@ def _finish(merged: _Merged, name: str, in_files: bool = True) -> dict:
     if cfg["input"]["kind"] == "mesh_sequence" and cfg["input"]["path"] is None:
         raise ConfigError(merged.origin("input.kind"), "input.path",
                           "input.kind is mesh_sequence, expected input.path: the folder of frame files")
+    if cfg["input"]["kind"] == "usd" and cfg["input"]["usd"] is None:
+        raise ConfigError(merged.origin("input.kind"), "input.usd",
+                          "input.kind is usd, expected input.usd: the USD file of the animated pieces")
     if cfg["name"] is None:
         cfg["name"] = name
     return cfg

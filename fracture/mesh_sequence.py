@@ -211,14 +211,29 @@ def up_axis_of(frames: list[MeshFrame]) -> str | None:
 
 def load_coarse_sequence(directory: str | Path, pattern: str = "*.obj", lattice: int = 2,
                          separation: float = 1e-3, up_axis: str = "auto"):
-    """Import a per-frame mesh sequence as a :class:`~fracture.coarse.CoarseFracture`.
+    """Import a per-frame mesh sequence as a :class:`~fracture.coarse.CoarseFracture`
+    (:func:`read_sequence`, then :func:`coarse_from_frames`).
 
     Parameters
     ----------
     directory : str or Path
-        Folder of frame files; the first (by name) is the rest pose.
+        Folder of frame files; the first (by number) is the rest pose.
     pattern : str
         Glob selecting the frame files.
+    lattice, separation, up_axis
+        As for :func:`coarse_from_frames`.
+    """
+    return coarse_from_frames(read_sequence(directory, pattern), lattice, separation, up_axis)
+
+
+def coarse_from_frames(frames: list[MeshFrame], lattice: int = 2, separation: float = 1e-3,
+                       up_axis: str = "auto"):
+    """A :class:`~fracture.coarse.CoarseFracture` from the frames of an animation of pieces.
+
+    Parameters
+    ----------
+    frames : list of MeshFrame
+        The first is the rest pose; every frame has the same pieces and faces.
     lattice : int
         Nodes per axis of the lattice fitted to a piece that does not move
         rigidly (2: trilinear, which includes every affine map).
@@ -233,7 +248,6 @@ def load_coarse_sequence(directory: str | Path, pattern: str = "*.obj", lattice:
     from fracture.label_tiling import label_tiling
     from fracture.tolerances import tol
 
-    frames = read_sequence(directory, pattern)
     rest = frames[0]
     diag = float(np.linalg.norm(rest.V.max(axis=0) - rest.V.min(axis=0)))
     shared = label_tiling(rest.V, rest.polygons, rest.names, source=str(rest.path))

@@ -16,7 +16,9 @@ lets them fall, and writes the frames three ways, as artists export them:
 * ``CASE/blender_obj/frameN.obj``: Blender's own OBJ exporter with its
   defaults (animation on, Y up, forward -Z, ``.mtl``, normals, UVs);
 * ``CASE/ply/frame_0001.ply ...``: one ASCII PLY per frame, all pieces in one
-  mesh, n-gons kept (as Blender's PLY export keeps them), Z up.
+  mesh, n-gons kept (as Blender's PLY export keeps them), Z up;
+* ``CASE/usd/CASE.usdc``: Blender's USD exporter (animation on): one mesh per
+  piece under its transform, the rigid motion as time-sampled transforms.
 
 ``CASE/case.json`` records the case, Blender's version and the export axes.
 Everything is deterministic for a given Blender build (seeded point sets,
@@ -55,7 +57,7 @@ def _args():
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--case", action="append", choices=sorted(CASES), help="default: every case")
     ap.add_argument("--frames", type=int, default=30)
-    ap.add_argument("--formats", default="sample,blender_obj,ply")
+    ap.add_argument("--formats", default="sample,blender_obj,ply,usd")
     return ap.parse_args(argv)
 
 
@@ -216,13 +218,21 @@ def main():
             scene.frame_set(1)
             bpy.ops.wm.obj_export(filepath=str(out / "blender_obj" / "frame.obj"), export_animation=True,
                                   start_frame=1, end_frame=args.frames, export_selected_objects=True)
+        if "usd" in formats:
+            bpy.ops.object.select_all(action="DESELECT")
+            for o in pieces:
+                o.select_set(True)
+            scene.frame_set(1)
+            bpy.ops.wm.usd_export(filepath=str(out / "usd" / f"{case}.usdc"), selected_objects_only=True,
+                                  export_animation=True, export_materials=False)
         kind, cells, seed, rot, height = CASES[case]
         (out / "case.json").write_text(json.dumps({
             "case": case, "object": kind, "cells": cells, "pieces": len(pieces), "seed": seed,
             "rotation_degrees": rot, "height": height, "frames": args.frames,
             "blender": bpy.app.version_string,
             "formats": {"sample": "Z up, world coordinates, n-gons", "blender_obj": "Blender's OBJ exporter "
-                        "defaults: Y up, forward -Z", "ply": "ASCII, Z up, all pieces in one mesh, n-gons"},
+                        "defaults: Y up, forward -Z", "ply": "ASCII, Z up, all pieces in one mesh, n-gons",
+                        "usd": "Blender's USD exporter: time-sampled transforms, Z up"},
         }, indent=1))
         print(f"{case}: {len(pieces)} pieces, {args.frames} frames -> {out}")
 

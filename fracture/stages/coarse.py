@@ -44,6 +44,13 @@ def coarse_stage(ctx: RunContext) -> None:
         if inp["kind"] == "mesh_sequence":
             cf, extra = load_coarse_sequence(inp["path"], inp["glob"], inp["lattice"], inp["separation"],
                                              inp["up_axis"])
+        elif inp["kind"] == "usd":
+            from fracture.mesh_sequence import coarse_from_frames
+            from fracture.usd_input import read_usd_frames
+
+            frames, stage_up = read_usd_frames(inp["usd"])
+            up = stage_up if inp["up_axis"] == "auto" else inp["up_axis"]
+            cf, extra = coarse_from_frames(frames, inp["lattice"], inp["separation"], up)
         elif inp["kind"] == "scene":
             from fracture.scenes import build_scene
 
@@ -51,7 +58,7 @@ def coarse_stage(ctx: RunContext) -> None:
         else:
             cf = coarse_from_meshes(inp)
         bar.update()
-    if inp["kind"] == "mesh_sequence" and inp["exterior"] is not None:
+    if inp["kind"] in ("mesh_sequence", "usd") and inp["exterior"] is not None:
         # a user's high-resolution exterior replaces the pieces' outer faces
         BV, BF = read_mesh(inp["exterior"], "input.exterior", closed=True)
     else:
