@@ -54,7 +54,7 @@ def test_every_export_imports_with_its_pieces_and_up_axis(corpus, case, fmt):
     assert cf.face_fracture_time.min() > 0  # nothing is apart in the rest pose
 
 
-END_TO_END = ["cube_rotated_8", "torus_8"]
+END_TO_END = ["cube_rotated_8", "torus_8", "cube_12"]
 
 
 @pytest.mark.slow

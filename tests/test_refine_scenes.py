@@ -11,10 +11,12 @@ from conftest import BUDGETS, CONFIGS, SCENE_CASES, scene_config
 from fracture import runner
 from fracture.components import label_components
 from fracture.config import load_config
+from fracture.exterior import Exterior
 from fracture.plyio import read_ply
 from fracture.refine.collide import self_intersections
+from fracture.refine.crossings_on_b import crossing_pairs
 from fracture.refine.engine import RefineParams, Refiner
-from fracture.refine.kernels import edge_table
+from fracture.refine.kernels import edge_table, row_edges
 from fracture.refine.mesh import RefineMesh
 from fracture.refine.remesh import plan_splits
 from fracture.scenes import build_scene
@@ -40,11 +42,15 @@ def test_refined_surface_is_clean_on_b_and_separates_the_components(name, tmp_pa
 
     V, F, _, face = read_ply(out / "refined" / "fracture_surface.ply")
     assert self_intersections(V, F) == 0  # recounted from the file
+    # no two boundary curves cross on B (the pieces could not be cut out of B along both)
+    BV, BF = read_ply(out / "coarse" / "exterior.ply")[:2]
+    B = Exterior(BV, BF)
+    E = row_edges(F, edge_table(F, len(V)).boundary_rows)
+    assert len(crossing_pairs(V, E, lambda P: B.normals[B.closest(P)[1]])) == 0
     sides = np.column_stack([face["side0"], face["side1"]])
     assert (sides[:, 0] != sides[:, 1]).all()
     # every component still separated from its neighbours: a volumetric flood
     # fill of B cut by the refined surface finds the same components
-    BV, BF = read_ply(out / "coarse" / "exterior.ply")[:2]
     resolution = 240  # finer than the closest sheets the refinement makes
     labels, _, n = label_components(BV, BF, V, F, resolution=resolution, strict=False)
     assert n == counts["components"]

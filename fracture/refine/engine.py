@@ -282,10 +282,13 @@ class Refiner:
         if not len(E):
             return 0
         gap = _CURVE_GAP * self.h
-        before = {tuple(x) for x in crossing_pairs(self.mesh.V, E, self.normal_on_b, gap).tolist()}
+        close = {tuple(x) for x in crossing_pairs(self.mesh.V, E, self.normal_on_b, gap).tolist()}
+        cross = {tuple(x) for x in crossing_pairs(self.mesh.V, E, self.normal_on_b).tolist()}
         kept = 0
         for _ in range(rounds):
-            pairs = [x for x in crossing_pairs(X1, E, self.normal_on_b, gap).tolist() if tuple(x) not in before]
+            # new pairs closer than the gap, and new crossings (of pairs already close, too)
+            pairs = [x for x in crossing_pairs(X1, E, self.normal_on_b, gap).tolist() if tuple(x) not in close]
+            pairs += [x for x in crossing_pairs(X1, E, self.normal_on_b).tolist() if tuple(x) not in cross]
             if not pairs:
                 break
             ids = np.unique(E[np.asarray(pairs).ravel()])
