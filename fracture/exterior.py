@@ -41,6 +41,10 @@ class Exterior:
         """Unit outward normals of B's triangles, ``(m, 3)``."""
         return face_frames(self.V, self.F)[1]
 
+    def normal_at(self, P: np.ndarray) -> np.ndarray:
+        """Unit outward normals of B at the points of B closest to ``P``, ``(k, 3)``."""
+        return self.normals[self.closest(P)[1]]
+
     def inside(self, P: np.ndarray) -> np.ndarray:
         """Whether points are inside (winding number above one half)."""
         return self._wn.winding_number(np.ascontiguousarray(P, np.float64).reshape(-1, 3)) > 0.5

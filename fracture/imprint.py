@@ -26,15 +26,14 @@ of B. It touches only the triangles along the cut.
 from __future__ import annotations
 
 import heapq
-
 from dataclasses import dataclass
 
 import numpy as np
 
 from fracture.errors import InputError
 from fracture.exterior import Exterior
-from fracture.refine.kernels import edge_table, row_edges
 from fracture.refine.crossings_on_b import splits_would_cross
+from fracture.refine.kernels import edge_table, row_edges
 from fracture.refine.mesh import RefineMesh
 
 # A point within this barycentric distance of an edge (or two edges) of a B
@@ -402,7 +401,7 @@ def subdivide_boundary(mesh: RefineMesh, exterior: Exterior, tolerance: float, m
         far = np.flatnonzero(d2 > tolerance ** 2)
         # one split edge per triangle per round
         far = far[np.unique(face[far], return_index=True)[1]]
-        far = far[~splits_would_cross(mesh.V, E, far, closest[far], lambda P: exterior.normals[exterior.closest(P)[1]])]
+        far = far[~splits_would_cross(mesh.V, E, far, closest[far], exterior.normal_at)]
         if not len(far):
             break
         new = mesh.split_edges(E[far], np.full(len(far), 0.5), rows=rows[far], which=np.arange(len(far)))

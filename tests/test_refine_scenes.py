@@ -46,7 +46,7 @@ def test_refined_surface_is_clean_on_b_and_separates_the_components(name, tmp_pa
     BV, BF = read_ply(out / "coarse" / "exterior.ply")[:2]
     B = Exterior(BV, BF)
     E = row_edges(F, edge_table(F, len(V)).boundary_rows)
-    assert len(crossing_pairs(V, E, lambda P: B.normals[B.closest(P)[1]])) == 0
+    assert len(crossing_pairs(V, E, B.normal_at)) == 0
     sides = np.column_stack([face["side0"], face["side1"]])
     assert (sides[:, 0] != sides[:, 1]).all()
     # every component still separated from its neighbours: a volumetric flood

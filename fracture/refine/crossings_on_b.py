@@ -27,20 +27,27 @@ def crossing_pairs(X: np.ndarray, E: np.ndarray, normal_at, gap: float = 0.0) ->
     ``normal_at(P)`` gives B's unit normal near points ``P (k, 3)``. Edges that
     share a vertex never count (they meet at it).
     """
+    pairs, _ = close_pairs(X, E, normal_at, gap)
+    return pairs
+
+
+def close_pairs(X: np.ndarray, E: np.ndarray, normal_at, gap: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`crossing_pairs` and, for each pair, whether it crosses (rather than only comes close)."""
+    none = np.zeros((0, 2), np.int64), np.zeros(0, bool)
     if len(E) < 2:
-        return np.zeros((0, 2), np.int64)
+        return none
     A, B = X[E[:, 0]], X[E[:, 1]]
     M, L = 0.5 * (A + B), np.linalg.norm(B - A, axis=1)
     pairs = cKDTree(M).query_pairs(float(L.max()) + gap, output_type="ndarray")
     if not len(pairs):
-        return np.zeros((0, 2), np.int64)
+        return none
     i, j = pairs[:, 0], pairs[:, 1]
     near = np.linalg.norm(M[i] - M[j], axis=1) <= 0.5 * (L[i] + L[j]) + gap
     share = (E[i, 0, None] == E[j]).any(axis=1) | (E[i, 1, None] == E[j]).any(axis=1)
     keep = near & ~share
     i, j = i[keep], j[keep]
     if not len(i):
-        return np.zeros((0, 2), np.int64)
+        return none
     n = normal_at(0.5 * (M[i] + M[j]))
     # a frame of B's tangent plane at each pair
     helper = np.where((np.abs(n[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
@@ -57,11 +64,11 @@ def crossing_pairs(X: np.ndarray, E: np.ndarray, normal_at, gap: float = 0.0) ->
         return np.sign((q[:, 0] - p[:, 0]) * (r[:, 1] - p[:, 1]) - (q[:, 1] - p[:, 1]) * (r[:, 0] - p[:, 0]))
 
     cross = (side(a, b, c) * side(a, b, d) < 0) & (side(c, d, a) * side(c, d, b) < 0)
+    near = cross.copy()
     if gap > 0.0:
-        close = np.minimum.reduce([_point_segment(a, c, d), _point_segment(b, c, d), _point_segment(c, a, b),
+        near |= np.minimum.reduce([_point_segment(a, c, d), _point_segment(b, c, d), _point_segment(c, a, b),
                                    _point_segment(d, a, b)]) < gap
-        cross |= close
-    return np.stack([i[cross], j[cross]], 1)
+    return np.stack([i[near], j[near]], 1), cross[near]
 
 
 def _point_segment(p, a, b):

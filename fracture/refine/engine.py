@@ -71,7 +71,7 @@ import numpy as np
 from fracture.allocator import keep_freed_memory
 from fracture.exterior import Exterior
 from fracture.refine.collide import stop_collisions
-from fracture.refine.crossings_on_b import crossing_pairs
+from fracture.refine.crossings_on_b import close_pairs
 from fracture.refine.fans import closed_vertices
 from fracture.refine.flips import flip_edges
 from fracture.refine.flow import energy, energy_gradient
@@ -268,10 +268,6 @@ class Refiner:
             s.near_at[ask] = V[ask]
         return s.near_d2[ids], s.near_tri[ids], s.near_point[ids]
 
-    def normal_on_b(self, P: np.ndarray) -> np.ndarray:
-        """B's unit outward normal at the points of B closest to ``P``."""
-        return self.B.normals[self.B.closest(P)[1]]
-
     def stop_crossings_on_b(self, X1: np.ndarray, table: EdgeTable, rounds: int = 4) -> int:
         """Keep in place (in ``X1``) the boundary vertices of edges that the step to ``X1`` would make cross
         (or come closer than ``_CURVE_GAP`` to) another boundary edge on B (:mod:`fracture.refine.crossings_on_b`); returns how many were kept.
@@ -282,13 +278,15 @@ class Refiner:
         if not len(E):
             return 0
         gap = _CURVE_GAP * self.h
-        close = {tuple(x) for x in crossing_pairs(self.mesh.V, E, self.normal_on_b, gap).tolist()}
-        cross = {tuple(x) for x in crossing_pairs(self.mesh.V, E, self.normal_on_b).tolist()}
+        pairs, crossing = close_pairs(self.mesh.V, E, self.B.normal_at, gap)
+        close = {tuple(x) for x in pairs.tolist()}
+        cross = {tuple(x) for x in pairs[crossing].tolist()}
         kept = 0
         for _ in range(rounds):
             # new pairs closer than the gap, and new crossings (of pairs already close, too)
-            pairs = [x for x in crossing_pairs(X1, E, self.normal_on_b, gap).tolist() if tuple(x) not in close]
-            pairs += [x for x in crossing_pairs(X1, E, self.normal_on_b).tolist() if tuple(x) not in cross]
+            now, crossing = close_pairs(X1, E, self.B.normal_at, gap)
+            pairs = [x for x, c in zip(now.tolist(), crossing.tolist())
+                     if tuple(x) not in close or (c and tuple(x) not in cross)]
             if not pairs:
                 break
             ids = np.unique(E[np.asarray(pairs).ravel()])
@@ -363,7 +361,7 @@ class Refiner:
             plan = plan_chord_splits(self.mesh.V, self.mesh.F, table, far=p.split_distance * self.h,
                                      near_b=p.min_edge * self.h, budget=p.max_triangles - len(self.mesh.F),
                                      project=lambda P: self.B.closest(P)[2], off_b=off_b,
-                                     normal_at=self.normal_on_b)
+                                     normal_at=self.B.normal_at)
             if not plan.count:
                 break
             made += plan.apply(self.mesh)
