@@ -232,19 +232,15 @@ def _positions(pieces, nodes, lab, h, edge_keys, face_keys, tet_ids, tets, n_nod
     # no point on a node: a triangle with two points there would have no area
     t = np.clip(t, _NODE_GAP, 1.0 - _NODE_GAP)
     PE = P0 + t[:, None] * (P1 - P0)
-    edge_index = {k: i for i, k in enumerate(edge_keys.tolist())}
 
-    def edge(x, y):
-        return edge_index[min(x, y) * n_nodes + max(x, y)]
+    def edge(x, y):  # the crossing ids of edges x - y (edge_keys is sorted)
+        return np.searchsorted(edge_keys, np.minimum(x, y) * n_nodes + np.maximum(x, y))
 
     a, b, c = face_keys // (n_nodes * n_nodes), (face_keys // n_nodes) % n_nodes, face_keys % n_nodes
-    Fg = np.array([[edge(i, j), edge(i, k), edge(j, k)] for i, j, k in zip(a.tolist(), b.tolist(), c.tolist())],
-                  np.int64).reshape(-1, 3)
-    # a face or tetrahedron that holds outside nodes: the mean of its crossings of B only, so that B
-    # stays on the surface where a sheet meets it (the mean of all would dent B by up to a third of a cell)
+    Fg = np.stack([edge(a, b), edge(a, c), edge(b, c)], 1)
     # a tetrahedron with four labels: its six edges all cross
-    Tg = np.array([[edge(tets[t_][i], tets[t_][j]) for i, j in _PAIRS] for t_ in tet_ids.tolist()],
-                  np.int64).reshape(-1, 6)
+    T = tets[tet_ids]
+    Tg = np.stack([edge(T[:, i], T[:, j]) for i, j in _PAIRS], 1).reshape(-1, 6)
     outside = (lab[u] == 0) | (lab[v] == 0)
     return PE, _mean_preferring(PE, Fg, outside), _mean_preferring(PE, Tg, outside)
 
