@@ -1,7 +1,8 @@
 """The README's picture of the effect: coarse and refined fracture surfaces on slices of zeta.
 
-Panels: a curved synthetic weak sheet with a flat cut 8 voxels off, a tilted
-one 4 voxels off, and the example wall's crack (its mid-plane). Each shows
+Panels: the example wall's crack and the collapsing wall's fracture network
+(their mid-planes), a curved synthetic weak sheet with a flat cut 8 voxels
+off and a tilted one 4 voxels off. Each shows
 zeta on a slice (dark: weak), where the coarse surface crosses it (white)
 and where the refined one does (red).
 
@@ -75,26 +76,27 @@ def sheet_panel(ax, kind: str, offset: float) -> None:
           f"{kind} weak sheet, cut {offset:g} voxels off")
 
 
-def wall_panel(ax) -> None:
-    cfg = load_config(ROOT / "configs" / "example.yaml", ["refine.snapshots=false"])
+def wall_panel(ax, name: str, title: str) -> None:
+    cfg = load_config(ROOT / "configs" / f"{name}.yaml", ["refine.snapshots=false"])
     with tempfile.TemporaryDirectory() as tmp:
         out = runner.run(cfg, Path(tmp) / "run", until="refine", progress=False)
         grid = Grid.from_dict(json.loads((out / "fields/grid.json").read_text()))
         zeta = np.load(out / "fields/zeta.npy")
         coarse = read_ply(out / "coarse/fracture_surface.ply")[:2]
         refined = read_ply(out / "refined/fracture_surface.ply")[:2]
-    panel(ax, grid, zeta, 2, [coarse, refined], "example wall: the crack on the mid-plane")
+    panel(ax, grid, zeta, 2, [coarse, refined], title)
 
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=ROOT / "docs" / "effect.png")
     args = ap.parse_args(argv)
-    fig = plt.figure(figsize=(13, 4.2), facecolor="white")
-    grid = fig.add_gridspec(1, 3, width_ratios=[1, 1, 3])
-    sheet_panel(fig.add_subplot(grid[0]), "curved", 8.0)
-    sheet_panel(fig.add_subplot(grid[1]), "tilted", 4.0)
-    wall_panel(fig.add_subplot(grid[2]))
+    fig = plt.figure(figsize=(13, 8.4), facecolor="white")
+    grid = fig.add_gridspec(2, 3, width_ratios=[1, 1, 3])
+    wall_panel(fig.add_subplot(grid[0, :2]), "example", "example wall (one crack), mid-plane")
+    wall_panel(fig.add_subplot(grid[0, 2]), "wall", "collapsing wall (12 pieces), mid-plane")
+    sheet_panel(fig.add_subplot(grid[1, 0]), "curved", 8.0)
+    sheet_panel(fig.add_subplot(grid[1, 1]), "tilted", 4.0)
     fig.tight_layout()
     args.out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(args.out, dpi=90)
