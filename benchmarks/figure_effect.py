@@ -91,7 +91,7 @@ def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=ROOT / "docs" / "effect.png")
     args = ap.parse_args(argv)
-    fig = plt.figure(figsize=(13, 8.4), facecolor="white")
+    fig = plt.figure(figsize=(13, 6.2), facecolor="white")
     grid = fig.add_gridspec(2, 3, width_ratios=[1, 1, 3])
     wall_panel(fig.add_subplot(grid[0, :2]), "example", "example wall (one crack), mid-plane")
     wall_panel(fig.add_subplot(grid[0, 2]), "wall", "collapsing wall (12 pieces), mid-plane")
