@@ -17,7 +17,6 @@ one voxel of it.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import tempfile
 import time
@@ -28,13 +27,11 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from fields.grid import Grid  # noqa: E402
 from fields.pyramid import StrengthPyramid  # noqa: E402
 from fields.synthetic import SHEETS, weak_sheet_case  # noqa: E402
 from fracture import runner  # noqa: E402
 from fracture.config import load_config  # noqa: E402
-from fracture.fidelity import area_samples, inside_thresholds, surface_figures  # noqa: E402
-from fracture.plyio import read_ply  # noqa: E402
+from fracture.fidelity import area_samples, run_figures  # noqa: E402
 from fracture.refine.engine import Refiner, RefineParams  # noqa: E402
 from fracture.refine.mesh import RefineMesh  # noqa: E402
 
@@ -46,23 +43,6 @@ def scene_row(name: str, overrides: list[str]) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         out = runner.run(cfg, Path(tmp) / "run", until="refine", progress=False)
         return run_figures(out)
-
-
-def run_figures(out: Path) -> dict:
-    """The figures of a run directory (coarse and refined surfaces against its fields)."""
-    manifest = json.loads((out / "manifest.json").read_text())
-    grid = Grid.from_dict(json.loads((out / "fields/grid.json").read_text()))
-    zeta = np.load(out / "fields/zeta.npy").astype(np.float64)
-    psi = np.load(out / "fields/psi.npy").astype(np.float64)
-    BV, BF = read_ply(out / "coarse/exterior.ply")[:2]
-    CV, CF = read_ply(out / "coarse/fracture_surface.ply")[:2]
-    RV, RF = read_ply(out / "refined/fracture_surface.ply")[:2]
-    thresholds = inside_thresholds(grid, zeta, BV, BF)
-    coarse = surface_figures(CV, CF, grid, zeta, thresholds, psi)
-    refined = surface_figures(RV, RF, grid, zeta, thresholds, psi, reference=(CV, CF))
-    stats = manifest["stats"]["refine"]
-    return dict(coarse=coarse, refined=refined, triangles=len(RF), iterations=len(stats["functional"]) - 1,
-                seconds=manifest["stages"]["refine"]["seconds"], stop=stats["stopped_because"])
 
 
 def sheet_row(kind: str, offset: float, params: RefineParams) -> dict:

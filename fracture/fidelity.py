@@ -12,9 +12,13 @@ material (marble veins, wood grain, brick-mortar boundaries, Figs. 1, 4, 9,
   and 90th percentile.
 
 Samples are drawn with a fixed seed, so a surface always gets the same figures.
+:func:`run_figures` gives them for the coarse and refined surfaces of a run directory.
 """
 
 from __future__ import annotations
+
+import json
+from pathlib import Path
 
 import numpy as np
 
@@ -22,6 +26,7 @@ from fields.grid import Grid
 from fields.interpolate import trilinear
 from fields.stress import distance_to_surface
 from fracture.exterior import Exterior
+from fracture.plyio import read_ply
 
 PERCENTILES = (10, 20, 30)
 
@@ -73,3 +78,26 @@ def surface_figures(V, F, grid: Grid, zeta: np.ndarray, thresholds: dict[int, fl
 def distance_cells(P: np.ndarray, V: np.ndarray, F: np.ndarray, grid: Grid) -> np.ndarray:
     """Distances from points to a triangle surface, in units of the smallest grid spacing."""
     return distance_to_surface(P, V, F) / float(np.min(grid.spacing))
+
+
+def run_figures(out: str | Path) -> dict:
+    """The figures of a run directory: its coarse and refined surfaces against its fields.
+
+    Returns ``coarse`` and ``refined`` (:func:`surface_figures`; the refined
+    surface's distances are to the coarse one), the refined ``triangles``,
+    ``iterations``, the refine stage's ``seconds`` and why it stopped (``stop``).
+    """
+    out = Path(out)
+    manifest = json.loads((out / "manifest.json").read_text())
+    grid = Grid.from_dict(json.loads((out / "fields/grid.json").read_text()))
+    zeta = np.load(out / "fields/zeta.npy").astype(np.float64)
+    psi = np.load(out / "fields/psi.npy").astype(np.float64)
+    BV, BF = read_ply(out / "coarse/exterior.ply")[:2]
+    CV, CF = read_ply(out / "coarse/fracture_surface.ply")[:2]
+    RV, RF = read_ply(out / "refined/fracture_surface.ply")[:2]
+    thresholds = inside_thresholds(grid, zeta, BV, BF)
+    coarse = surface_figures(CV, CF, grid, zeta, thresholds, psi)
+    refined = surface_figures(RV, RF, grid, zeta, thresholds, psi, reference=(CV, CF))
+    stats = manifest["stats"]["refine"]
+    return dict(coarse=coarse, refined=refined, triangles=len(RF), iterations=len(stats["functional"]) - 1,
+                seconds=manifest["stages"]["refine"]["seconds"], stop=stats["stopped_because"])

@@ -12,6 +12,7 @@ from fracture import runner
 from fracture.components import label_components
 from fracture.config import load_config
 from fracture.exterior import Exterior
+from fracture.fidelity import run_figures
 from fracture.plyio import read_ply
 from fracture.refine.collide import self_intersections
 from fracture.refine.crossings_on_b import crossing_pairs
@@ -102,23 +103,11 @@ def example_runs(tmp_path_factory):
     return runs
 
 
-def _surfaces(out):
-    from fields.grid import Grid
-    grid = Grid.from_dict(json.loads((out / "fields/grid.json").read_text()))
-    CV, CF = read_ply(out / "coarse/fracture_surface.ply")[:2]
-    RV, RF = read_ply(out / "refined/fracture_surface.ply")[:2]
-    return grid, (CV, CF), (RV, RF)
-
-
 def test_the_stress_weight_controls_how_far_the_crack_travels(example_runs):
     """Section 4.2: a larger stress weight keeps the result closer to the coarse surface. On the example
     wall the refined crack's mean distance to the coarse one falls monotonically with the weight, at
     least threefold from 0.2 to 4."""
-    from fracture.fidelity import area_samples, distance_cells
-    distances = []
-    for b in (0.2, 1.5, 4.0):
-        grid, (CV, CF), (RV, RF) = _surfaces(example_runs[b])
-        distances.append(distance_cells(area_samples(RV, RF), CV, CF, grid).mean())
+    distances = [run_figures(example_runs[b])["refined"]["distance_mean"] for b in (0.2, 1.5, 4.0)]
     assert distances[0] > distances[1] > distances[2]
     assert distances[0] > 3.0 * distances[2]
 
@@ -127,12 +116,6 @@ def test_the_example_crack_follows_the_brick_mortar_boundaries(example_runs):
     """The paper's effect (Figs. 4, 10): the coarse crack crosses bricks; the refined one runs in the weak
     layers between bricks and mortar. Measured as the share of its area in the weakest 20 % of zeta inside
     the wall: at least 45 % (the coarse crack: 13 %), and at least three times the coarse crack's."""
-    from fracture.fidelity import inside_thresholds, surface_figures
-    out = example_runs[0.2]
-    grid, (CV, CF), (RV, RF) = _surfaces(out)
-    zeta = np.load(out / "fields/zeta.npy").astype(np.float64)
-    BV, BF = read_ply(out / "coarse/exterior.ply")[:2]
-    thresholds = inside_thresholds(grid, zeta, BV, BF)
-    coarse = surface_figures(CV, CF, grid, zeta, thresholds)["weak_share_20"]
-    refined = surface_figures(RV, RF, grid, zeta, thresholds)["weak_share_20"]
+    figures = run_figures(example_runs[0.2])
+    coarse, refined = figures["coarse"]["weak_share_20"], figures["refined"]["weak_share_20"]
     assert refined >= 0.45 and refined >= 3.0 * coarse

@@ -544,9 +544,9 @@ class Refiner:
                 done += 1
                 clock = time.perf_counter()
                 gain = log.functional_before[-1] - log.functional[-1]
-                still = move < p.tolerance or gain < _LITTLE_GAIN * abs(log.functional[-1])
-                settled = still and (made <= _FEW_SPLITS * len(self.mesh.F) or self.full)
-                settled |= self.full and gain < _FULL_GAIN * abs(log.functional[-1])
+                little = (_FULL_GAIN if self.full else _LITTLE_GAIN) * abs(log.functional[-1])
+                settled = (move < p.tolerance or gain < little) and (made <= _FEW_SPLITS * len(self.mesh.F)
+                                                                      or self.full)
                 off_b = self.boundary_error(self.boundary)
                 if settled and off_b > self.on_b:
                     off_b = self.settle_boundary()
