@@ -23,7 +23,7 @@ sys.path.insert(0, str(ROOT))
 
 from fracture import runner  # noqa: E402
 from fracture.config import load_config  # noqa: E402
-from fracture.errors import InputError, StageError  # noqa: E402
+from fracture.errors import InputError, ResultError, StageError  # noqa: E402
 
 
 def main() -> int:
@@ -49,7 +49,7 @@ def main() -> int:
             start = time.perf_counter()
             try:
                 out = runner.run(cfg, root / f"run_{case}", progress=False)
-            except (InputError, StageError) as exc:
+            except (InputError, ResultError, StageError) as exc:
                 print(f"| {case} | refused: {str(exc)[:120]} | | | {time.perf_counter() - start:.0f} |")
                 continue
             manifest = json.loads((out / "manifest.json").read_text())

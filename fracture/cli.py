@@ -68,7 +68,7 @@ def main(argv: list[str] | None = None) -> int:
     from fracture import runner
     from fracture.atomic import RunDirectoryExists
     from fracture.config import dump_config, load_config
-    from fracture.errors import InputError, StageError
+    from fracture.errors import InputError, ResultError, StageError
 
     try:
         if args.command == "stages":
@@ -92,7 +92,7 @@ def main(argv: list[str] | None = None) -> int:
         done = runner.run(cfg, out, until=args.until, force=args.force, progress=not args.quiet)
         print(f"run complete: {done}  (manifest: {done / 'manifest.json'})")
         return 0
-    except (ConfigError, InputError, StageError, RunDirectoryExists) as exc:
+    except (ConfigError, InputError, ResultError, StageError, RunDirectoryExists) as exc:
         print(f"fracref: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

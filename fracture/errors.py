@@ -11,4 +11,11 @@ class StageError(ValueError):
     """A stage name on the command line is unknown or not available."""
 
 
-__all__ = ["ConfigError", "InputError", "StageError"]
+class ResultError(ValueError):
+    """A result failed the checks a run makes before it succeeds (a piece not closed, crossing itself, ...).
+
+    The message names the piece and the failed check; the run writes nothing.
+    """
+
+
+__all__ = ["ConfigError", "InputError", "ResultError", "StageError"]

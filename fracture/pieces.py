@@ -117,27 +117,36 @@ class Pieces:
 def label_patches(im: Imprint, mesh: RefineMesh, n_components: int, fallback) -> tuple[np.ndarray, float]:
     """Component of each of B's triangles, by patch.
 
-    At a cut edge, a B triangle on the front of the S triangle there (the
-    side its normal points to) belongs to that triangle's ``sides[:, 1]``,
-    one behind it to ``sides[:, 0]``. Each patch takes the component most of
-    its cut edges vote for, weighted by how clearly the B triangle lies on
-    one side. Patches with no cut edge take ``fallback(face_ids)``, the
-    components of their triangles by another rule (majority).
+    The rule is the one that makes the pieces closed, so it reads only the
+    orientations, never the geometry. In piece ``sides[:, 0]`` an S triangle
+    keeps its orientation and in ``sides[:, 1]`` it is reversed; a closed,
+    oriented piece passes each of its edges once in each direction. So at a
+    cut edge where the S triangle runs ``u -> v``, the B triangle that also
+    runs ``u -> v`` belongs to ``sides[:, 1]`` and the one running ``v -> u``
+    to ``sides[:, 0]``. (A side test of B's centroids against the S
+    triangle's plane, as used before, guesses wrong where S meets B at a
+    grazing angle: the thin pieces of a torus or a monkey.) Each patch takes
+    the component its cut edges vote for; patches with no cut edge take
+    ``fallback(face_ids)``, the components of their triangles by another rule
+    (majority). The second value is the smallest share of a patch's votes
+    that agree with its label (1 unless S's boundary curves on B cross).
     """
     patch = flood_fill_patches(im.F, im.cut_edges)
     n_patch = int(patch.max()) + 1 if len(patch) else 0
     E = im.cut_edges
     T = mesh.F[im.cut_faces]
-    n = np.cross(mesh.V[T[:, 1]] - mesh.V[T[:, 0]], mesh.V[T[:, 2]] - mesh.V[T[:, 0]])
-    mid = 0.5 * (im.V[E[:, 0]] + im.V[E[:, 1]])
+    su, sv = im.to_fracture[E[:, 0]], im.to_fracture[E[:, 1]]
+    forward = np.zeros(len(E), bool)  # the S triangle runs su -> sv
+    backward = np.zeros(len(E), bool)
+    for i in range(3):
+        forward |= (T[:, i] == su) & (T[:, (i + 1) % 3] == sv)
+        backward |= (T[:, i] == sv) & (T[:, (i + 1) % 3] == su)
+    counted = (forward | backward).astype(np.float64)  # a cut edge off its triangle has no say
+    sides = mesh.sides[im.cut_faces]
     votes = np.zeros((n_patch, n_components))
-    for directed in (E, E[:, ::-1]):
-        f = directed_edge_face(im.F, directed)
-        w = im.V[im.F[f]].mean(axis=1) - mid
-        side = np.einsum("ij,ij->i", w, n)
-        weight = np.abs(side) / np.maximum(np.linalg.norm(w, axis=1) * np.linalg.norm(n, axis=1), 1e-300)
-        comp = np.where(side > 0, mesh.sides[im.cut_faces, 1], mesh.sides[im.cut_faces, 0])
-        np.add.at(votes, (patch[f], comp), weight)
+    np.add.at(votes, (patch[directed_edge_face(im.F, E)], np.where(forward, sides[:, 1], sides[:, 0])), counted)
+    np.add.at(votes, (patch[directed_edge_face(im.F, E[:, ::-1])], np.where(forward, sides[:, 0], sides[:, 1])),
+              counted)
     label = votes.argmax(axis=1)
     total = votes.sum(axis=1)
     voted = total > 0
@@ -184,9 +193,10 @@ def _resolve_pieces(pieces: Pieces) -> Pieces:
     n_new = 0
     for c, (ids, V, F) in enumerate(pieces.parts):
         pairs = crossing_pairs(V, F)
-        if not pairs:
+        pinched = not np.asarray(igl.is_vertex_manifold(np.ascontiguousarray(F, np.int64))).all()
+        if not (pairs or pinched):
             continue
-        out = resolve_crossings(V, F, pieces.exterior[c])
+        out = resolve_crossings(V, F, pieces.exterior[c], boolean=bool(pairs))
         if out is None:
             left[c] = int(pairs)
             continue
@@ -214,7 +224,8 @@ def _resolve_pieces(pieces: Pieces) -> Pieces:
                    derived=derived, resolved=resolved, crossings=left)
 
 
-def resolve_crossings(V: np.ndarray, F: np.ndarray, exterior: np.ndarray, volume_tolerance: float = 0.5):
+def resolve_crossings(V: np.ndarray, F: np.ndarray, exterior: np.ndarray, volume_tolerance: float = 0.5,
+                      boolean: bool = True):
     """Resolve a closed mesh that crosses itself into the boundary of its winding-number-positive region.
 
     libigl's exact boolean (the union of ``(V, F)`` with nothing) cuts the
@@ -222,7 +233,11 @@ def resolve_crossings(V: np.ndarray, F: np.ndarray, exterior: np.ndarray, volume
     region of positive winding number. The result is refused (``None``)
     when the boolean fails, and unless it is closed, 2-manifold, outward and free of crossings, with a
     volume within ``volume_tolerance`` of the input's (the pockets it drops
-    are thin; a result that far off is not the same piece).
+    are thin; a result that far off is not the same piece). Vertices the
+    boolean rounded within 1e-9 of each other are welded first
+    (:func:`weld_rounded`), and pinched vertices get a copy per extra fan
+    (:func:`split_pinches`); with ``boolean=False`` only the pinches are
+    split (a piece that touches itself at a vertex but crosses nowhere).
 
     Returns ``(F, exterior, source, P, parents, weights, on_s)``: the new
     triangles over ``[V[source >= 0]; P]`` ordered as the output vertices
@@ -232,11 +247,16 @@ def resolve_crossings(V: np.ndarray, F: np.ndarray, exterior: np.ndarray, volume
     barycentric ``weights`` of the input triangle it lies on, an S triangle
     (``on_s``) where it lies on one.
     """
-    try:
-        VC, FC, J = igl_cgal.mesh_boolean(np.ascontiguousarray(V, np.float64), np.ascontiguousarray(F, np.int64),
-                                          np.zeros((0, 3)), np.zeros((0, 3), np.int64), "union")
-    except RuntimeError:  # CGAL gives up on some inputs (e.g. coincident crossing curves): refused as well
-        return None
+    if boolean:
+        try:
+            VC, FC, J = igl_cgal.mesh_boolean(np.ascontiguousarray(V, np.float64), np.ascontiguousarray(F, np.int64),
+                                              np.zeros((0, 3)), np.zeros((0, 3), np.int64), "union")
+        except RuntimeError:  # CGAL gives up on some inputs (e.g. coincident crossing curves): refused as well
+            return None
+        J = np.asarray(J).ravel()
+        FC, J = weld_rounded(VC, FC, J)
+    else:  # a piece that only touches itself at a vertex: its pinches are split below
+        VC, FC, J = np.asarray(V, np.float64), np.asarray(F, np.int64), np.arange(len(F))
     used = np.unique(FC)
     if len(used) < len(VC):  # every output vertex must be on a triangle (its birth triangle is read there)
         remap = np.full(len(VC), -1)
@@ -255,7 +275,6 @@ def resolve_crossings(V: np.ndarray, F: np.ndarray, exterior: np.ndarray, volume
     first = np.full(inv.max() + 1, -1)
     first[inv[:len(V)][::-1]] = np.arange(len(V))[::-1]
     source = first[inv[len(V):]]
-    J = np.asarray(J).ravel()
     ext = np.asarray(exterior, bool)[J]
     new = np.flatnonzero(source < 0)
     if not len(new):
@@ -297,6 +316,32 @@ def _cancelling(F: np.ndarray, n: int) -> np.ndarray:
         opposite = parity[a] != parity[b]
         out[twin[a[opposite]]] = out[twin[b[opposite]]] = True
     return out
+
+
+def weld_rounded(V: np.ndarray, F: np.ndarray, J: np.ndarray, relative: float = 1e-9) -> tuple[np.ndarray, np.ndarray]:
+    """Merge the vertices an exact boolean's rounding left within ``relative`` of the diagonal of each other.
+
+    The boolean computes exactly and rounds its new points to doubles; where
+    crossing curves nearly meet, that leaves triangles with edges of 1e-16
+    that cross their neighbours. Each group of such vertices becomes its
+    lowest-numbered member and the triangles that collapse go (with their
+    rows of ``J``, the source triangle of every output triangle). Returns the
+    new ``F`` and ``J``; unused vertices stay (the caller drops them).
+    """
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    eps = relative * float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
+    pairs = cKDTree(V).query_pairs(eps, output_type="ndarray")
+    if not len(pairs):
+        return F, J
+    graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(V), len(V)))
+    _, group = connected_components(graph, directed=False)
+    first = np.full(group.max() + 1, len(V))
+    np.minimum.at(first, group, np.arange(len(V)))
+    F = first[group][F]
+    keep = (F[:, 0] != F[:, 1]) & (F[:, 1] != F[:, 2]) & (F[:, 2] != F[:, 0])
+    return F[keep], J[keep]
 
 
 def split_pinches(V: np.ndarray, F: np.ndarray, nudge: float = 1e-3) -> tuple[np.ndarray, np.ndarray]:
@@ -378,18 +423,25 @@ def mesh_checks(V: np.ndarray, F: np.ndarray, intersections: bool = True) -> dic
     return out
 
 
-def overlap_and_gap(pieces: Pieces, BV: np.ndarray, BF: np.ndarray, samples: int, rng) -> tuple[float, float]:
-    """Shares of sample points inside B that lie in more than one piece, and in none.
+def overlap_and_gap(pieces: Pieces, BV: np.ndarray, BF: np.ndarray, samples: int, rng
+                    ) -> tuple[float, float, np.ndarray, int]:
+    """Where sample points inside B fall: in more than one piece, in none, in each.
 
     Points are drawn uniformly in B's box; insideness is the winding number.
+    Returns the shares of the points inside B that lie in more than one piece
+    and in none, each piece's share of them (its volume over B's, estimated
+    from its winding number) and how many points fell inside B.
     """
     lo, hi = BV.min(axis=0), BV.max(axis=0)
     P = lo + (hi - lo) * rng.random((samples, 3))
     inside_b = igl.fast_winding_number(np.ascontiguousarray(BV), np.ascontiguousarray(BF, np.int64), P) > 0.5
     P = P[inside_b]
     count = np.zeros(len(P), np.int64)
+    share = np.zeros(pieces.n_pieces)
+    n = max(len(P), 1)
     for c in range(pieces.n_pieces):
         _, V, F = pieces.piece(c)
-        count += igl.fast_winding_number(V, np.ascontiguousarray(F, np.int64), P) > 0.5
-    n = max(len(P), 1)
-    return float((count > 1).sum() / n), float((count == 0).sum() / n)
+        inside = igl.fast_winding_number(V, np.ascontiguousarray(F, np.int64), P) > 0.5
+        count += inside
+        share[c] = inside.sum() / n
+    return float((count > 1).sum() / n), float((count == 0).sum() / n), share, len(P)

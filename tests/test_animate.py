@@ -51,7 +51,7 @@ def test_a_slanted_cut_makes_two_closed_pieces_with_the_exact_volumes():
     # the piece x < 0.37 + 0.1 y has volume 0.37 + 0.05
     assert volumes[0] == pytest.approx(0.42, abs=1e-12) and volumes[1] == pytest.approx(0.58, abs=1e-12)
     assert sum(volumes) == pytest.approx(signed_volume(BV, BF), rel=1e-12)
-    overlap, uncovered = overlap_and_gap(pieces, BV, BF, 4000, np.random.default_rng(0))
+    overlap, uncovered, _, _ = overlap_and_gap(pieces, BV, BF, 4000, np.random.default_rng(0))
     assert overlap == 0 and uncovered == 0
     assert pieces.patch_agreement == 1.0
 
@@ -216,3 +216,45 @@ def test_every_scene_animates_into_closed_pieces(name, tmp_path):
     if name == "blender_cube8":  # Blender's own object names, in and out
         assert names == read_obj_objects(SAMPLE / "frame_0001.obj")[0]
         assert len(frames) == 40
+
+
+def test_pieces_are_verified_before_a_run_succeeds():
+    from fracture.errors import ResultError
+    from fracture.stages.animate import verify_pieces
+
+    V, F = box((0, 0, 0), (1, 1, 1), (2, 2, 2))
+    good = mesh_checks(V, F)
+    checks = lambda *pieces, **kw: {"pieces": list(pieces), "volume_B": 2.0, "volume_pieces": 2.0,  # noqa: E731
+                                    "volume_relative_error": 0.0, "overlap_share": 0.0, **kw}
+    verify_pieces(checks(good, good), ["a", "b"])  # two unit cubes in a box of volume 2
+    with pytest.raises(ResultError, match=r"piece 1 \(b\) is not closed"):
+        verify_pieces(checks(good, mesh_checks(V, F[1:])), ["a", "b"])
+    with pytest.raises(ResultError, match=r"piece 0 \(a\) has volume -1.*inside out"):
+        verify_pieces(checks(mesh_checks(V, F[:, ::-1]), good), ["a", "b"])
+    with pytest.raises(ResultError, match=r"piece 0 \(a\) crosses itself \(3 triangle"):
+        verify_pieces(checks({**good, "self_intersections": 3}, good), ["a", "b"])
+    # a piece whose surface wraps its space twice: its volume is twice what its winding number encloses
+    twice = {**good, "volume": 2.0, "volume_sampled": 1.0}
+    with pytest.raises(ResultError, match=r"piece 0 \(a\): its volume 2 disagrees with the 1"):
+        verify_pieces(checks(twice, good, samples_inside=20000), ["a", "b"])
+    verify_pieces(checks({**good, "volume_sampled": 1.01}, good, samples_inside=20000), ["a", "b"])
+    with pytest.raises(ResultError, match="hold 1.9 of volume where the object has 2"):
+        verify_pieces(checks(good, good, volume_pieces=1.9, volume_relative_error=0.05), ["a", "b"])
+    with pytest.raises(ResultError, match="2 % of the object lies in two pieces"):
+        verify_pieces(checks(good, good, overlap_share=0.02), ["a", "b"])
+
+
+def test_welding_removes_the_slivers_a_boolean_rounds_into_crossings():
+    from fracture.pieces import weld_rounded
+
+    V, F = box((0, 0, 0), (1, 1, 1), (3, 3, 3))
+    # a copy of vertex 0 within rounding of it, and a sliver triangle on the pair
+    V = np.concatenate([V, V[:1] + 1e-17])
+    F2 = np.concatenate([F, [[0, len(V) - 1, 5]]])
+    F3 = np.where(F2 == 0, len(V) - 1, F2)  # the copy takes the place of 0 in every triangle but the sliver
+    F3[-1] = [0, len(V) - 1, 5]
+    J = np.arange(len(F3))
+    FW, JW = weld_rounded(V, F3, J)
+    assert len(FW) == len(F) and np.array_equal(JW, J[:-1])
+    assert np.array_equal(FW, F)  # the group takes its lowest vertex, 0
+    assert mesh_checks(V, FW)["closed_oriented"]

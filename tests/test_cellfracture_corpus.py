@@ -54,15 +54,16 @@ def test_every_export_imports_with_its_pieces_and_up_axis(corpus, case, fmt):
     assert cf.face_fracture_time.min() > 0  # nothing is apart in the rest pose
 
 
-END_TO_END = ["cube_rotated_8", "torus_8", "cube_12"]
+# the thin pieces of a torus and a monkey meet B at grazing angles (a side test of B's
+# triangles against S's planes mislabels their patches); the full flow at a small budget
+END_TO_END = ["cube_rotated_8", "torus_8", "cube_20", "cube_12"]
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("case", END_TO_END)
 def test_exports_run_end_to_end_into_closed_pieces(corpus, case, tmp_path):
     cfg = load_config(REPO / "configs" / "blender_cube8.yaml",
-                      [f"input.path={corpus / case / 'blender_obj'}", "refine.max_triangles=20000",
-                       "refine.iterations=10", "animate.check_samples=0"])
+                      [f"input.path={corpus / case / 'blender_obj'}", "refine.max_triangles=6000"])
     out = runner.run(cfg, tmp_path / "run", progress=False)
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["stats"]["coarse"]["up_axis"] == "y"

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from fracture.primitives import box
-from fracture.topology import directed_edge_face, directed_edges, fan, signed_volume, unique_edges
+from fracture.topology import directed_edge_face, directed_edges, fan, orient_sheets, signed_volume, unique_edges
 
 
 def test_directed_edge_face_finds_the_owner_or_minus_one():
@@ -26,3 +26,46 @@ def test_fan_triangulates_polygons():
     np.testing.assert_array_equal(T, [[0, 1, 2], [0, 2, 3], [0, 3, 4], [5, 6, 7]])
     np.testing.assert_array_equal(owner, [0, 0, 0, 1])
     assert fan([])[0].shape == (0, 3)
+
+
+def test_orient_sheets_makes_each_sheet_agree_and_leaves_junctions_alone():
+    rng = np.random.default_rng(3)
+    # three sheets meeting at the line x = y = 0 (a Y junction), each a 4 x 4 grid
+    from fracture.primitives import grid_faces
+
+    sheets = []
+    for k, angle in enumerate((0.0, 2.1, 4.2)):
+        u, z = np.meshgrid(np.linspace(0, 1, 5), np.linspace(0, 1, 5), indexing="ij")
+        V = np.stack([u.ravel() * np.cos(angle), u.ravel() * np.sin(angle), z.ravel()], 1)
+        sheets.append((V, grid_faces(5, 5)))
+    V = np.concatenate([s[0] for s in sheets])
+    F = np.concatenate([s[1] + 25 * k for k, s in enumerate(sheets)])
+    _, V_index = np.unique(V.round(12), axis=0, return_inverse=True)  # the junction line is shared
+    F = V_index.ravel()[F]
+    F[1::2] = F[1::2, ::-1]  # mixed orientations
+    turn = rng.random(len(F)) < 0.5
+    F[turn] = F[turn, ::-1]
+    G, turned, conflict = orient_sheets(F)
+    assert conflict is None and 0 < turned < len(F)
+    edges, count = unique_edges(G)
+    manifold = count == 2
+    # across every two-triangle edge the triangles run it in opposite directions
+    D = np.sort(directed_edges(G), axis=1)
+    key = D[:, 0] * (G.max() + 1) + D[:, 1]
+    for e in edges[manifold]:
+        rows = np.flatnonzero(key == e[0] * (G.max() + 1) + e[1])
+        a, b = directed_edges(G)[rows]
+        assert a[0] == b[1] and a[1] == b[0]
+    assert (count == 3).sum() == 4  # the junction's edges keep three triangles
+    assert np.array_equal(orient_sheets(G)[0], G) and orient_sheets(G)[1] == 0
+
+
+def test_orient_sheets_reports_a_moebius_strip():
+    n = 12
+    # vertices i (top) and n + i (bottom); after a half turn the strip joins top to bottom
+    F = []
+    for i in range(n - 1):
+        F += [[i, n + i, i + 1], [i + 1, n + i, n + i + 1]]
+    F += [[n - 1, 2 * n - 1, n], [n, 2 * n - 1, 0]]  # the twist
+    _, _, conflict = orient_sheets(np.array(F))
+    assert conflict is not None

@@ -34,7 +34,7 @@ from open3d.visualization import gui, rendering
 
 from fields.colormap import colorbar
 from fracture.atomic import atomic_write_bytes, atomic_write_text, png_bytes
-from fracture.errors import ConfigError, InputError, StageError
+from fracture.errors import ConfigError, InputError, ResultError, StageError
 from viewer import annotate
 from viewer.data import FIELDS, RunData, Surface
 from viewer.looks import (
@@ -562,7 +562,7 @@ class Viewer:
         self.status.text = f"re-run done: {out}"
 
     def report_error(self, what: str, exc: BaseException) -> None:
-        known = isinstance(exc, (ConfigError, InputError, StageError, OSError))
+        known = isinstance(exc, (ConfigError, InputError, ResultError, StageError, OSError))
         text = f"{what}: {exc}" if known else f"{what}: {exc!r}\n{traceback.format_exc(limit=4)}"
         self.errors.append(text)
         self.status.text = text.splitlines()[0][:120]

@@ -30,6 +30,7 @@ import copy
 import igl
 import numpy as np
 
+from fracture.errors import ResultError
 from fracture.imprint import imprint_boundary
 from fracture.objio import ObjFrames
 from fracture.pieces import build_pieces, mesh_checks, overlap_and_gap
@@ -59,6 +60,7 @@ def animate_stage(ctx: RunContext) -> None:
         transfer = build_transfer(cf, pieces, mesh.tree_matrix())
         bar.update()
         checks = _check(ctx, pieces, BV, BF, opts)
+        verify_pieces(checks, cf.names)
         bar.update()
 
         local = pieces.parts
@@ -98,12 +100,6 @@ def animate_stage(ctx: RunContext) -> None:
     ctx.counts.update(pieces=pieces.n_pieces, piece_triangles=int(sum(len(f) for f in pieces.faces)),
                       frames_written=transfer.n_frames if opts["obj_frames"] else 0)
     ctx.stats["animate"] = checks
-    bad = [c for c, p in enumerate(checks["pieces"]) if not (p["closed_oriented"] and p["vertex_manifold"])]
-    if bad:
-        ctx.notes.append(f"animate: pieces {bad} are not closed, oriented 2-manifolds")
-    if pieces.unresolved:
-        ctx.notes.append(f"animate: pieces {pieces.unresolved} self-intersect and could not be resolved "
-                         f"({sum(pieces.crossings)} triangle pairs)")
 
 
 def _check(ctx: RunContext, pieces, BV, BF, opts) -> dict:
@@ -120,9 +116,55 @@ def _check(ctx: RunContext, pieces, BV, BF, opts) -> dict:
     out = {"pieces": per_piece, "volume_B": vb, "volume_pieces": total,
            "volume_relative_error": abs(total - vb) / abs(vb), "patch_agreement": pieces.patch_agreement}
     if opts["check_samples"]:
-        overlap, gap = overlap_and_gap(pieces, BV, BF, opts["check_samples"], np.random.default_rng(ctx.cfg["seed"]))
-        out.update(overlap_share=overlap, uncovered_share=gap)
+        overlap, gap, share, n = overlap_and_gap(pieces, BV, BF, opts["check_samples"],
+                                                 np.random.default_rng(ctx.cfg["seed"]))
+        out.update(overlap_share=overlap, uncovered_share=gap, samples_inside=n)
+        for ch, p in zip(per_piece, share):
+            ch["volume_sampled"] = float(p * vb)
     return out
+
+
+# What a verified set of pieces may miss: of B's volume in all (slivers of S
+# grazing B are kept by one piece), and of the sample points in two pieces.
+VOLUME_BALANCE = 0.01
+OVERLAP_SHARE = 0.005
+
+
+def verify_pieces(checks: dict, names: list[str]) -> None:
+    """Refuse pieces that are not what a run promises (a :class:`ResultError` naming the piece).
+
+    Each piece must be closed and consistently oriented, vertex-manifold,
+    free of self-intersections (where they were counted, exactly), with a
+    positive volume that agrees with the share of sample points its winding
+    number claims (within five standard errors of the sampling); together
+    the pieces must hold B's volume and not overlap.
+    """
+    vb = checks["volume_B"]
+    n = checks.get("samples_inside", 0)
+    for c, p in enumerate(checks["pieces"]):
+        what = f"animate: piece {c} ({names[c]})"
+        if not p["closed_oriented"]:
+            raise ResultError(f"{what} is not closed with consistently oriented faces, so it would not be solid")
+        if p.get("self_intersections", 0):
+            raise ResultError(f"{what} crosses itself ({p['self_intersections']} triangle pairs meet) and the "
+                              "crossings could not be resolved")
+        if not p["vertex_manifold"]:
+            raise ResultError(f"{what} is pinched at a vertex (not a 2-manifold)")
+        if p["volume"] <= 0:
+            raise ResultError(f"{what} has volume {p['volume']:.3g}; it is inside out or empty")
+        if "volume_sampled" in p:
+            share = min(max(p["volume_sampled"] / vb, 0.0), 1.0)
+            allowed = 5.0 * abs(vb) * np.sqrt(max(share * (1.0 - share), 1.0 / n) / n) + 1e-3 * abs(vb)
+            if abs(p["volume"] - p["volume_sampled"]) > allowed:
+                raise ResultError(f"{what}: its volume {p['volume']:.4g} disagrees with the {p['volume_sampled']:.4g} "
+                                  f"its winding number encloses at {n} sample points (it wraps some space twice)")
+    if checks["volume_relative_error"] > VOLUME_BALANCE:
+        raise ResultError(f"animate: the pieces hold {checks['volume_pieces']:.4g} of volume where the object has "
+                          f"{vb:.4g} ({100 * checks['volume_relative_error']:.2g} % off, at most "
+                          f"{100 * VOLUME_BALANCE:g} % expected)")
+    if checks.get("overlap_share", 0.0) > OVERLAP_SHARE:
+        raise ResultError(f"animate: {100 * checks['overlap_share']:.2g} % of the object lies in two pieces at once "
+                          f"(at most {100 * OVERLAP_SHARE:g} % expected)")
 
 
 def _hausdorff_to_b(pieces, transfer: Transfer, X: np.ndarray, BV, BF) -> float:

@@ -19,6 +19,7 @@ def coarse_from_meshes(inp: dict) -> CoarseFracture:
     """
     from fracture.components import label_components
     from fracture.errors import InputError
+    from fracture.topology import orient_sheets
     from fracture.animation import exterior_points, lattice_animation
     from fracture.virtual import extend_cuts
 
@@ -28,10 +29,18 @@ def coarse_from_meshes(inp: dict) -> CoarseFracture:
                          + " and ".join(f"input.{k}" for k in missing) + " to mesh files (OBJ, PLY, OFF or STL)")
     BV, BF = read_mesh(inp["exterior"], "input.exterior", closed=True)
     V, F = read_mesh(inp["fracture"], "input.fracture")
+    # the pieces follow the sides of each triangle, so a sheet's triangles must agree (any one way)
+    F, turned, conflict = orient_sheets(F)
+    if conflict is not None:
+        raise InputError(f"input.fracture ({inp['fracture']}): faces {conflict[0] + 1} and {conflict[1] + 1} "
+                         "(counted from 1 in the file) lie on a one-sided sheet (a Moebius strip): its two sides "
+                         "cannot be told apart; expected sheets with two sides")
+    notes = [f"input.fracture: {turned} faces turned to agree with their neighbours"] if turned else []
     V, F, virtual = extend_cuts(V, F, BV, BF)
     sides, ext, n = label_components(BV, BF, V, F, what=f"input.fracture ({inp['fracture']})")
     still = lattice_animation(exterior_points(BV, BF, ext, n), lambda c, t, X: X, 1)
-    notes = [f"virtual fracture: {int(virtual.sum())} triangles extend incomplete cuts"] if virtual.any() else []
+    if virtual.any():
+        notes.append(f"virtual fracture: {int(virtual.sum())} triangles extend incomplete cuts")
     return make_coarse(BV, BF, ext, V, F, sides, [f"piece_{c:03d}" for c in range(n)], still, inp["separation"],
                        virtual=virtual, notes=notes)
 
