@@ -36,7 +36,7 @@ from fracture.coarse import flood_fill_patches
 from fracture.imprint import Imprint
 from fracture.refine.collide import self_intersections
 from fracture.refine.mesh import RefineMesh
-from fracture.topology import barycentric_weights, directed_edge_face, directed_edges, signed_volume
+from fracture.topology import barycentric_weights, directed_edge_face, directed_edges, signed_volume, weld
 
 
 @dataclass
@@ -323,23 +323,18 @@ def weld_rounded(V: np.ndarray, F: np.ndarray, J: np.ndarray, relative: float = 
 
     The boolean computes exactly and rounds its new points to doubles; where
     crossing curves nearly meet, that leaves triangles with edges of 1e-16
-    that cross their neighbours. Each group of such vertices becomes its
-    lowest-numbered member and the triangles that collapse go (with their
-    rows of ``J``, the source triangle of every output triangle). Returns the
-    new ``F`` and ``J``; unused vertices stay (the caller drops them).
+    that cross their neighbours. Each cluster of such vertices
+    (:func:`fracture.topology.weld`) becomes its lowest-numbered member and
+    the triangles that collapse go (with their rows of ``J``, the source
+    triangle of every output triangle). Returns the new ``F`` and ``J``;
+    unused vertices stay (the caller drops them).
     """
-    from scipy.sparse.csgraph import connected_components
-    from scipy.spatial import cKDTree
-
-    eps = relative * float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
-    pairs = cKDTree(V).query_pairs(eps, output_type="ndarray")
-    if not len(pairs):
+    _, cluster = weld(V, relative * float(np.linalg.norm(V.max(axis=0) - V.min(axis=0))))
+    if cluster.max() + 1 == len(V):
         return F, J
-    graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(V), len(V)))
-    _, group = connected_components(graph, directed=False)
-    first = np.full(group.max() + 1, len(V))
-    np.minimum.at(first, group, np.arange(len(V)))
-    F = first[group][F]
+    first = np.full(cluster.max() + 1, len(V))
+    np.minimum.at(first, cluster, np.arange(len(V)))
+    F = first[cluster][F]
     keep = (F[:, 0] != F[:, 1]) & (F[:, 1] != F[:, 2]) & (F[:, 2] != F[:, 0])
     return F[keep], J[keep]
 

@@ -165,53 +165,50 @@ def weld(P: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
     return G, label
 
 
-def orient_sheets(F: np.ndarray) -> tuple[np.ndarray, int, np.ndarray | None]:
+def orient_sheets(F: np.ndarray) -> tuple[np.ndarray, int, tuple[int, int] | None]:
     """Turn the triangles of every sheet of a (non-manifold) surface to agree with their neighbours.
 
     A sheet is a set of triangles joined across edges that have exactly two
     triangles; edges with three or more (the junctions of a fracture surface)
     separate sheets, whose relative orientation is left alone. In each sheet
     the triangle first in ``F`` keeps its orientation and the others follow
-    it (breadth first across the sheet's edges). Returns the turned ``F``, how
-    many triangles were turned, and, for a sheet that cannot be oriented (a
-    Moebius strip), two triangles that disagree across an edge (else ``None``).
+    it. Returns the turned ``F``, how many triangles were turned, and, for a
+    sheet that cannot be oriented (a Moebius strip), two neighbouring
+    triangles of it (else ``None``).
+
+    Each triangle is taken twice, as it is (node ``f``) and turned (node
+    ``m + f``); across a sheet edge, ``f`` joins whichever copy of its
+    neighbour runs the edge the other way. The components of that graph are
+    the consistent orientations: a triangle whose two copies fall in one
+    component is on a one-sided sheet.
     """
     F = np.asarray(F, np.int64)
     m = len(F)
     if not m:
         return F.copy(), 0, None
     D = directed_edges(F)
-    n = int(F.max()) + 1
-    key = edge_keys(D, n)
+    key = edge_keys(D, int(F.max()) + 1)
     order = np.argsort(key, kind="stable")
-    counts = np.bincount(np.unique(key, return_inverse=True)[1].ravel())
-    starts = np.r_[0, np.cumsum(counts)[:-1]]
-    pair = starts[counts == 2]
-    a, b = order[pair], order[pair + 1]  # rows of D: the two triangles on a manifold edge
-    same = D[a, 0] == D[b, 0]  # both run the edge the same way: one of them must turn
+    _, start, count = np.unique(key[order], return_index=True, return_counts=True)
+    pair = start[count == 2]
+    a, b = order[pair], order[pair + 1]  # rows of D: the two triangles on a sheet edge
     fa, fb = a // 3, b // 3
-    graph = coo_matrix((np.ones(len(fa)), (fa, fb)), shape=(m, m)).tocsr()
-    graph = graph + graph.T
+    turn_b = np.where(D[a, 0] == D[b, 0], m, 0)  # both run the edge the same way: f joins the turned copy
+    rows = np.r_[fa, fa + m]
+    cols = np.r_[fb + turn_b, (fb + turn_b + m) % (2 * m)]
+    graph = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(2 * m, 2 * m))
     _, label = connected_components(graph, directed=False)
-    flip = np.full(m, -1, np.int8)
-    # breadth first per sheet (a compiled traversal would not pay: coarse surfaces have thousands of triangles)
-    neighbours = [[] for _ in range(m)]
-    for x, y, s in zip(fa.tolist(), fb.tolist(), same.tolist()):
-        neighbours[x].append((y, s))
-        neighbours[y].append((x, s))
-    for root in np.unique(label, return_index=True)[1].tolist():
-        flip[root] = 0
-        queue = [root]
-        while queue:
-            f = queue.pop()
-            for g, s in neighbours[f]:
-                want = flip[f] ^ int(s)
-                if flip[g] < 0:
-                    flip[g] = want
-                    queue.append(g)
-    bad = (flip[fa] ^ flip[fb]) != same.astype(np.int8)
-    conflict = (int(fa[bad][0]), int(fb[bad][0])) if bad.any() else None
+    _, sheet = connected_components(coo_matrix((np.ones(len(fa)), (fa, fb)), shape=(m, m)), directed=False)
+    root = np.full(sheet.max() + 1, m)
+    np.minimum.at(root, sheet, np.arange(m))  # each sheet's first triangle keeps its orientation
+    keep = label[root[sheet]]
+    turn = label[:m] != keep
+    one_sided = np.flatnonzero(label[:m] == label[m:])
+    conflict = None
+    if len(one_sided):
+        f = int(one_sided[0])
+        edge = np.flatnonzero((fa == f) | (fb == f))[0]
+        conflict = (int(fa[edge]), int(fb[edge]))
     out = F.copy()
-    turn = flip == 1
     out[turn] = out[turn][:, ::-1]
     return out, int(turn.sum()), conflict

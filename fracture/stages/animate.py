@@ -152,7 +152,7 @@ def verify_pieces(checks: dict, names: list[str]) -> None:
             raise ResultError(f"{what} is pinched at a vertex (not a 2-manifold)")
         if p["volume"] <= 0:
             raise ResultError(f"{what} has volume {p['volume']:.3g}; it is inside out or empty")
-        if "volume_sampled" in p:
+        if "volume_sampled" in p and n:
             share = min(max(p["volume_sampled"] / vb, 0.0), 1.0)
             allowed = 5.0 * abs(vb) * np.sqrt(max(share * (1.0 - share), 1.0 / n) / n) + 1e-3 * abs(vb)
             if abs(p["volume"] - p["volume_sampled"]) > allowed:
