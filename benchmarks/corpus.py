@@ -6,6 +6,7 @@ came out closed, vertex-manifold and free of self-intersections, with the triang
 
     python benchmarks/corpus.py                          # Blender's OBJ exports, default config
     python benchmarks/corpus.py --format sample --set refine.max_triangles=20000
+    python benchmarks/corpus.py --dir /tmp/held           # cases made with make_cellfracture.py --random
 """
 
 from __future__ import annotations
@@ -30,25 +31,31 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--format", default="blender_obj", choices=["sample", "blender_obj", "ply"])
     ap.add_argument("--case", action="append", help="default: every case")
+    ap.add_argument("--dir", type=Path, help="cases made elsewhere (one folder per case, as "
+                    "tools/make_cellfracture.py writes them) instead of the shipped archives")
     ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY.PATH=VALUE")
     args = ap.parse_args()
-    archives = sorted((ROOT / "examples" / "cellfracture").glob("*.tar.xz"))
-    cases = [a.name[:-len(".tar.xz")] for a in archives]
+    if args.dir:
+        cases = sorted(p.name for p in args.dir.iterdir() if (p / "case.json").is_file())
+    else:
+        archives = sorted((ROOT / "examples" / "cellfracture").glob("*.tar.xz"))
+        cases = [a.name[:-len(".tar.xz")] for a in archives]
     if args.case:
         cases = [c for c in cases if c in args.case]
     print("| case | result | bad pieces | refined triangles | seconds |\n| --- | --- | --- | --- | --- |")
     good = 0
     with tempfile.TemporaryDirectory() as tmp:
-        root = Path(tmp)
+        root = args.dir or Path(tmp)
         for case in cases:
-            with tarfile.open(ROOT / "examples" / "cellfracture" / f"{case}.tar.xz") as tar:
-                tar.extractall(root, filter="data")
+            if not args.dir:
+                with tarfile.open(ROOT / "examples" / "cellfracture" / f"{case}.tar.xz") as tar:
+                    tar.extractall(root, filter="data")
             pattern = "*.ply" if args.format == "ply" else "*.obj"
             cfg = load_config(ROOT / "configs" / "blender_cube8.yaml",
                               [f"input.path={root / case / args.format}", f"input.glob='{pattern}'"] + args.overrides)
             start = time.perf_counter()
             try:
-                out = runner.run(cfg, root / f"run_{case}", progress=False)
+                out = runner.run(cfg, Path(tmp) / f"run_{case}", progress=False)
             except (InputError, ResultError, StageError) as exc:
                 print(f"| {case} | refused: {str(exc)[:120]} | | | {time.perf_counter() - start:.0f} |")
                 continue

@@ -46,7 +46,7 @@ SNAP = 1e-4
 CHORD = 0.05
 # A triangle of S with every corner on B whose centroid is closer to B than
 # this fraction of its longest edge lies along B (see clip_tangent_triangles).
-TANGENT = 0.05
+TANGENT = 0.1
 # An interior edge of S between two boundary vertices is split, and the new
 # vertex put this fraction of the edge's length inside B.
 BRIDGE_DEPTH = 0.2
@@ -321,7 +321,7 @@ def _walk_section(surf: _Surface, p: int, q: int, claimed: set, cut: set, where:
 
 
 def clip_tangent_triangles(mesh: RefineMesh, exterior: Exterior, ratio: float = TANGENT, max_rounds: int = 20) -> int:
-    """Remove triangles that lie along B: every corner on S's boundary, centroid within ``ratio`` of their size from B.
+    """Remove ears of S that lie along B: two boundary edges, centroid within ``ratio`` of their size from B.
 
     Such a triangle separates nothing (B is on one of its sides); kept, it
     would double a patch of B (a flat B) or cut through it (a curved B).
@@ -332,7 +332,11 @@ def clip_tangent_triangles(mesh: RefineMesh, exterior: Exterior, ratio: float = 
         table = edge_table(mesh.F, len(mesh.V))
         on_b = np.zeros(len(mesh.V), bool)
         on_b[row_edges(mesh.F, table.boundary_rows)] = True
-        cand = np.flatnonzero(on_b[mesh.F].all(axis=1))
+        # ears only (two boundary edges or three): removing a triangle with fewer would split the fan
+        # of its corners opposite them, cutting off a cap of S whose rim, imprinted on B, is oriented
+        # against the rest of the cut; the bridges such a triangle has are split instead
+        ear = (table.row_count.reshape(-1, 3) == 1).sum(axis=1) >= 2
+        cand = np.flatnonzero(on_b[mesh.F].all(axis=1) & ear)
         if not len(cand):
             break
         T = mesh.V[mesh.F[cand]]

@@ -17,6 +17,16 @@ pocket goes and the piece is closed, 2-manifold and free of
 self-intersections. The piece on the near side of S keeps the sliver of S
 outside B; both are a thin shell of S's grazing triangles in volume.
 
+The boolean is exact, but its new vertices are rounded to doubles, and where
+S grazes B the crossing curves of nearly coplanar triangles are so close
+that the rounding leaves sliver triangles crossing their neighbours. When a
+piece cannot be resolved, all pieces are resolved again from positions
+moved by a fixed pseudo-random jitter of :data:`JITTER` of B's diagonal
+(the whole shared array, so neighbouring pieces keep meeting exactly): the
+degenerate configurations are gone and so are the slivers. This is a
+numeric perturbation in place of a symbolic one (which the boolean does not
+offer), at a scale far below the mesh's.
+
 All pieces index one vertex array: S's vertices (shared by the pieces that
 meet there), vertices made on S triangles by the resolution, then B's
 vertices off the cut and vertices made on B triangles.
@@ -37,6 +47,9 @@ from fracture.imprint import Imprint
 from fracture.refine.collide import self_intersections
 from fracture.refine.mesh import RefineMesh
 from fracture.topology import barycentric_weights, directed_edge_face, directed_edges, signed_volume, weld
+
+JITTER = 1e-9  # of B's diagonal: the positions' perturbation when a resolution needs one (see the module doc)
+JITTER_TRIES = 3  # jittered attempts (seeds 1, 2, 3) after the plain one
 
 
 @dataclass
@@ -68,6 +81,9 @@ class Pieces:
         Per piece, the crossing triangle pairs left: nonzero only where the
         resolution was refused (see :func:`resolve_crossings`). Both are
         ``None`` for pieces built without the resolution.
+    jitter_seed : int
+        0, or the seed of the jitter ``V`` was moved by so that every piece
+        could be resolved (see the module doc).
     """
 
     V: np.ndarray
@@ -78,6 +94,7 @@ class Pieces:
     derived: sp.csr_matrix | None = None
     resolved: list | None = None
     crossings: list | None = None
+    jitter_seed: int = 0
 
     def __post_init__(self):
         if self.derived is None:
@@ -185,12 +202,32 @@ def build_pieces(im: Imprint, mesh: RefineMesh, n_components: int, fallback, res
 
 
 def _resolve_pieces(pieces: Pieces) -> Pieces:
-    """Resolve every self-crossing piece and renumber the shared vertices (see :class:`Pieces` for the order)."""
+    """Resolve every self-crossing piece; if one is refused, retry all from jittered positions (module doc)."""
+    out, failed = _resolve_all(pieces)
+    if not failed:
+        return out
+    diagonal = float(np.linalg.norm(pieces.V.max(axis=0) - pieces.V.min(axis=0)))
+    for seed in range(1, JITTER_TRIES + 1):
+        jitter = np.random.default_rng(seed).uniform(-1.0, 1.0, pieces.V.shape) * (JITTER * diagonal)
+        moved, failed_moved = _resolve_all(replace(pieces, V=pieces.V + jitter, jitter_seed=seed))
+        if len(failed_moved) < len(failed):
+            out, failed = moved, failed_moved
+        if not failed:
+            break
+    return out
+
+
+def _resolve_all(pieces: Pieces) -> tuple[Pieces, list[int]]:
+    """Resolve every self-crossing or pinched piece, renumber the shared vertices (order: see :class:`Pieces`).
+
+    Also returns the pieces whose resolution was refused.
+    """
     n_s, n_v = pieces.n_fracture, len(pieces.V)
     faces, exterior = list(pieces.faces), list(pieces.exterior)
     resolved, left = [0] * pieces.n_pieces, [0] * pieces.n_pieces
     new_pos, new_parents, new_weights, new_on_s = [], [], [], []
     n_new = 0
+    failed = []
     for c, (ids, V, F) in enumerate(pieces.parts):
         pairs = crossing_pairs(V, F)
         pinched = not np.asarray(igl.is_vertex_manifold(np.ascontiguousarray(F, np.int64))).all()
@@ -199,6 +236,7 @@ def _resolve_pieces(pieces: Pieces) -> Pieces:
         out = resolve_crossings(V, F, pieces.exterior[c], boolean=bool(pairs))
         if out is None:
             left[c] = int(pairs)
+            failed.append(c)
             continue
         FC, ext, source, P, parents, weights, on_s = out
         to_global = np.where(source >= 0, ids[np.maximum(source, 0)], -1)
@@ -209,7 +247,7 @@ def _resolve_pieces(pieces: Pieces) -> Pieces:
         new_pos.append(P), new_parents.append(ids[parents]), new_weights.append(weights), new_on_s.append(on_s)
         resolved[c] = int(pairs)
     if not n_new:
-        return replace(pieces, faces=faces, exterior=exterior, resolved=resolved, crossings=left)
+        return replace(pieces, faces=faces, exterior=exterior, resolved=resolved, crossings=left), failed
     P, parents, weights, on_s = (np.concatenate(a) for a in (new_pos, new_parents, new_weights, new_on_s))
     # order: S's vertices, new ones on S, B's vertices, new ones on B
     old = np.arange(n_v + n_new)
@@ -221,7 +259,7 @@ def _resolve_pieces(pieces: Pieces) -> Pieces:
     derived = sp.csr_matrix((weights[on_s].ravel(), (np.repeat(np.arange(k), 3), parents[on_s].ravel())),
                             shape=(k, n_s))
     return replace(pieces, V=V, n_fracture=n_s + k, faces=[renumber[F] for F in faces], exterior=exterior,
-                   derived=derived, resolved=resolved, crossings=left)
+                   derived=derived, resolved=resolved, crossings=left), failed
 
 
 def resolve_crossings(V: np.ndarray, F: np.ndarray, exterior: np.ndarray, volume_tolerance: float = 0.5,

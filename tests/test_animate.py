@@ -74,12 +74,11 @@ def test_imprinting_keeps_the_tree_and_puts_the_boundary_on_b():
     assert s_edges == b_edges
 
 
-def test_a_surface_leaving_b_makes_pieces_without_crossings():
-    # S: the height field z = 0.7 + 0.4 b(x) b(y) (b a bump, 0 on the sides)
-    # reaches z = 1.1 and leaves the unit cube through its top face. The
-    # piece above S would enclose an inverted pocket: resolved, it is the
-    # positive part of its winding number.
-    import igl
+def bump_cut():
+    """The unit cube (B) and the height field z = 0.7 + 0.4 b(x) b(y) (S, b a bump, 0 on the sides).
+
+    S reaches z = 1.1 and leaves the cube through its top face; component 1 is above S.
+    """
     BV, BF = box((0, 0, 0), (1, 1, 1), (10, 10, 10))
     n = 9
     x, y = np.meshgrid(np.linspace(0, 1, n + 1), np.linspace(0, 1, n + 1), indexing="ij")
@@ -87,8 +86,16 @@ def test_a_surface_leaving_b_makes_pieces_without_crossings():
     V = np.stack([x, y, 0.7 + 6.4 * x * (1 - x) * y * (1 - y)], 1)
     F = grid_faces(n + 1, n + 1)
     up = np.cross(V[F[0, 1]] - V[F[0, 0]], V[F[0, 2]] - V[F[0, 0]])[2] > 0
-    sides = np.tile([0, 1] if up else [1, 0], (len(F), 1))  # component 1 above S
-    mesh = RefineMesh.from_coarse(V, F, sides)
+    sides = np.tile([0, 1] if up else [1, 0], (len(F), 1))
+    return BV, BF, RefineMesh.from_coarse(V, F, sides)
+
+
+def test_a_surface_leaving_b_makes_pieces_without_crossings():
+    # S (bump_cut) leaves the unit cube through its top face. The piece
+    # above S would enclose an inverted pocket: resolved, it is the
+    # positive part of its winding number.
+    import igl
+    BV, BF, mesh = bump_cut()
     im = imprint_boundary(BV, BF, mesh)
 
     def labels(faces):
@@ -258,3 +265,63 @@ def test_welding_removes_the_slivers_a_boolean_rounds_into_crossings():
     assert len(FW) == len(F) and np.array_equal(JW, J[:-1])
     assert np.array_equal(FW, F)  # the group takes its lowest vertex, 0
     assert mesh_checks(V, FW)["closed_oriented"]
+
+
+def _fan_and_flap(y_height: float):
+    """S: a fan of three triangles around an inner vertex w, on B's bottom face, plus two flat triangles.
+
+    T = (a, c, x) lies on B with one boundary edge (x, a); U = (x, c, y)
+    is an ear (two boundary edges) standing ``y_height`` above B at y.
+    """
+    a, b, c = [0.3, 0.3, 0.0], [0.5, 0.2, 0.0], [0.6, 0.5, 0.0]
+    w, x, y = [0.47, 0.33, 0.3], [0.4, 0.6, 0.0], [0.6, 0.75, y_height]
+    V = np.array([a, b, c, w, x, y])
+    F = np.array([[3, 0, 1], [3, 1, 2], [3, 2, 0], [0, 2, 4], [4, 2, 5]])
+    return RefineMesh.from_coarse(V, F, np.tile([0, 1], (len(F), 1)))
+
+
+def test_only_ears_along_b_are_clipped_so_s_keeps_its_fans():
+    import igl
+
+    from fracture.imprint import clip_tangent_triangles
+    BV, BF = box((0, 0, 0), (1, 1, 1), (4, 4, 4))
+    # T lies on B but is not an ear: removing it would split c's fan (a pinch
+    # cutting the fan around w off S); its bridges are split instead
+    standing = _fan_and_flap(0.3)
+    assert clip_tangent_triangles(standing, Exterior(BV, BF)) == 0 and len(standing.F) == 5
+    # with U lying on B too, U goes, which makes T an ear, and T goes next
+    lying = _fan_and_flap(0.0)
+    assert clip_tangent_triangles(lying, Exterior(BV, BF)) == 2
+    assert sorted(map(sorted, lying.F.tolist())) == [[0, 1, 3], [0, 2, 3], [1, 2, 3]]
+    assert np.asarray(igl.is_vertex_manifold(lying.F)).all()
+
+
+def test_a_refused_resolution_is_retried_from_jittered_positions(monkeypatch):
+    # the bump cut, with the first resolution refused (as the boolean's rounding can refuse one)
+    import fracture.pieces as fp
+    BV, BF, mesh = bump_cut()
+    im = imprint_boundary(BV, BF, mesh)
+    raw = build_pieces(im, mesh, 2, lambda faces: np.zeros(len(faces), np.int64), resolve=False)
+
+    real, calls = fp.resolve_crossings, []
+
+    def refuse_first(*args, **kwargs):
+        calls.append(args[0])
+        return None if len(calls) == 1 else real(*args, **kwargs)
+
+    monkeypatch.setattr(fp, "resolve_crossings", refuse_first)
+    pieces = fp._resolve_pieces(raw)
+    assert pieces.jitter_seed == 1 and pieces.unresolved == [] and len(calls) == 2
+    # every vertex moved by at most the jitter, the same for both pieces (one shared array)
+    ns = raw.n_fracture
+    moved = np.abs(pieces.V[:ns] - raw.V[:ns]).max()
+    assert 0 < moved <= fp.JITTER * np.linalg.norm(np.ptp(raw.V, axis=0))
+    for c in range(2):
+        ch = mesh_checks(*pieces.piece(c)[1:])
+        assert ch["closed_oriented"] and ch["vertex_manifold"] and ch["self_intersections"] == 0
+    overlap, uncovered, _, _ = overlap_and_gap(pieces, BV, BF, 4000, np.random.default_rng(0))
+    assert overlap < 0.005
+    # deterministic: the same seed, the same positions
+    calls.clear()
+    again = fp._resolve_pieces(raw)
+    assert np.array_equal(again.V, pieces.V)

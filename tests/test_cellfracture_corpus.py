@@ -56,7 +56,7 @@ def test_every_export_imports_with_its_pieces_and_up_axis(corpus, case, fmt):
 
 # the thin pieces of a torus and a monkey meet B at grazing angles (a side test of B's
 # triangles against S's planes mislabels their patches); the full flow at a small budget
-END_TO_END = ["cube_rotated_8", "torus_8", "cube_20", "cube_12"]
+END_TO_END = ["cube_rotated_8", "torus_8", "cube_20", "cube_12", "cylinder_10", "suzanne_6"]
 
 
 @pytest.mark.slow

@@ -4,6 +4,7 @@ Runs inside Blender (Debian's ``blender`` package, 3.4, ships the add-on)::
 
     blender -b --factory-startup --python tools/make_cellfracture.py -- --out examples/cellfracture
     blender -b --factory-startup --python tools/make_cellfracture.py -- --out /tmp/c --case torus_12 --frames 30
+    blender -b --factory-startup --python tools/make_cellfracture.py -- --out /tmp/held --random 8 --random-seed 1
 
 For every case (an object, a number of cells, a seed, a pose) it builds the
 object, fractures it with Cell Fracture (cells seeded by random points inside
@@ -58,7 +59,23 @@ def _args():
     ap.add_argument("--case", action="append", choices=sorted(CASES), help="default: every case")
     ap.add_argument("--frames", type=int, default=30)
     ap.add_argument("--formats", default="sample,blender_obj,ply,usd")
+    ap.add_argument("--random", type=int, default=0, metavar="N",
+                    help="instead of the named cases, N random ones (object, cells, seed and pose drawn "
+                         "with --random-seed): inputs the corpus has not seen")
+    ap.add_argument("--random-seed", type=int, default=0)
     return ap.parse_args(argv)
+
+
+def random_cases(n: int, seed: int) -> dict:
+    """``n`` cases drawn like the named ones: an object, 5 to 20 cells, a seed, any rotation."""
+    rng = random.Random(seed)
+    out = {}
+    for _ in range(n):
+        kind = rng.choice(["cube", "cylinder", "icosphere", "torus", "suzanne"])
+        cells, cell_seed = rng.randint(5, 20), rng.randint(100, 10**6)
+        rot = tuple(round(rng.uniform(0.0, 90.0), 1) for _ in range(3))
+        out[f"{kind}_{cells}_s{cell_seed}"] = (kind, cells, cell_seed, rot, 3.5)
+    return out
 
 
 def _clear():
@@ -199,6 +216,9 @@ def write_ply(path: Path, pieces, frame: int):
 def main():
     args = _args()
     formats = set(args.formats.split(","))
+    if args.random:
+        CASES.clear()
+        CASES.update(random_cases(args.random, args.random_seed))
     for case in args.case or sorted(CASES):
         pieces, ground = build_with_ground(case, args.frames)
         out = args.out / case

@@ -114,7 +114,8 @@ def _check(ctx: RunContext, pieces, BV, BF, opts) -> dict:
         per_piece.append(ch)
     vb = signed_volume(BV, BF)
     out = {"pieces": per_piece, "volume_B": vb, "volume_pieces": total,
-           "volume_relative_error": abs(total - vb) / abs(vb), "patch_agreement": pieces.patch_agreement}
+           "volume_relative_error": abs(total - vb) / abs(vb), "patch_agreement": pieces.patch_agreement,
+           "jitter_seed": pieces.jitter_seed}
     if opts["check_samples"]:
         overlap, gap, share, n = overlap_and_gap(pieces, BV, BF, opts["check_samples"],
                                                  np.random.default_rng(ctx.cfg["seed"]))
