@@ -44,8 +44,8 @@ SNAP = 1e-4
 # Boundary edges of S are split until their midpoints are this close to B,
 # relative to B's median edge length.
 CHORD = 0.05
-# A triangle of S with every corner on B whose centroid is closer to B than
-# this fraction of its longest edge lies along B (see clip_tangent_triangles).
+# An ear of S (two boundary edges) whose centroid is closer to B than this
+# fraction of its longest edge lies along B (see clip_tangent_triangles).
 TANGENT = 0.1
 # An interior edge of S between two boundary vertices is split, and the new
 # vertex put this fraction of the edge's length inside B.
@@ -329,14 +329,12 @@ def clip_tangent_triangles(mesh: RefineMesh, exterior: Exterior, ratio: float = 
     """
     total = 0
     for _ in range(max_rounds):
-        table = edge_table(mesh.F, len(mesh.V))
-        on_b = np.zeros(len(mesh.V), bool)
-        on_b[row_edges(mesh.F, table.boundary_rows)] = True
-        # ears only (two boundary edges or three): removing a triangle with fewer would split the fan
-        # of its corners opposite them, cutting off a cap of S whose rim, imprinted on B, is oriented
-        # against the rest of the cut; the bridges such a triangle has are split instead
-        ear = (table.row_count.reshape(-1, 3) == 1).sum(axis=1) >= 2
-        cand = np.flatnonzero(on_b[mesh.F].all(axis=1) & ear)
+        # ears only (two boundary edges or three, so every corner on the boundary): removing a
+        # triangle with fewer would split the fan of its corner opposite them, cutting off a cap of S
+        # whose rim, imprinted on B, is oriented against the rest of the cut; the bridges such a
+        # triangle has are split instead (split_bridge_edges)
+        boundary = edge_table(mesh.F, len(mesh.V)).row_count.reshape(-1, 3) == 1
+        cand = np.flatnonzero(boundary.sum(axis=1) >= 2)
         if not len(cand):
             break
         T = mesh.V[mesh.F[cand]]

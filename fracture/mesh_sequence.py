@@ -22,6 +22,7 @@ from scipy.sparse.csgraph import connected_components
 
 from fracture.errors import InputError
 from fracture.meshio import read_obj_objects
+from fracture.topology import diagonal
 
 
 @dataclass
@@ -202,7 +203,7 @@ def up_axis_of(frames: list[MeshFrame]) -> str | None:
     provided they moved down it by more than 1 % of the object's size; None when they did not."""
     first, last = frames[0].V, frames[-1].V
     d = (last - first).mean(axis=0)
-    size = float(np.linalg.norm(first.max(axis=0) - first.min(axis=0)))
+    size = diagonal(first)
     k = int(np.argmax(np.abs(d)))
     if d[k] >= -0.01 * size:
         return None
@@ -249,7 +250,7 @@ def coarse_from_frames(frames: list[MeshFrame], lattice: int = 2, separation: fl
     from fracture.tolerances import tol
 
     rest = frames[0]
-    diag = float(np.linalg.norm(rest.V.max(axis=0) - rest.V.min(axis=0)))
+    diag = diagonal(rest.V)
     shared = label_tiling(rest.V, rest.polygons, rest.names, source=str(rest.path))
     names = [rest.names[p] for p in shared.kept]
     V, F = _compact(shared.V, shared.fracture_F)

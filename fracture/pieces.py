@@ -46,7 +46,8 @@ from fracture.coarse import flood_fill_patches
 from fracture.imprint import Imprint
 from fracture.refine.collide import self_intersections
 from fracture.refine.mesh import RefineMesh
-from fracture.topology import barycentric_weights, directed_edge_face, directed_edges, signed_volume, weld
+from fracture.topology import (barycentric_weights, diagonal, directed_edge_face, directed_edges, signed_volume,
+                               weld)
 
 JITTER = 1e-9  # of B's diagonal: the positions' perturbation when a resolution needs one (see the module doc)
 JITTER_TRIES = 3  # jittered attempts (seeds 1, 2, 3) after the plain one
@@ -206,9 +207,9 @@ def _resolve_pieces(pieces: Pieces) -> Pieces:
     out, failed = _resolve_all(pieces)
     if not failed:
         return out
-    diagonal = float(np.linalg.norm(pieces.V.max(axis=0) - pieces.V.min(axis=0)))
+    size = diagonal(pieces.V)
     for seed in range(1, JITTER_TRIES + 1):
-        jitter = np.random.default_rng(seed).uniform(-1.0, 1.0, pieces.V.shape) * (JITTER * diagonal)
+        jitter = np.random.default_rng(seed).uniform(-1.0, 1.0, pieces.V.shape) * (JITTER * size)
         moved, failed_moved = _resolve_all(replace(pieces, V=pieces.V + jitter, jitter_seed=seed))
         if len(failed_moved) < len(failed):
             out, failed = moved, failed_moved
@@ -367,7 +368,7 @@ def weld_rounded(V: np.ndarray, F: np.ndarray, J: np.ndarray, relative: float = 
     triangle of every output triangle). Returns the new ``F`` and ``J``;
     unused vertices stay (the caller drops them).
     """
-    _, cluster = weld(V, relative * float(np.linalg.norm(V.max(axis=0) - V.min(axis=0))))
+    _, cluster = weld(V, relative * diagonal(V))
     if cluster.max() + 1 == len(V):
         return F, J
     first = np.full(cluster.max() + 1, len(V))

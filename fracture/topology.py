@@ -127,6 +127,11 @@ def plane_basis(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return u, np.cross(n, u)
 
 
+def diagonal(V: np.ndarray) -> float:
+    """Length of the diagonal of the bounding box of the points ``V``."""
+    return float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
+
+
 def signed_volume(V: np.ndarray, F: np.ndarray) -> float:
     """Volume enclosed by a closed, outward triangle mesh (negative if inward)."""
     A, B, C = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]

@@ -121,8 +121,9 @@ def _seed_points(obj, cells: int, seed: int):
     return seeds
 
 
-def build(case: str, frames: int):
-    kind, cells, seed, rot, height = CASES[case]
+def build(spec: tuple, frames: int):
+    """The object of ``spec`` (an entry of :data:`CASES`) fractured, its pieces posed as rigid bodies."""
+    kind, cells, seed, rot, height = spec
     _clear()
     scene = bpy.context.scene
     scene.frame_start, scene.frame_end = 1, frames
@@ -163,9 +164,9 @@ def build(case: str, frames: int):
     return pieces
 
 
-def build_with_ground(case: str, frames: int):
+def build_with_ground(spec: tuple, frames: int):
     """The fractured object's pieces as active rigid bodies over a passive ground plane at z = 0."""
-    pieces = build(case, frames)
+    pieces = build(spec, frames)
     scene = bpy.context.scene
     bpy.ops.mesh.primitive_plane_add(size=40.0, location=(0.0, 0.0, 0.0))
     ground = bpy.context.active_object
@@ -216,11 +217,10 @@ def write_ply(path: Path, pieces, frame: int):
 def main():
     args = _args()
     formats = set(args.formats.split(","))
-    if args.random:
-        CASES.clear()
-        CASES.update(random_cases(args.random, args.random_seed))
-    for case in args.case or sorted(CASES):
-        pieces, ground = build_with_ground(case, args.frames)
+    cases = random_cases(args.random, args.random_seed) if args.random else CASES
+    names = sorted(cases) if args.random else args.case or sorted(CASES)
+    for case in names:
+        pieces, ground = build_with_ground(cases[case], args.frames)
         out = args.out / case
         scene = bpy.context.scene
         for sub in formats:
@@ -245,7 +245,7 @@ def main():
             scene.frame_set(1)
             bpy.ops.wm.usd_export(filepath=str(out / "usd" / f"{case}.usdc"), selected_objects_only=True,
                                   export_animation=True, export_materials=False)
-        kind, cells, seed, rot, height = CASES[case]
+        kind, cells, seed, rot, height = cases[case]
         (out / "case.json").write_text(json.dumps({
             "case": case, "object": kind, "cells": cells, "pieces": len(pieces), "seed": seed,
             "rotation_degrees": rot, "height": height, "frames": args.frames,

@@ -19,8 +19,9 @@ The manifest gets, per piece, whether it is closed, 2-manifold and
 outward-oriented, its volume and self-intersections (and how many crossing
 triangle pairs the resolution of :mod:`fracture.pieces` removed); the pieces' volume
 against B's; the share of sample points inside more than one piece; the
-Hausdorff distance between the first frame's exterior and B; and the
-largest gap between copies of a vertex before its fracture time.
+Hausdorff distance between the first frame's exterior and B; the
+largest gap between copies of a vertex before its fracture time; and
+``jitter_seed``, nonzero when the resolution needed jittered positions.
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ from fracture.objio import ObjFrames
 from fracture.pieces import build_pieces, mesh_checks, overlap_and_gap
 from fracture.plyio import write_ply
 from fracture.runner import RunContext, stage
-from fracture.topology import signed_volume
+from fracture.topology import diagonal, signed_volume
 from fracture.transfer import Transfer, build_transfer, frame_points
 from fracture.usd import write_pieces_usd
 
@@ -174,7 +175,7 @@ def _hausdorff_to_b(pieces, transfer: Transfer, X: np.ndarray, BV, BF) -> float:
     used = np.unique(EF)
     d1 = np.sqrt(igl.point_mesh_squared_distance(np.ascontiguousarray(X[used]), BV, BF)[0].max())
     d2 = np.sqrt(igl.point_mesh_squared_distance(np.ascontiguousarray(BV), X, EF)[0].max())
-    return float(max(d1, d2) / np.linalg.norm(BV.max(axis=0) - BV.min(axis=0)))
+    return float(max(d1, d2) / diagonal(BV))
 
 
 class EarlyGap:
