@@ -467,29 +467,51 @@ def imprint_boundary(BV: np.ndarray, BF: np.ndarray, mesh: RefineMesh, where: st
     split_bridge_edges(mesh, exterior)
     rows = edge_table(mesh.F, len(mesh.V)).boundary_rows
     sface, E = rows // 3, row_edges(mesh.F, rows)  # edges as directed in their triangle
-    surf = _Surface(BV, BF)
     verts = np.unique(E)
     _, f0, closest = exterior.closest(mesh.V[verts])
+    length = np.linalg.norm(mesh.V[E[:, 1]] - mesh.V[E[:, 0]], axis=1)
+    error = None
+    for order in _trace_orders(length):
+        try:
+            surf, to_b, chains = _embed(BV, BF, E, verts, f0, closest, order, where)
+            break
+        except InputError as e:
+            error = error or e
+    else:
+        raise error
+    # S's boundary vertices take their positions on B
+    mesh.V[verts] = np.array([surf.V[to_b[v]] for v in verts.tolist()])
+
+    BV_cut = np.array(surf.V)
+    cut_edges, cut_faces, to_fracture = _split_fracture_edges(mesh, E, sface, chains, BV_cut, to_b)
+    return Imprint(V=BV_cut, F=np.array(surf.F, np.int64), to_fracture=to_fracture,
+                   cut_edges=cut_edges, cut_faces=cut_faces, origin=np.array(surf.origin, np.int64))
+
+
+def _trace_orders(length: np.ndarray):
+    """Orders in which to trace S's boundary edges, tried in turn until one embeds them all."""
+    yield np.argsort(length, kind="stable")
+    yield np.arange(len(length))
+    yield np.argsort(-length, kind="stable")
+
+
+def _embed(BV, BF, E, verts, f0, closest, order, where):
+    """Insert S's boundary vertices into B and trace its boundary edges in ``order``."""
+    surf = _Surface(BV, BF)
     claimed: set[int] = set()
     to_b = {}
     for v, f, p in zip(verts.tolist(), f0.tolist(), closest):
         b = _insert(surf, p, f, claimed, where)
         claimed.add(b)
         to_b[v] = b
-    # S's boundary vertices take their positions on B
-    mesh.V[verts] = np.array([surf.V[to_b[v]] for v in verts.tolist()])
-
     cut: set[tuple[int, int]] = set()
-    chains = []
-    for a, b in E.tolist():
+    chains = [None] * len(E)
+    for i in order.tolist():
+        a, b = E[i].tolist()
         chain = _trace(surf, to_b[a], to_b[b], claimed, cut, where)
         cut.update((min(x, y), max(x, y)) for x, y in zip(chain[:-1], chain[1:]))
-        chains.append(chain)
-
-    BV_cut = np.array(surf.V)
-    cut_edges, cut_faces, to_fracture = _split_fracture_edges(mesh, E, sface, chains, BV_cut, to_b)
-    return Imprint(V=BV_cut, F=np.array(surf.F, np.int64), to_fracture=to_fracture,
-                   cut_edges=cut_edges, cut_faces=cut_faces, origin=np.array(surf.origin, np.int64))
+        chains[i] = chain
+    return surf, to_b, chains
 
 
 def _split_fracture_edges(mesh: RefineMesh, E, sface, chains, BV_cut: np.ndarray, to_b: dict):
