@@ -21,7 +21,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from fracture.errors import InputError
-from fracture.meshio import read_obj_objects
+from fracture.meshio import read_obj_objects, read_ply_polygons
 from fracture.topology import diagonal
 
 
@@ -52,28 +52,9 @@ class MeshFrame:
 def _read_ply_pieces(path: Path) -> MeshFrame:
     """A PLY frame (ASCII or binary, any polygon sizes, as Blender writes it) read with plyfile: the
     pieces are the connected components of its faces."""
-    from plyfile import PlyData, PlyParseError
-
-    try:
-        ply = PlyData.read(str(path))
-        vert = ply["vertex"]
-        V = np.stack([np.asarray(vert[c], np.float64) for c in ("x", "y", "z")], 1)
-        face = ply["face"] if "face" in ply else None
-        names = face.data.dtype.names if face is not None else ()
-        key = next((k for k in ("vertex_indices", "vertex_index") if k in names), None)
-        if face is not None and key is None:
-            raise InputError(f"{path}: the face element has no vertex_indices list")
-        polys = [np.asarray(f, np.int64) for f in face[key]] if face is not None else []
-    except InputError:
-        raise
-    except (PlyParseError, KeyError, ValueError, OSError) as exc:
-        raise InputError(f"{path}: cannot read PLY ({exc})") from None
+    V, polys = read_ply_polygons(path)
     if not polys:
         return MeshFrame(path, [], V.reshape(-1, 3), [])
-    for i, f in enumerate(polys):
-        if len(f) < 3 or f.min() < 0 or f.max() >= len(V):
-            raise InputError(f"{path}: face {i} has {len(f)} corners or a corner outside the "
-                             f"{len(V)} vertices")
     n = len(V)
     flat = np.concatenate(polys)
     first = np.repeat(np.array([f[0] for f in polys]), [len(f) for f in polys])
@@ -103,6 +84,12 @@ def read_frame(path: str | Path) -> MeshFrame:
         raise InputError(f"{path}: unsupported frame format {path.suffix!r}, expected .obj or .ply")
     if len(frame.V) == 0 or not frame.names:
         raise InputError(f"{path}: no pieces (expected objects with vertices and faces)")
+    seen = set()
+    for name in frame.names:
+        if name in seen:
+            raise InputError(f"{path}: two pieces are named {name!r}; expected a distinct name per piece "
+                             "(the pieces are matched across frames by name)")
+        seen.add(name)
     for p, polys in enumerate(frame.polygons):
         ids = np.concatenate(polys)
         if ids.min() < 0 or ids.max() >= len(frame.V):

@@ -8,6 +8,7 @@ import igl
 import numpy as np
 
 from fracture.errors import InputError
+from fracture.tolerances import tol
 from fracture.topology import fan, unique_edges
 
 MESH_SUFFIXES = (".obj", ".ply", ".off", ".stl")
@@ -48,7 +49,21 @@ def check_triangle_mesh(V, F, what: str, closed: bool = False) -> tuple[np.ndarr
         raise InputError(f"{what}: face indices span [{int(F.min())}, {int(F.max())}], expected [0, {len(V) - 1}]")
     repeated = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
     if repeated.any():
-        raise InputError(f"{what}: {int(repeated.sum())} faces repeat a vertex (first: face {int(np.flatnonzero(repeated)[0])})")
+        raise InputError(f"{what}: {int(repeated.sum())} faces repeat a vertex (first: face "
+                         f"{int(np.flatnonzero(repeated)[0]) + 1}, counted from 1); expected three distinct corners")
+    _, first, inverse = np.unique(np.sort(F, axis=1), axis=0, return_index=True, return_inverse=True)
+    twice = np.flatnonzero(first[inverse.ravel()] != np.arange(len(F)))
+    if len(twice):
+        f = int(twice[0])
+        raise InputError(f"{what}: faces {int(first[inverse.ravel()[f]]) + 1} and {f + 1} (counted from 1) are the same "
+                         f"triangle{f' ({len(twice)} such repeats)' if len(twice) > 1 else ''}; expected each triangle once")
+    T = V[F]
+    area2 = np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1)
+    diagonal = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
+    flat = np.flatnonzero(area2 <= tol.degenerate * diagonal ** 2)
+    if len(flat):
+        raise InputError(f"{what}: face {int(flat[0]) + 1} (counted from 1) has no area: its corners coincide or lie on "
+                         f"a line{f' ({len(flat)} such faces)' if len(flat) > 1 else ''}; expected triangles with area")
     if closed:
         _, counts = unique_edges(F)
         if np.any(counts != 2):
@@ -63,6 +78,9 @@ def check_triangle_mesh(V, F, what: str, closed: bool = False) -> tuple[np.ndarr
 
 def read_mesh(path: str | Path, what: str | None = None, closed: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Read a triangle mesh (OBJ, PLY, OFF, STL; polygons are fan-triangulated).
+
+    STL stores every triangle's corners apart: corners at the same position
+    are merged into one vertex, so that a closed surface reads as closed.
 
     Parameters
     ----------
@@ -80,14 +98,56 @@ def read_mesh(path: str | Path, what: str | None = None, closed: bool = False) -
         raise InputError(f"{what}: unsupported mesh format {path.suffix!r}, expected one of {', '.join(MESH_SUFFIXES)}")
     if path.stat().st_size == 0:
         raise InputError(f"{what}: file is empty")
-    if path.suffix.lower() == ".obj":
+    suffix = path.suffix.lower()
+    if suffix == ".obj":
         V, F = read_obj(path, what)
+    elif suffix == ".ply":
+        V, polys = read_ply_polygons(path, what)
+        F = fan(polys)[0]
     else:
         try:
             V, F = igl.read_triangle_mesh(str(path))
         except Exception as exc:  # libigl raises RuntimeError with little detail
-            raise InputError(f"{what}: cannot read mesh ({exc})") from None
+            raise InputError(f"{what}: cannot read this {suffix[1:].upper()} file (libigl: {exc})") from None
+        if suffix == ".stl" and len(V):
+            V, inverse = np.unique(np.asarray(V), axis=0, return_inverse=True)
+            F = inverse.reshape(-1)[np.asarray(F)]
     return check_triangle_mesh(V, F, what, closed=closed)
+
+
+def read_ply_polygons(path: Path, what: str | None = None) -> tuple[np.ndarray, list[np.ndarray]]:
+    """Vertices and polygons (any sizes, as Blender writes them) of an ASCII or binary PLY file.
+
+    Read with plyfile: libigl's PLY reader aborts the interpreter on lists of
+    mixed lengths.
+    """
+    from plyfile import PlyData, PlyParseError
+
+    what = what or str(path)
+    try:
+        ply = PlyData.read(str(path))
+        if "vertex" not in ply:
+            raise InputError(f"{what}: no vertex element; expected a PLY mesh with vertices and faces")
+        vert = ply["vertex"]
+        missing = [c for c in ("x", "y", "z") if c not in vert.data.dtype.names]
+        if missing:
+            raise InputError(f"{what}: the vertices have no {', '.join(missing)} property")
+        V = np.stack([np.asarray(vert[c], np.float64) for c in ("x", "y", "z")], 1)
+        face = ply["face"] if "face" in ply else None
+        names = face.data.dtype.names if face is not None else ()
+        key = next((k for k in ("vertex_indices", "vertex_index") if k in names), None)
+        if face is not None and key is None:
+            raise InputError(f"{what}: the face element has no vertex_indices list")
+        polys = [np.asarray(f, np.int64) for f in face[key]] if face is not None else []
+    except InputError:
+        raise
+    except (PlyParseError, KeyError, ValueError, IndexError, TypeError, OSError) as exc:
+        raise InputError(f"{what}: cannot read PLY ({exc})") from None
+    for i, f in enumerate(polys):
+        if len(f) < 3 or f.min() < 0 or f.max() >= len(V):
+            raise InputError(f"{what}: face {i + 1} (counted from 1) has {len(f)} corners or a corner outside the "
+                             f"{len(V)} vertices; expected 3 or more corners among them")
+    return V.reshape(-1, 3), polys
 
 
 def read_obj_objects(path: Path, what: str | None = None) -> tuple[list[str], np.ndarray, list[list[np.ndarray]]]:

@@ -39,3 +39,7 @@ tol.on_surface = 1e-5
 # split from a boundary edge starts on the chord and reaches B the iteration
 # after, unless a collision stops its projection).
 tol.on_b = 1e-9
+
+# Input meshes: a triangle whose doubled area is at most this times the
+# squared diagonal has no area (corners coinciding or on a line).
+tol.degenerate = 1e-14

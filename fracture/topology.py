@@ -217,3 +217,37 @@ def orient_sheets(F: np.ndarray) -> tuple[np.ndarray, int, tuple[int, int] | Non
     out = F.copy()
     out[turn] = out[turn][:, ::-1]
     return out, int(turn.sum()), conflict
+
+
+def orient_outward(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, int, tuple[int, int] | None]:
+    """Orient a closed surface so that it bounds its solid: every shell outward, a cavity's shell inward.
+
+    The triangles of each shell are first made to agree (:func:`orient_sheets`);
+    then a shell nested in an odd number of others (a cavity) must enclose a
+    negative volume and any other shell a positive one, and a shell that does
+    not is turned over whole. Nesting is read from winding numbers of one
+    vertex of each shell. Returns the oriented ``F``, how many triangles were
+    turned, and two neighbouring triangles of a one-sided shell (else ``None``).
+    """
+    F, turned, conflict = orient_sheets(F)
+    if conflict is not None:
+        return F, turned, conflict
+    n = len(V)
+    graph = coo_matrix((np.ones(2 * len(F)), (np.r_[F[:, 0], F[:, 1]], np.r_[F[:, 1], F[:, 2]])), shape=(n, n))
+    _, vertex_shell = connected_components(graph, directed=False)
+    face_shell = vertex_shell[F[:, 0]]
+    shells = np.unique(face_shell)
+    probe = np.array([F[face_shell == s][0, 0] for s in shells])
+    depth = np.zeros(len(shells), np.int64)
+    for j, s in enumerate(shells):
+        others = shells != s
+        if others.any():
+            w = igl.winding_number(V, F[face_shell == s], V[probe[others]])
+            depth[others] += np.abs(w) > 0.5
+    F = F.copy()
+    for j, s in enumerate(shells):
+        mine = face_shell == s
+        if (signed_volume(V, F[mine]) > 0) != (depth[j] % 2 == 0):
+            F[mine] = F[mine][:, ::-1]
+            turned += int(mine.sum())
+    return F, turned, None

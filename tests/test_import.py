@@ -171,6 +171,8 @@ def _remove_object(lines, name):
     ("nan", [4], lambda l: _set_nan(l, "source_cell.003"), ["frame_0004.obj", "'source_cell.003'", "NaN"]),
     ("empty file", [6], lambda l: [], ["frame_0006.obj", "empty"]),
     ("moved piece", [1], lambda l: _shift_piece(l, "source_cell.005", (0.05, 0.05, 0.05)), ["frame_0001.obj", "'source_cell.005'", "must tile"]),
+    ("duplicate name", [1, 2], lambda l: _rename(l, "source_cell.004", "source_cell.003"),
+     ["frame_0001.obj", "two pieces are named 'source_cell.003'"]),
 ])
 def test_bad_sequences_are_rejected_with_their_place(tmp_path, case, frames, edit, words):
     d = _copy_sample(tmp_path)

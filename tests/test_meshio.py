@@ -51,3 +51,73 @@ def test_check_triangle_mesh_errors():
         check_triangle_mesh(V, [[0, 1, 1]], "m")
     with pytest.raises(InputError, match=r"shape \(3, 2\)"):
         check_triangle_mesh(np.zeros((3, 2)), [[0, 1, 2]], "m")
+
+
+def _write_ply_polygons(path, V, polys, binary):
+    from plyfile import PlyData, PlyElement
+
+    vert = np.array([tuple(v) for v in V], dtype=[("x", "f4"), ("y", "f4"), ("z", "f4")])
+    face = np.empty(len(polys), dtype=[("vertex_indices", "O")])
+    face["vertex_indices"] = [np.asarray(f, np.int32) for f in polys]
+    PlyData([PlyElement.describe(vert, "vertex"), PlyElement.describe(face, "face")],
+            text=not binary).write(str(path))
+
+
+def _cube_polygons(mixed: bool):
+    """A unit cube as six quads, or (mixed) three quads and six triangles, as Blender's PLY export keeps them."""
+    V = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], float)
+    quads = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
+    if not mixed:
+        return V, quads
+    return V, quads[:3] + [t for q in quads[3:] for t in ([q[0], q[1], q[2]], [q[0], q[2], q[3]])]
+
+
+@pytest.mark.parametrize("mixed", [False, True])
+@pytest.mark.parametrize("binary", [False, True])
+def test_ply_polygons_of_any_size_are_triangulated(tmp_path, mixed, binary):
+    V, polys = _cube_polygons(mixed)
+    _write_ply_polygons(tmp_path / "cube.ply", V, polys, binary)
+    V2, F2 = read_mesh(tmp_path / "cube.ply", "input.exterior", closed=True)
+    assert len(F2) == 12
+    assert signed_volume(V2, F2) == pytest.approx(1.0)
+
+
+def _write_stl(path, V, F, binary):
+    T = V[F].astype(np.float32)
+    N = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
+    if binary:
+        rec = np.zeros(len(F), dtype=[("n", "<f4", 3), ("v", "<f4", (3, 3)), ("attr", "<u2")])
+        rec["n"], rec["v"] = N, T
+        path.write_bytes(b"\0" * 80 + np.uint32(len(F)).tobytes() + rec.tobytes())
+    else:
+        lines = ["solid cube"]
+        for n, t in zip(N, T):
+            lines += [f"facet normal {n[0]} {n[1]} {n[2]}", "outer loop"]
+            lines += [f"vertex {x:.7g} {y:.7g} {z:.7g}" for x, y, z in t]
+            lines += ["endloop", "endfacet"]
+        path.write_text("\n".join(lines + ["endsolid cube"]) + "\n")
+
+
+@pytest.mark.parametrize("binary", [False, True])
+def test_stl_corners_are_merged_into_a_closed_surface(tmp_path, binary):
+    V, F = box([0, 0, 0], [1, 2, 3], (2, 2, 2))
+    _write_stl(tmp_path / "b.stl", V, F, binary)
+    V2, F2 = read_mesh(tmp_path / "b.stl", "input.exterior", closed=True)
+    assert len(V2) == len(V) and len(F2) == len(F)
+    assert signed_volume(V2, F2) == pytest.approx(6.0)
+
+
+def test_a_repeated_or_flat_triangle_is_named_from_one():
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [2, 0, 0], [1, 0, 0.0]])
+    with pytest.raises(InputError, match=r"faces 1 and 3 \(counted from 1\) are the same triangle"):
+        check_triangle_mesh(V, [[0, 1, 2], [1, 3, 2], [2, 0, 1]], "m")
+    with pytest.raises(InputError, match=r"face 2 \(counted from 1\) has no area"):
+        check_triangle_mesh(V, [[0, 1, 2], [0, 1, 3]], "m")  # corners on a line
+    with pytest.raises(InputError, match=r"face 2 \(counted from 1\) has no area"):
+        check_triangle_mesh(V, [[0, 1, 2], [1, 4, 2]], "m")  # two corners at one place
+
+
+def test_an_unreadable_ply_names_its_file(tmp_path):
+    (tmp_path / "bad.ply").write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nend_header\n\x00")
+    with pytest.raises(InputError, match="bad.ply"):
+        read_mesh(tmp_path / "bad.ply", "input.exterior")

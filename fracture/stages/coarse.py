@@ -21,28 +21,57 @@ def coarse_from_meshes(inp: dict) -> CoarseFracture:
     from fracture.errors import InputError
     from fracture.topology import orient_sheets
     from fracture.animation import exterior_points, lattice_animation
+    from fracture.trim import trim_to_object
     from fracture.virtual import extend_cuts
 
     missing = [k for k in ("exterior", "fracture") if not inp.get(k)]
     if missing:
         raise InputError("coarse: input.kind 'meshes' needs the object's exterior and coarse fracture surface; set "
                          + " and ".join(f"input.{k}" for k in missing) + " to mesh files (OBJ, PLY, OFF or STL)")
-    BV, BF = read_mesh(inp["exterior"], "input.exterior", closed=True)
+    BV, BF, notes = read_exterior(inp["exterior"])
+    what = f"input.fracture ({inp['fracture']})"
     V, F = read_mesh(inp["fracture"], "input.fracture")
     # the pieces follow the sides of each triangle, so a sheet's triangles must agree (any one way)
     F, turned, conflict = orient_sheets(F)
     if conflict is not None:
-        raise InputError(f"input.fracture ({inp['fracture']}): faces {conflict[0] + 1} and {conflict[1] + 1} "
+        raise InputError(f"{what}: faces {conflict[0] + 1} and {conflict[1] + 1} "
                          "(counted from 1 in the file) lie on a one-sided sheet (a Moebius strip): its two sides "
                          "cannot be told apart; expected sheets with two sides")
-    notes = [f"input.fracture: {turned} faces turned to agree with their neighbours"] if turned else []
+    if turned:
+        notes.append(f"input.fracture: {turned} faces turned to agree with their neighbours")
+    V, F, outside = trim_to_object(V, F, BV, BF)
+    if not len(F):
+        raise InputError(f"{what}: no part of the fracture surface lies inside the object (input.exterior, "
+                         f"{inp['exterior']}); expected a cut through it")
+    if outside:
+        notes.append(f"input.fracture: trimmed to the object ({100 * outside:.1f} % of its area was outside)")
     V, F, virtual = extend_cuts(V, F, BV, BF)
-    sides, ext, n = label_components(BV, BF, V, F, what=f"input.fracture ({inp['fracture']})")
+    sides, ext, n = label_components(BV, BF, V, F, what=what)
+    enclosed = [c for c in range(n) if not (ext == c).any()]
+    if enclosed:
+        faces = np.flatnonzero((sides == enclosed[0]).any(axis=1) & ~virtual)
+        raise InputError(f"{what}: the fracture surface encloses a piece that does not reach the object's surface "
+                         f"(the piece inside faces {', '.join(str(f + 1) for f in faces[:5])}"
+                         f"{' ...' if len(faces) > 5 else ''}, counted from 1); expected every piece to have part "
+                         "of the exterior")
     still = lattice_animation(exterior_points(BV, BF, ext, n), lambda c, t, X: X, 1)
     if virtual.any():
         notes.append(f"virtual fracture: {int(virtual.sum())} triangles extend incomplete cuts")
     return make_coarse(BV, BF, ext, V, F, sides, [f"piece_{c:03d}" for c in range(n)], still, inp["separation"],
                        virtual=virtual, notes=notes)
+
+
+def read_exterior(path) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """The object's closed exterior, oriented outward (cavities inward), and notes on what was turned."""
+    from fracture.errors import InputError
+    from fracture.topology import orient_outward
+
+    BV, BF = read_mesh(path, "input.exterior", closed=True)
+    BF, turned, conflict = orient_outward(BV, BF)
+    if conflict is not None:
+        raise InputError(f"input.exterior ({path}): faces {conflict[0] + 1} and {conflict[1] + 1} (counted from 1) "
+                         "lie on a one-sided surface; expected the closed surface of a solid")
+    return BV, BF, [f"input.exterior: {turned} faces turned to face outward"] if turned else []
 
 
 @stage("coarse")
@@ -69,7 +98,8 @@ def coarse_stage(ctx: RunContext) -> None:
         bar.update()
     if inp["kind"] in ("mesh_sequence", "usd") and inp["exterior"] is not None:
         # a user's high-resolution exterior replaces the pieces' outer faces
-        BV, BF = read_mesh(inp["exterior"], "input.exterior", closed=True)
+        BV, BF, notes = read_exterior(inp["exterior"])
+        cf.notes.extend(notes)
     else:
         BV, BF = cf.exterior_V, cf.exterior_F
     ctx.products.update(coarse=cf, exterior=(BV, BF))
