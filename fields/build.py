@@ -53,6 +53,22 @@ def padded_bounds(V: np.ndarray, padding: float) -> tuple[np.ndarray, np.ndarray
     return lo - pad, hi + pad
 
 
+def grid_for(exterior_V: np.ndarray, resolution, padding: float) -> Grid:
+    """The grid :func:`build_fields` samples on: the object's padded box at ``resolution``."""
+    lo, hi = padded_bounds(exterior_V, padding)
+    return Grid.from_bounds(lo, hi, grid_shape_for_box(lo, hi, resolution))
+
+
+def fields_memory(n_nodes: int, levels: int) -> int:
+    """Peak bytes :func:`build_fields` needs for a grid of ``n_nodes`` (an estimate from above).
+
+    Measured peaks are about 350 bytes a node with five pyramid levels (the
+    strength layers' noise, the distance transform's indices, zeta, xi, psi
+    and the pyramid, in float64); each level holds one more field.
+    """
+    return int(n_nodes * (160 + 40 * levels))
+
+
 def build_fields(
     exterior_V: np.ndarray,
     fracture_V: np.ndarray,
@@ -96,8 +112,7 @@ def build_fields(
     """
     step = step or (lambda name: None)
     obj_lo, obj_hi = exterior_V.min(axis=0), exterior_V.max(axis=0)
-    lo, hi = padded_bounds(exterior_V, padding)
-    grid = Grid.from_bounds(lo, hi, grid_shape_for_box(lo, hi, resolution))
+    grid = grid_for(exterior_V, resolution, padding)
     X = grid.points()
 
     zeta = strength_field(X, (obj_lo, obj_hi), layers, seed, normalize).reshape(grid.shape)

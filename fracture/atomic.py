@@ -10,6 +10,7 @@ when every stage has succeeded; an existing run is swapped out only with
 from __future__ import annotations
 
 import contextlib
+import glob
 import os
 import shutil
 import tempfile
@@ -54,34 +55,78 @@ def atomic_write_text(path: str | Path, text: str) -> None:
 
 
 class RunDirectoryExists(FileExistsError):
-    """The run directory exists and ``force`` was not given."""
+    """The run directory exists and ``force`` was not given (or it is not a run, which ``force`` never replaces)."""
 
 
-def check_run_directory(out: Path, force: bool) -> None:
-    """Refuse an existing, non-empty target unless ``force``."""
-    if out.exists() and not force:
-        if out.is_dir() and not any(out.iterdir()):
-            return
+class OutputError(Exception):
+    """A run directory could not be written (a path component is a file, the disk is full, no permission)."""
+
+
+RUN_MARKER = "manifest.json"
+
+
+def check_run_directory(out: Path, force: bool, marker: str = RUN_MARKER) -> None:
+    """Refuse an existing, non-empty target unless ``force`` is given and it is an earlier run (holds ``marker``)."""
+    blocked = next((p for p in out.parents if p.exists() and not p.is_dir()), None)
+    if blocked is not None:
+        raise RunDirectoryExists(f"{out}: {blocked} is a file, not a directory; choose another --out")
+    if not out.exists():
+        return
+    if not out.is_dir():
+        raise RunDirectoryExists(f"{out}: exists and is not a directory; choose another --out")
+    if not any(out.iterdir()):
+        return
+    if not force:
         raise RunDirectoryExists(f"{out}: run directory exists; choose another --out or pass --force to replace it")
-    if out.exists() and not out.is_dir():
-        raise RunDirectoryExists(f"{out}: exists and is not a directory")
+    if not (out / marker).is_file():
+        raise RunDirectoryExists(f"{out}: is not a run directory (it has no {marker}) and is not empty; --force "
+                                 "replaces only an earlier run: choose another --out")
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # someone else's process
+        return True
+    return True
+
+
+def remove_stale_staging(out: Path) -> list[Path]:
+    """Remove staging directories of earlier runs into ``out`` whose process is gone (killed runs).
+
+    Staging directories are named ``.NAME.partial-PID-XXXX``; one whose
+    process still runs is left alone. Returns the removed directories.
+    """
+    removed = []
+    for p in out.parent.glob(f".{glob.escape(out.name)}.partial-*"):
+        pid = p.name[len(out.name) + len(".partial-") + 1:].split("-")[0]
+        if p.is_dir() and pid.isdigit() and not _alive(int(pid)):
+            shutil.rmtree(p, ignore_errors=True)
+            removed.append(p)
+    return removed
 
 
 @contextlib.contextmanager
-def staged_directory(out: str | Path, force: bool = False) -> Iterator[Path]:
+def staged_directory(out: str | Path, force: bool = False, marker: str = RUN_MARKER) -> Iterator[Path]:
     """Yield a fresh staging directory that becomes ``out`` on success.
 
     On any exception (including ``KeyboardInterrupt``) the staging directory
-    is deleted and ``out`` is left exactly as it was.
+    is deleted and ``out`` is left exactly as it was. An ``OSError`` while
+    making or filling it (disk full, a file in the way) becomes an
+    :class:`OutputError` that says so in one line.
     """
     out = Path(out).absolute()
-    check_run_directory(out, force)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=out.parent))
-    os.chmod(staging, 0o777 & ~_umask())  # mkdtemp creates 0700; give the usual directory mode
+    check_run_directory(out, force, marker)
+    staging = None
     try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        remove_stale_staging(out)
+        staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-{os.getpid()}-", dir=out.parent))
+        os.chmod(staging, 0o777 & ~_umask())  # mkdtemp creates 0700; give the usual directory mode
         yield staging
-        check_run_directory(out, force)  # something may have appeared meanwhile
+        check_run_directory(out, force, marker)  # something may have appeared meanwhile
         old = None
         if out.exists():
             old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-", dir=out.parent))
@@ -90,6 +135,18 @@ def staged_directory(out: str | Path, force: bool = False) -> Iterator[Path]:
         os.replace(staging, out)
         if old is not None:
             shutil.rmtree(old, ignore_errors=True)
+    except OSError as exc:
+        if staging is not None:
+            shutil.rmtree(staging, ignore_errors=True)
+        if isinstance(exc, RunDirectoryExists) or (exc.filename is not None
+                                                    and not str(exc.filename).startswith(str(out.parent))):
+            raise  # not the run directory's fault (an input file, say)
+        what = f"{exc.filename}: {exc.strerror}" if exc.filename is not None else str(exc)
+        with contextlib.suppress(OSError):
+            what += f"; {shutil.disk_usage(out.parent).free / 2 ** 20:.1f} MB free there"
+        raise OutputError(f"{out}: cannot write the run ({what}); nothing was written and an earlier run there "
+                          "is untouched") from None
     except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
+        if staging is not None:
+            shutil.rmtree(staging, ignore_errors=True)
         raise

@@ -63,10 +63,25 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
+def _terminate(signum, frame):
+    raise SystemExit(128 + signum)  # unwinds like Ctrl-C: a run being staged is removed
+
+
 def main(argv: list[str] | None = None) -> int:
+    """The command line; SIGTERM is taken like Ctrl-C while it runs (the previous handler is restored)."""
+    import signal
+
+    previous = signal.signal(signal.SIGTERM, _terminate)
+    try:
+        return _main(argv)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _main(argv: list[str] | None) -> int:
     args = _parser().parse_args(argv)
     from fracture import runner
-    from fracture.atomic import RunDirectoryExists
+    from fracture.atomic import OutputError, RunDirectoryExists
     from fracture.config import dump_config, load_config
     from fracture.errors import InputError, ResultError, StageError
 
@@ -92,8 +107,13 @@ def main(argv: list[str] | None = None) -> int:
         done = runner.run(cfg, out, until=args.until, force=args.force, progress=not args.quiet)
         print(f"run complete: {done}  (manifest: {done / 'manifest.json'})")
         return 0
-    except (ConfigError, InputError, ResultError, StageError, RunDirectoryExists) as exc:
+    except (ConfigError, InputError, ResultError, StageError, RunDirectoryExists, OutputError) as exc:
         print(f"fracref: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # a file the command reads or writes outside a run directory
+        if exc.filename is None:
+            raise
+        print(f"fracref: error: {exc.filename}: {exc.strerror}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("fracref: interrupted; nothing was written", file=sys.stderr)

@@ -55,6 +55,8 @@ SCHEMA: dict[str, Any] = {
         "resolution": Param(50, "int3", lo=4, hi=1024,
                             doc="nodes along the longest axis, or [nx, ny, nz] (e.g. [150, 50, 10])"),
         "padding": Param(0.05, lo=0.0, hi=1.0, doc="grid margin around the object, relative to its largest extent"),
+        "max_memory_gb": Param(8.0, lo=0.01, hi=1e5,
+                               doc="refuse a grid whose fields would need more memory than this (GB)"),
     },
     "strength": {
         "layers": Layers(
@@ -128,12 +130,28 @@ SCHEMA: dict[str, Any] = {
 }
 
 
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """PyYAML's safe loader, refusing a key given twice in one mapping (PyYAML keeps the last silently)."""
+
+    def construct_mapping(self, node, deep=False):
+        seen = {}
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)
+            if key in seen:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"key {key!r} given twice (first on line {seen[key] + 1}); expected each key once",
+                    key_node.start_mark)
+            seen[key] = key_node.start_mark.line
+        return super().construct_mapping(node, deep)
+
+
+
 def read_yaml(path: Path) -> dict:
     """Read one YAML mapping safely, with errors that name the file and line."""
     if not path.is_file():
         raise ConfigError(str(path), "", "config file not found")
     try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+        data = yaml.load(path.read_text(encoding="utf-8"), Loader=_UniqueKeyLoader)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"{path}:{mark.line + 1}" if mark is not None else str(path)
@@ -304,7 +322,15 @@ def _finish(merged: _Merged, name: str, in_files: bool = True) -> dict:
                           "input.kind is usd, expected input.usd: the USD file of the animated pieces")
     if cfg["name"] is None:
         cfg["name"] = name
+    elif not _plain_name(cfg["name"]):
+        raise ConfigError(merged.origin("name"), "name", f"{cfg['name']!r} is not a plain name (runs go to "
+                          "runs/<name>); expected letters, digits, '.', '-' or '_', no path separators; use --out "
+                          "for another directory")
     return cfg
+
+
+def _plain_name(name: str) -> bool:
+    return bool(re.fullmatch(r"[\w.\-]+", name)) and name not in (".", "..")
 
 
 def dump_config(cfg: dict) -> str:

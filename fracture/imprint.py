@@ -51,6 +51,9 @@ TANGENT = 0.1
 # vertex put this fraction of the edge's length inside B.
 BRIDGE_DEPTH = 0.2
 
+# What a user can change when S cannot be imprinted (said after each such refusal).
+_RETRY = "; a different seed or refine.max_triangles gives other refined cracks there"
+
 
 @dataclass
 class Imprint:
@@ -195,8 +198,9 @@ def _insert(surf: _Surface, p, f0, claimed: set, where: str) -> int:
         if v not in claimed:
             return v
         if np.linalg.norm(np.asarray(surf.V[v]) - p) <= 1e-12 * max(1.0, np.abs(p).max()):
-            raise InputError(f"{where}: two boundary vertices of the refined fracture surface coincide on B "
-                             f"at {np.round(p, 6).tolist()}")
+            raise InputError(f"{where}: the refined fracture surface cannot be joined to the object's surface at "
+                             f"{np.round(p, 6).tolist()}: two points where its cracks reach the surface coincide "
+                             f"there{_RETRY}")
         # another boundary vertex is there already: insert beside it
         bary = np.maximum(bary, 2 * SNAP)
         bary /= bary.sum()
@@ -297,8 +301,9 @@ def _walk_section(surf: _Surface, p: int, q: int, claimed: set, cut: set, where:
         score = np.where((sa * sb <= 0) & (sa != sb) & (ahead > progress), ahead, -np.inf)
         k = int(np.argmax(score))
         if not np.isfinite(score[k]):
-            raise InputError(f"{where}: cannot trace the fracture boundary on B from "
-                             f"{np.round(U, 6).tolist()} toward {np.round(Q, 6).tolist()}")
+            raise InputError(f"{where}: the refined fracture surface cannot be joined to the object's surface "
+                             f"between {np.round(U, 6).tolist()} and {np.round(Q, 6).tolist()}: the surface folds "
+                             f"between them{_RETRY}")
         _, a, b = fan[k]
         t = lam[k]
         if t < SNAP and a not in claimed:
@@ -307,8 +312,9 @@ def _walk_section(surf: _Surface, p: int, q: int, claimed: set, cut: set, where:
             u = b
         else:
             if (min(a, b), max(a, b)) in cut:
-                raise InputError(f"{where}: two boundary curves of the refined fracture surface cross on B near "
-                                 f"{np.round(Y[k], 6).tolist()}")
+                raise InputError(f"{where}: the refined fracture surface cannot be joined to the object's surface "
+                                 f"near {np.round(Y[k], 6).tolist()}: two of its cracks cross each other on the "
+                                 f"surface there{_RETRY}")
             # (a claimed end is another curve's vertex: pass beside it, not through it)
             t = min(max(t, 2 * SNAP), 1 - 2 * SNAP)
             u = surf.split_edge(a, b, A[k] + t * (B[k] - A[k]))
@@ -317,7 +323,8 @@ def _walk_section(surf: _Surface, p: int, q: int, claimed: set, cut: set, where:
         if u not in claimed:
             added.append(u)
         claimed.add(u)
-    raise InputError(f"{where}: tracing the fracture boundary on B did not reach its end")
+    raise InputError(f"{where}: the refined fracture surface cannot be joined to the object's surface between "
+                     f"{np.round(P, 6).tolist()} and {np.round(Q, 6).tolist()}: the path along it does not end{_RETRY}")
 
 
 def clip_tangent_triangles(mesh: RefineMesh, exterior: Exterior, ratio: float = TANGENT, max_rounds: int = 20) -> int:

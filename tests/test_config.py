@@ -44,7 +44,7 @@ def test_defaults_fill_everything_and_experiment_overrides(tmp_path, slab_meshes
         grid: {resolution: [10, 11, 12]}
         input: {exterior: slab.obj}
         """))
-    assert cfg["grid"] == {"resolution": [10, 11, 12], "padding": 0.1}
+    assert cfg["grid"] == {"resolution": [10, 11, 12], "padding": 0.1, "max_memory_gb": 8.0}
     assert cfg["psi"]["stress_weight"] == 2.0 and cfg["psi"]["strength_weight"] == 1.0
     assert cfg["pyramid"]["levels"] == 5
     assert cfg["input"]["exterior"] == str(slab_meshes[0].resolve())
@@ -76,7 +76,7 @@ def _error(tmp_path, text, overrides=()):
 
 @pytest.mark.parametrize("text, key, words", [
     ("grdi: {resolution: 5}\n", "grdi", "unknown key"),
-    ("grid: {resolutoin: 5}\n", "grid.resolutoin", "unknown key; expected one of: padding, resolution"),
+    ("grid: {resolutoin: 5}\n", "grid.resolutoin", "unknown key; expected one of: max_memory_gb, padding, resolution"),
     ("grid: {resolution: fifty}\n", "grid.resolution", "got 'fifty' (str), expected an integer or a list of 3 integers"),
     ("grid: {resolution: [10, 10]}\n", "grid.resolution", "expected an integer or a list of 3 integers"),
     ("grid: {resolution: 2}\n", "grid.resolution", "in [4, 1024]"),
@@ -93,6 +93,8 @@ def _error(tmp_path, text, overrides=()):
     ("strength: {layers: [{kind: radial, axis: w}]}\n", "strength.layers[0].axis", "one of 'x', 'y', 'z'"),
     ("input: {exterior: nowhere.obj}\n", "input.exterior", "file not found: 'nowhere.obj'"),
     ("input: 3\n", "input", "expected a mapping"),
+    ("name: ../../elsewhere\n", "name", "is not a plain name"),
+    ("name: /tmp/elsewhere\n", "name", "is not a plain name"),
 ])
 def test_config_errors_name_file_key_given_and_expected(tmp_path, text, key, words):
     message, path = _error(tmp_path, text)
@@ -114,6 +116,10 @@ def test_yaml_problems(tmp_path):
     # Safe loading: no Python objects are constructed from tags.
     message, _ = _error(tmp_path, "name: !!python/object/apply:os.system ['echo hi']\n")
     assert "invalid YAML" in message
+    message, _ = _error(tmp_path, "grid:\n  resolution: 20\nseed: 1\ngrid:\n  resolution: 30\n")
+    assert message.startswith(f"{path}:4: invalid YAML: key 'grid' given twice (first on line 1)"), message
+    message, _ = _error(tmp_path, "grid: {resolution: 20, resolution: 30}\n")
+    assert "key 'resolution' given twice" in message
     message, _ = _error(tmp_path, "defaults: [missing]\n")
     assert "included config 'missing' not found" in message
     write(tmp_path / "a.yaml", "defaults: [b]\n")

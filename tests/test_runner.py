@@ -10,9 +10,12 @@ import yaml
 from conftest import CONFIGS, REPO
 from fields.grid import Grid
 from fracture import runner
-from fracture.atomic import RunDirectoryExists, atomic_write_text
+import errno
+import os
+
+from fracture.atomic import OutputError, RunDirectoryExists, atomic_write_text, staged_directory
 from fracture.config import load_config
-from fracture.errors import InputError, StageError
+from fracture.errors import ConfigError, InputError, StageError
 
 
 def fracref(*args, cwd=None):
@@ -140,6 +143,69 @@ def test_existing_non_directory_is_refused(tmp_path, small_config):
     (tmp_path / "file").write_text("x")
     with pytest.raises(RunDirectoryExists):
         runner.run(load_config(small_config), tmp_path / "file", force=True, progress=False)
+
+
+def test_force_replaces_only_an_earlier_run(tmp_path, small_config):
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "notes.txt").write_text("keep")
+    res = fracref("run", small_config, "--out", mine, "--force", "--until", "coarse")
+    assert res.returncode == 2 and "is not a run directory (it has no manifest.json)" in res.stderr
+    assert (mine / "notes.txt").read_text() == "keep" and len(list(mine.iterdir())) == 1
+    run = tmp_path / "run"
+    runner.run(load_config(small_config), run, until="coarse", progress=False)
+    first = (run / "manifest.json").read_bytes()
+    runner.run(load_config(small_config, ["seed=5"]), run, until="coarse", force=True, progress=False)
+    assert (run / "manifest.json").read_bytes() != first
+
+
+def test_an_output_path_through_a_file_is_one_line(tmp_path, small_config):
+    (tmp_path / "afile").write_text("x")
+    res = fracref("run", small_config, "--out", tmp_path / "afile" / "sub", "--until", "coarse")
+    assert res.returncode == 2 and "Traceback" not in res.stderr
+    assert f"{tmp_path / 'afile'} is a file, not a directory" in res.stderr
+
+
+def test_staging_of_killed_runs_is_removed_by_the_next_run(tmp_path, small_config):
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    stale = tmp_path / f".run.partial-{int(dead.stdout)}-abcd"
+    live = tmp_path / f".run.partial-{os.getpid()}-efgh"  # a run still going: left alone
+    for d in (stale, live):
+        d.mkdir()
+        (d / "fields").mkdir()
+    runner.run(load_config(small_config), tmp_path / "run", until="coarse", progress=False)
+    assert not stale.exists() and live.exists()
+
+
+def test_a_full_disk_leaves_nothing_and_says_so(tmp_path):
+    out = tmp_path / "run"
+    with pytest.raises(OutputError, match=r"cannot write the run \(.*No space left on device.*\); nothing was written"):
+        with staged_directory(out) as staging:
+            (staging / "big.npy").write_bytes(b"partial")
+            raise OSError(errno.ENOSPC, "No space left on device", str(staging / "big.npy"))
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_killed_cli_run_removes_its_staging(tmp_path, small_config):
+    import signal
+    import time
+
+    proc = subprocess.Popen([sys.executable, "-m", "fracture", "run", str(small_config), "--out", str(tmp_path / "run"),
+                             "--quiet"], cwd=REPO, stderr=subprocess.PIPE, text=True)
+    while not list(tmp_path.glob(".run.partial-*")) and proc.poll() is None:
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGTERM)
+    proc.wait(timeout=120)
+    assert proc.returncode != 0 or (tmp_path / "run").is_dir()  # killed, or it had already finished
+    assert not list(tmp_path.glob(".run.*"))
+    assert "Traceback" not in proc.stderr.read()
+
+
+def test_a_grid_beyond_the_memory_limit_is_refused_before_it_is_allocated(tmp_path, small_config):
+    cfg = load_config(small_config, ["grid.resolution=[1024, 1024, 1024]"])
+    with pytest.raises(ConfigError, match=r"1024x1024x1024 grid .* need about [0-9.]+ GB, more than grid\.max_memory_gb"):
+        runner.run(cfg, tmp_path / "run", progress=False)
+    assert not (tmp_path / "run").exists() and not list(tmp_path.glob(".run.*"))
 
 
 @pytest.mark.slow

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from fields.build import build_fields
+from fields.build import build_fields, fields_memory, grid_for
 from fields.slices import axis_slice, slice_image
+from fracture.errors import ConfigError
 from fracture.runner import RunContext, stage
 
 PREVIEW_FIELDS = ("zeta", "xi", "psi")
@@ -32,10 +33,23 @@ def fields_from_config(cfg: dict, BV: np.ndarray, SV: np.ndarray, SF: np.ndarray
     )
 
 
+def check_grid_memory(cfg: dict, BV: np.ndarray) -> None:
+    """Refuse, before allocating, a grid whose fields need more than ``grid.max_memory_gb``."""
+    grid = grid_for(BV, cfg["grid"]["resolution"], cfg["grid"]["padding"])
+    need = fields_memory(grid.size, cfg["pyramid"]["levels"]) / 1e9
+    if need > cfg["grid"]["max_memory_gb"]:
+        shape = "x".join(str(n) for n in grid.shape)
+        raise ConfigError("config", "grid.resolution",
+                          f"{cfg['grid']['resolution']} gives a {shape} grid ({grid.size:,} nodes) whose fields need "
+                          f"about {need:.1f} GB, more than grid.max_memory_gb ({cfg['grid']['max_memory_gb']:g} GB); "
+                          "expected a lower resolution, or raise the limit if this machine has the memory")
+
+
 @stage("fields")
 def fields_stage(ctx: RunContext) -> None:
     cfg = ctx.cfg
     (BV, BF), cf = ctx.products["exterior"], ctx.products["coarse"]
+    check_grid_memory(cfg, BV)
     with ctx.bar(3, "fields") as bar:
         fs = fields_from_config(cfg, BV, cf.V, cf.F, step=lambda name: (bar.set_postfix_str(name), bar.update()))
     ctx.products["fields"] = fs
