@@ -272,15 +272,58 @@ def label_components(BV: np.ndarray, BF: np.ndarray, V: np.ndarray, F: np.ndarra
     for name, lab in (("fracture", np.minimum(behind, front)), ("exterior", ext)):
         if (lab == 0).any():
             f = int(np.flatnonzero(lab == 0)[0])
-            raise InputError(f"{what}: cannot tell the component beside {name} triangle {f} "
-                             f"({int((lab == 0).sum())} such triangles); is the object thinner than "
-                             f"{2 * h:.3g} there?")
+            which = (f"which pieces lie on the two sides of fracture triangle {f + 1}" if name == "fracture" else
+                     f"which piece the object's surface triangle {f + 1} belongs to")
+            raise InputError(f"{what}: cannot tell {which} (counted from 1; {int((lab == 0).sum())} such "
+                             f"triangles): expected the object thicker than {2 * h:.3g} there and the cut inside it")
     same = behind == front
     if strict and same.any():
         f = int(np.flatnonzero(same)[0])
-        raise InputError(f"{what}: triangle {f} has the same component on both sides ({int(same.sum())} such "
-                         f"triangles): the surface does not split the object there (an incomplete cut?)")
+        raise InputError(f"{what}: fracture triangle {f + 1} (counted from 1) has the same piece on both sides "
+                         f"({int(same.sum())} such triangles): the cut does not split the object there; expected a "
+                         "cut that reaches the object's surface all round")
     # voxel regions no triangle reads (pockets cut off by walls) are not components
     used, inverse = np.unique(np.concatenate([behind, front, ext]), return_inverse=True)
     m = len(F)
     return np.stack([inverse[:m], inverse[m:2 * m]], 1), inverse[2 * m:], len(used)
+
+
+def join_slivers(BV: np.ndarray, BF: np.ndarray, V: np.ndarray, F: np.ndarray, sides: np.ndarray,
+                 exterior_component: np.ndarray, n: int):
+    """Join pieces that hold no exterior triangle but touch B to their neighbour across the cut.
+
+    A cut that leaves B and comes back close by (a curved sheet grazing an
+    inner corner) cuts off a sliver whose patch of B is smaller than the
+    labelling grid: no B triangle is labelled with it. Such a piece is
+    joined to the piece on the other side of most of its fracture area,
+    and the fracture triangles that then have one piece on both sides are
+    dropped. A piece whose fracture triangles do not touch B is enclosed
+    by the cut and stays (the caller refuses it).
+
+    Returns ``F, sides, exterior_component, n, kept`` (``kept``: which
+    triangles of ``F`` remain) and the number of pieces joined.
+    """
+    from fracture.exterior import Exterior
+    from fracture.tolerances import tol
+    from fracture.topology import diagonal
+
+    lonely = [c for c in range(n) if not (exterior_component == c).any()]
+    if not lonely:
+        return F, sides, exterior_component, n, np.ones(len(F), bool), 0
+    on_b = Exterior(BV, BF).distance(V) <= tol.on_surface * diagonal(BV)
+    area = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+    sides = sides.copy()
+    joined = 0
+    for c in lonely:
+        mine = (sides == c).any(axis=1)
+        if not on_b[F[mine]].any():
+            continue
+        other = np.where(sides[mine, 0] == c, sides[mine, 1], sides[mine, 0])
+        k = int(np.argmax(np.bincount(other, weights=area[mine], minlength=n)))
+        sides[sides == c] = k
+        joined += 1
+    kept = sides[:, 0] != sides[:, 1]
+    used = np.unique(np.r_[exterior_component, sides[kept].ravel()])
+    renumber = np.full(n, -1, np.int64)
+    renumber[used] = np.arange(len(used))
+    return F[kept], renumber[sides[kept]], renumber[exterior_component], len(used), kept, joined

@@ -116,10 +116,9 @@ SCHEMA: dict[str, Any] = {
         "usd": Param(True, "bool", doc="write animation/pieces.usdc: one mesh per piece, points per frame, "
                      "interior and exterior materials (Blender: File > Import > Universal Scene Description)"),
         "fps": Param(24.0, lo=0.1, hi=1000.0, doc="frame rate recorded in the USD file"),
-        "check_samples": Param(20000, "int", lo=0, hi=10_000_000,
-                               doc="random points for the piece overlap check (0: skip)"),
-        "check_intersections": Param(True, "bool", doc="find and resolve self-crossing pieces, and count the "
-                                     "crossing triangle pairs of every piece (off: faster, pieces may cross)"),
+        "check_samples": Param(20000, "int", lo=1000, hi=10_000_000,
+                               doc="random points at which the pieces' winding numbers are checked (their volumes, "
+                                   "no overlap); every run checks its pieces"),
     },
     "preview": {
         "axis": Param(None, "str", choices=("x", "y", "z"), nullable=True,

@@ -25,7 +25,8 @@ def check_triangle_mesh(V, F, what: str, closed: bool = False) -> tuple[np.ndarr
         Names the mesh in error messages (file, config key, piece).
     closed : bool
         Also require every edge to have exactly two incident triangles
-        (a closed, edge-manifold surface).
+        (a closed, edge-manifold surface). Triangles without area are
+        refused only when not ``closed``.
 
     Raises
     ------
@@ -61,7 +62,9 @@ def check_triangle_mesh(V, F, what: str, closed: bool = False) -> tuple[np.ndarr
     area2 = np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1)
     diagonal = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
     flat = np.flatnonzero(area2 <= tol.degenerate * diagonal ** 2)
-    if len(flat):
+    # only an open surface (a fracture surface) is refused for them: a closed exterior made by CAD
+    # booleans often keeps flat triangles where coplanar faces merged, and they bound nothing
+    if len(flat) and not closed:
         raise InputError(f"{what}: face {int(flat[0]) + 1} (counted from 1) has no area: its corners coincide or lie on "
                          f"a line{f' ({len(flat)} such faces)' if len(flat) > 1 else ''}; expected triangles with area")
     if closed:

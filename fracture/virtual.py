@@ -17,7 +17,7 @@ import numpy as np
 from fracture.errors import InputError
 from fracture.exterior import Exterior
 from fracture.tolerances import tol
-from fracture.topology import boundary_conormals, boundary_edges
+from fracture.topology import boundary_conormals, boundary_edges, directed_edge_face
 
 
 def _crack_front(V, F, B: Exterior) -> tuple[np.ndarray, np.ndarray]:
@@ -125,4 +125,40 @@ def extend_cuts(V: np.ndarray, F: np.ndarray, BV: np.ndarray, BF: np.ndarray, st
     F2 = np.concatenate([F] + [f.astype(np.int64) for f in new_faces])
     virtual = np.zeros(len(F2), bool)
     virtual[len(F):] = True
-    return Vall, F2, virtual
+    return follow_b(Vall, F2, virtual, B)
+
+
+# A boundary edge of the extended cut whose midpoint is farther than this
+# (relative to B's diagonal) from B is split, the new vertex put on B.
+CHORD = 2e-3
+
+
+def follow_b(V: np.ndarray, F: np.ndarray, virtual: np.ndarray, B: Exterior, max_rounds: int = 10):
+    """Split the cut's boundary edges until they follow B within :data:`CHORD` of its diagonal.
+
+    The extended fronts end on B vertex by vertex, and the straight edge
+    between two ends on different faces of B cuts a corner off B's convex
+    edges (the edge runs inside) or leaves it (concave ones): the cut then
+    leaves a channel round that corner that joins its two sides. Each split
+    puts the edge's midpoint at its closest point on B (one edge per triangle
+    a round; the triangle on it is halved and the halves keep its flag).
+    """
+    limit = CHORD * float(np.linalg.norm(np.ptp(B.V, axis=0)))
+    for _ in range(max_rounds):
+        E = boundary_edges(F)
+        d2, _, closest = B.closest(0.5 * (V[E[:, 0]] + V[E[:, 1]]))
+        far = np.flatnonzero(d2 > limit ** 2)
+        if not len(far):
+            break
+        face = directed_edge_face(F, E[far])
+        far, first = far[np.unique(face, return_index=True)[1]], np.unique(face)
+        a, b = E[far, 0], E[far, 1]
+        m = len(V) + np.arange(len(far))
+        V = np.concatenate([V, closest[far]])
+        tri = F[first]
+        c = tri.sum(axis=1) - a - b  # the corner off the edge
+        F = F.copy()
+        F[first] = np.stack([a, m, c], 1)
+        F = np.concatenate([F, np.stack([m, b, c], 1)])
+        virtual = np.concatenate([virtual, virtual[first]])
+    return V, F, virtual

@@ -100,7 +100,7 @@ def cube8_run(tmp_path_factory):
     from fracture import runner
 
     out = tmp_path_factory.mktemp("usd") / "run"
-    cfg = scene_config("blender_cube8", ["refine.max_triangles=15000", "animate.check_samples=0",
+    cfg = scene_config("blender_cube8", ["refine.max_triangles=15000", "animate.check_samples=1000",
                                          "animate.obj_frames=true"])
     return runner.run(cfg, out, progress=False)
 
@@ -234,7 +234,7 @@ def test_a_usd_written_by_blender_runs_end_to_end(tmp_path):
     assert done.returncode == 0, done.stderr[-2000:]
     cfg_path = tmp_path / "c.yaml"
     cfg_path.write_text(f"input: {{kind: usd, usd: {usd}}}\n")
-    cfg = load_config(cfg_path, ["refine.max_triangles=8000", "refine.iterations=6", "animate.check_samples=0"])
+    cfg = load_config(cfg_path, ["refine.max_triangles=8000", "refine.iterations=6", "animate.check_samples=1000"])
     out = runner.run(cfg, tmp_path / "run", progress=False)
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["counts"]["components"] == 8 and manifest["counts"]["frames"] == 24

@@ -20,7 +20,7 @@ from fracture.errors import InputError
 HERE = Path(__file__).resolve().parent
 # a small run with fields, iterations and a 6-frame animation of 14 pieces (a few seconds)
 RUN_OVERRIDES = ["input.frames=6", "refine.max_triangles=4000", "refine.iterations=6", "grid.resolution=40",
-                 "animate.check_samples=0"]
+                 "animate.check_samples=1000"]
 
 
 @pytest.fixture(scope="module")

@@ -57,7 +57,7 @@ def animate_stage(ctx: RunContext) -> None:
             _, f, _ = igl.point_mesh_squared_distance(centroids, cf.exterior_V, cf.exterior_F)
             return cf.exterior_component[f]
 
-        pieces = build_pieces(im, mesh, cf.n_components, fallback, resolve=opts["check_intersections"])
+        pieces = build_pieces(im, mesh, cf.n_components, fallback)
         transfer = build_transfer(cf, pieces, mesh.tree_matrix())
         bar.update()
         checks = _check(ctx, pieces, BV, BF, opts)
@@ -117,12 +117,11 @@ def _check(ctx: RunContext, pieces, BV, BF, opts) -> dict:
     out = {"pieces": per_piece, "volume_B": vb, "volume_pieces": total,
            "volume_relative_error": abs(total - vb) / abs(vb), "patch_agreement": pieces.patch_agreement,
            "jitter_seed": pieces.jitter_seed}
-    if opts["check_samples"]:
-        overlap, gap, share, n = overlap_and_gap(pieces, BV, BF, opts["check_samples"],
-                                                 np.random.default_rng(ctx.cfg["seed"]))
-        out.update(overlap_share=overlap, uncovered_share=gap, samples_inside=n)
-        for ch, p in zip(per_piece, share):
-            ch["volume_sampled"] = float(p * vb)
+    overlap, gap, share, n = overlap_and_gap(pieces, BV, BF, opts["check_samples"],
+                                             np.random.default_rng(ctx.cfg["seed"]))
+    out.update(overlap_share=overlap, uncovered_share=gap, samples_inside=n)
+    for ch, p in zip(per_piece, share):
+        ch["volume_sampled"] = float(p * vb)
     return out
 
 

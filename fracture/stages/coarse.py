@@ -17,7 +17,7 @@ def coarse_from_meshes(inp: dict) -> CoarseFracture:
     Incomplete cuts are extended (virtual fracture) and the components found
     by flood fill; the animation is the rest pose alone.
     """
-    from fracture.components import label_components
+    from fracture.components import join_slivers, label_components
     from fracture.errors import InputError
     from fracture.topology import orient_sheets
     from fracture.animation import exterior_points, lattice_animation
@@ -47,6 +47,12 @@ def coarse_from_meshes(inp: dict) -> CoarseFracture:
         notes.append(f"input.fracture: trimmed to the object ({100 * outside:.1f} % of its area was outside)")
     V, F, virtual = extend_cuts(V, F, BV, BF)
     sides, ext, n = label_components(BV, BF, V, F, what=what)
+    F, sides, ext, n, kept, joined = join_slivers(BV, BF, V, F, sides, ext, n)
+    virtual = virtual[kept]
+    if joined:
+        notes.append(f"input.fracture: {joined} sliver piece{'s' if joined > 1 else ''} between the cut and the "
+                     "object's surface, too thin for the labelling grid, joined to the neighbour across the cut "
+                     f"({int((~kept).sum())} triangles dropped)")
     enclosed = [c for c in range(n) if not (ext == c).any()]
     if enclosed:
         faces = np.flatnonzero((sides == enclosed[0]).any(axis=1) & ~virtual)
