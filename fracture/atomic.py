@@ -135,18 +135,14 @@ def staged_directory(out: str | Path, force: bool = False, marker: str = RUN_MAR
         os.replace(staging, out)
         if old is not None:
             shutil.rmtree(old, ignore_errors=True)
-    except OSError as exc:
+    except BaseException as exc:
         if staging is not None:
             shutil.rmtree(staging, ignore_errors=True)
-        if isinstance(exc, RunDirectoryExists) or (exc.filename is not None
-                                                    and not str(exc.filename).startswith(str(out.parent))):
-            raise  # not the run directory's fault (an input file, say)
+        if (not isinstance(exc, OSError) or isinstance(exc, RunDirectoryExists)
+                or (exc.filename is not None and not str(exc.filename).startswith(str(out.parent)))):
+            raise  # not a failure to write the run directory (an input file, say, or Ctrl-C)
         what = f"{exc.filename}: {exc.strerror}" if exc.filename is not None else str(exc)
         with contextlib.suppress(OSError):
             what += f"; {shutil.disk_usage(out.parent).free / 2 ** 20:.1f} MB free there"
         raise OutputError(f"{out}: cannot write the run ({what}); nothing was written and an earlier run there "
                           "is untouched") from None
-    except BaseException:
-        if staging is not None:
-            shutil.rmtree(staging, ignore_errors=True)
-        raise

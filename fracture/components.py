@@ -18,7 +18,10 @@ from scipy import ndimage
 
 from fracture.errors import InputError
 from fracture.coarse import flood_fill_patches
-from fracture.topology import boundary_edges, directed_edges, edge_keys, edge_outward, face_frames, unique_edges
+from fracture.exterior import Exterior
+from fracture.tolerances import tol
+from fracture.topology import (boundary_edges, diagonal, directed_edges, edge_keys, edge_outward, face_frames,
+                               unique_edges)
 
 # Voxels with fewer free cells than this are slivers between the surface and
 # B, not components.
@@ -303,15 +306,11 @@ def join_slivers(BV: np.ndarray, BF: np.ndarray, V: np.ndarray, F: np.ndarray, s
     Returns ``F, sides, exterior_component, n, kept`` (``kept``: which
     triangles of ``F`` remain) and the number of pieces joined.
     """
-    from fracture.exterior import Exterior
-    from fracture.tolerances import tol
-    from fracture.topology import diagonal
-
     lonely = [c for c in range(n) if not (exterior_component == c).any()]
     if not lonely:
         return F, sides, exterior_component, n, np.ones(len(F), bool), 0
     on_b = Exterior(BV, BF).distance(V) <= tol.on_surface * diagonal(BV)
-    area = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+    area = face_frames(V, F)[0]
     sides = sides.copy()
     joined = 0
     for c in lonely:

@@ -9,7 +9,7 @@ import numpy as np
 
 from fracture.errors import InputError
 from fracture.tolerances import tol
-from fracture.topology import fan, unique_edges
+from fracture.topology import diagonal, face_frames, fan, unique_edges
 
 MESH_SUFFIXES = (".obj", ".ply", ".off", ".stl")
 
@@ -58,10 +58,7 @@ def check_triangle_mesh(V, F, what: str, closed: bool = False) -> tuple[np.ndarr
         f = int(twice[0])
         raise InputError(f"{what}: faces {int(first[inverse.ravel()[f]]) + 1} and {f + 1} (counted from 1) are the same "
                          f"triangle{f' ({len(twice)} such repeats)' if len(twice) > 1 else ''}; expected each triangle once")
-    T = V[F]
-    area2 = np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1)
-    diagonal = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
-    flat = np.flatnonzero(area2 <= tol.degenerate * diagonal ** 2)
+    flat = np.flatnonzero(2 * face_frames(V, F)[0] <= tol.degenerate * diagonal(V) ** 2)
     # only an open surface (a fracture surface) is refused for them: a closed exterior made by CAD
     # booleans often keeps flat triangles where coplanar faces merged, and they bound nothing
     if len(flat) and not closed:

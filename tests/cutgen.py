@@ -14,24 +14,10 @@ import numpy as np
 
 from fracture.primitives import box, cylinder, grid_faces
 from fracture.topology import weld
+from test_flow import icosphere
 
 EXTERIORS = ("box", "sphere", "torus", "lshape", "stairs", "prism")
 CUTS = ("plane", "curved", "bent", "incomplete", "overhang", "Y", "T", "X", "misoriented")
-
-
-def _icosphere(radius: float, level: int) -> tuple[np.ndarray, np.ndarray]:
-    """An octahedron split ``level`` times, projected to the sphere."""
-    V = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], float)
-    F = np.array([[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]])
-    for _ in range(level):
-        E = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
-        edges, inverse = np.unique(E, axis=0, return_inverse=True)
-        mid = len(V) + inverse.reshape(3, -1).T  # midpoints of edges 01, 12, 20 of each triangle
-        V = np.r_[V, 0.5 * (V[edges[:, 0]] + V[edges[:, 1]])]
-        a, b, c = F.T
-        ab, bc, ca = mid.T
-        F = np.concatenate([np.c_[a, ab, ca], np.c_[ab, b, bc], np.c_[ca, bc, c], np.c_[ab, bc, ca]])
-    return radius * V / np.linalg.norm(V, axis=1, keepdims=True), F
 
 
 def _torus(R: float, r: float, nu: int = 32, nv: int = 16) -> tuple[np.ndarray, np.ndarray]:
@@ -57,8 +43,8 @@ def exterior(kind: str, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarra
     if kind == "box":
         return box([0, 0, 0], s, (4, 4, 4))
     if kind == "sphere":
-        V, F = _icosphere(0.5, 3)
-        return V * s / s.max() + 0.5, F
+        V, F = icosphere(3)
+        return 0.5 * V * s / s.max() + 0.5, F
     if kind == "torus":
         V, F = _torus(0.35, rng.uniform(0.12, 0.2))
         return V + 0.5, F
