@@ -5,8 +5,9 @@ frame number in their names (the last run of digits: ``frame_0001.obj``,
 Blender's ``frame1.obj ... frame40.obj``; :func:`frame_paths`); the first is
 the rest pose. In an OBJ every piece is an object (``o name``)
 and faces may be n-gons; in a PLY, which has no objects, the pieces are the
-connected components of the mesh, named ``piece_000``, ``piece_001``, ... in
-the order of their first vertex. Every frame must have the same pieces, the
+connected components of the mesh, joined where their open boundaries close
+each other (:func:`join_open_shells`), named ``piece_000``, ``piece_001``, ...
+in the order of their first vertex. Every frame must have the same pieces, the
 same vertices in the same order and the same faces.
 """
 
@@ -22,7 +23,7 @@ from scipy.sparse.csgraph import connected_components
 
 from fracture.errors import InputError
 from fracture.meshio import read_obj_objects, read_ply_polygons
-from fracture.topology import diagonal
+from fracture.topology import diagonal, weld
 
 
 @dataclass
@@ -50,8 +51,11 @@ class MeshFrame:
 
 
 def _read_ply_pieces(path: Path) -> MeshFrame:
-    """A PLY frame (ASCII or binary, any polygon sizes, as Blender writes it) read with plyfile: the
-    pieces are the connected components of its faces."""
+    """A PLY frame (ASCII or binary, any polygon sizes, as Blender writes it) read with plyfile.
+
+    PLY has no objects: the pieces are the connected components of its faces, joined
+    where their open boundaries close each other (:func:`join_open_shells`).
+    """
     V, polys = read_ply_polygons(path)
     if not polys:
         return MeshFrame(path, [], V.reshape(-1, 3), [])
@@ -60,12 +64,82 @@ def _read_ply_pieces(path: Path) -> MeshFrame:
     first = np.repeat(np.array([f[0] for f in polys]), [len(f) for f in polys])
     A = coo_matrix((np.ones(len(flat)), (first, flat)), shape=(n, n))
     _, label = connected_components(A, directed=False)
-    face_label = label[[f[0] for f in polys]]
+    face_label = join_open_shells(V, polys, label[[f[0] for f in polys]])
     # connected_components numbers components by their lowest vertex, which
     # is the "order of the first vertex" rule; keep only labels with faces.
     labels = np.unique(face_label)
     pieces = [[f for f, lab in zip(polys, face_label) if lab == want] for want in labels]
     return MeshFrame(path, [f"piece_{i:03d}" for i in range(len(labels))], V, pieces)
+
+
+def join_open_shells(V: np.ndarray, polys: list[np.ndarray], face_label: np.ndarray) -> np.ndarray:
+    """Join the parts of a piece that a file stores apart: ``face_label`` with merged labels.
+
+    Cell Fracture gives a piece's outer faces and its cut faces vertices of their own, so
+    each is an open shell; where several pieces are written to one PLY, only the positions
+    say which shells belong together. Two open groups are joined when every boundary edge
+    of the smaller one lies (by position) on the other's boundary; among such pairs, the
+    one whose union is left with the fewest open edges goes first, so that a piece's outer
+    and cut faces pair up before a neighbour's do, then the one whose vertices lie closest
+    in the file (an exporter writes a piece's vertices together: two pieces that meet
+    along a whole loop, such as the halves of a box cut in two, have four shells that
+    pair up either way). Neighbouring pieces touch along part of their boundaries only
+    and stay apart.
+    """
+    _, at = weld(V, 1e-9 * diagonal(V))  # one key per position
+    ids = np.concatenate(polys)
+    nxt = np.concatenate([np.roll(f, -1) for f in polys])
+    labels, owner = np.unique(np.repeat(face_label, [len(f) for f in polys]), return_inverse=True)
+    lo = np.full(len(labels), len(V))
+    hi = np.full(len(labels), -1)
+    np.minimum.at(lo, owner, ids)
+    np.maximum.at(hi, owner, ids)
+    span = {int(lab): (int(lo[k]), int(hi[k])) for k, lab in enumerate(labels)}
+    # open edges of each group: position edges its faces use an odd number of times
+    m = len(V)
+    key = np.minimum(at[ids], at[nxt]) * m + np.maximum(at[ids], at[nxt])
+    pairs, count = np.unique(np.stack([owner, key], 1), axis=0, return_counts=True)
+    open_ = pairs[count % 2 == 1]
+    boundary: dict[int, set] = {}
+    for k, e in open_.tolist():
+        boundary.setdefault(int(labels[k]), set()).add(e)
+    parent = {}
+    while True:
+        owners: dict[int, list[int]] = {}
+        for g, edges in boundary.items():
+            for e in edges:
+                owners.setdefault(e, []).append(g)
+        shared: dict[tuple[int, int], int] = {}
+        for gs in owners.values():
+            for i in range(len(gs)):
+                for j in range(i + 1, len(gs)):
+                    pair = (min(gs[i], gs[j]), max(gs[i], gs[j]))
+                    shared[pair] = shared.get(pair, 0) + 1
+        best = None
+        for (i, j), s in shared.items():
+            if s < min(len(boundary[i]), len(boundary[j])):
+                continue
+            left = len(boundary[i]) + len(boundary[j]) - 2 * s
+            gap = max(0, max(span[i][0], span[j][0]) - min(span[i][1], span[j][1]))
+            if best is None or (left, gap, i, j) < best:
+                best = (left, gap, i, j)
+        if best is None:
+            break
+        *_, i, j = best
+        parent[j] = i
+        span[i] = (min(span[i][0], span[j][0]), max(span[i][1], span[j][1]))
+        rest = boundary[i] ^ boundary.pop(j)
+        if rest:
+            boundary[i] = rest
+        else:
+            del boundary[i]
+    root = np.arange(face_label.max() + 1)
+    for j in parent:
+        i = parent[j]
+        while i in parent:
+            i = parent[i]
+        root[j] = i
+    return root[face_label]
 
 
 def read_frame(path: str | Path) -> MeshFrame:

@@ -160,6 +160,28 @@ def _nearest_coarse(cf: CoarseFracture, K: np.ndarray, c: int, X: np.ndarray) ->
     return T, barycentric_weights(P, K[T])
 
 
+def shared_components(pieces: Pieces, n_components: int) -> np.ndarray:
+    """Per fracture vertex, the component whose motion it follows once its pieces are apart.
+
+    A vertex of S is held by every piece it bounds and follows the lowest of them. A vertex
+    the resolution of crossings made on an S triangle is held by one piece; it follows its
+    triangle's corners so that it stays with its neighbours, or its own piece when no piece
+    holds any of the corners (the triangle lies outside B). A vertex no piece holds gets
+    ``n_components``.
+    """
+    nf = pieces.n_fracture
+    shared = np.full(nf, n_components)
+    for c in range(n_components):
+        verts = pieces.piece(c)[0]
+        verts = verts[verts < nf]
+        shared[verts] = np.minimum(shared[verts], c)
+    if nf > pieces.n_surface:
+        D = pieces.derived
+        corners = np.minimum.reduceat(shared[D.indices], D.indptr[:-1])
+        shared[pieces.n_surface:] = np.where(corners < n_components, corners, shared[pieces.n_surface:])
+    return shared
+
+
 def build_transfer(cf: CoarseFracture, pieces: Pieces, tree: sp.csr_matrix) -> Transfer:
     """The transfer for ``pieces`` given the tree map ``tree`` (fracture vertices x coarse fracture vertices)."""
     C = cf.n_components
@@ -168,16 +190,7 @@ def build_transfer(cf: CoarseFracture, pieces: Pieces, tree: sp.csr_matrix) -> T
     nf = pieces.n_fracture
     tree = pieces.fracture_tree(tree)
 
-    # per fracture vertex: the shared component (lowest among the pieces that
-    # hold it) and the fracture time interpolated through the tree
-    shared_comp = np.full(nf, C)
-    for c in range(C):
-        verts = pieces.piece(c)[0]
-        verts = verts[verts < nf]
-        shared_comp[verts] = np.minimum(shared_comp[verts], c)
-    if nf > pieces.n_surface:  # a vertex made on an S triangle is held by one piece: take its corners' component
-        D = pieces.derived
-        shared_comp[pieces.n_surface:] = np.minimum.reduceat(shared_comp[D.indices], D.indptr[:-1])
+    shared_comp = shared_components(pieces, C)
     vtime = tree @ cf.vertex_fracture_time.astype(np.float64)
 
     rows_v, rows_c, ent_row, ent_k, ent_w, ent_c = [], [], [], [], [], []

@@ -14,7 +14,7 @@ from fracture.exterior import Exterior
 from fracture.imprint import BRIDGE_DEPTH, imprint_boundary, split_bridge_edges
 from fracture.meshio import read_obj_objects
 from fracture.objio import ObjFrames
-from fracture.pieces import build_pieces, mesh_checks, overlap_and_gap
+from fracture.pieces import Pieces, build_pieces, mesh_checks, overlap_and_gap
 from fracture.plyio import read_ply
 from fracture.primitives import box, grid_faces
 from fracture.refine.mesh import RefineMesh
@@ -325,3 +325,24 @@ def test_a_refused_resolution_is_retried_from_jittered_positions(monkeypatch):
     calls.clear()
     again = fp._resolve_pieces(raw)
     assert np.array_equal(again.V, pieces.V)
+
+
+def test_vertices_made_on_s_follow_their_corners_or_else_their_own_piece():
+    import scipy.sparse as sp
+
+    from fracture.transfer import shared_components
+
+    # S: vertices 0-3; made on S triangles: 4 (corners 0, 1, 2) and 5 (corners 2, 3, 0)
+    # piece 0 holds 0, 1 and 4; piece 1 holds 1 and 5; 2 and 3 (outside B) belong to no piece
+    V = np.zeros((8, 3))
+    derived = sp.csr_matrix(np.array([[0.2, 0.3, 0.5, 0.0], [0.4, 0.0, 0.3, 0.3]]))
+    # vertex 5's corners: 0 is held by piece 0 only, so it follows piece 0
+    faces = [np.array([[0, 1, 4], [0, 4, 6]]), np.array([[1, 5, 7]])]
+    pieces = Pieces(V=V, n_fracture=6, faces=faces, exterior=[np.zeros(2, bool), np.zeros(1, bool)],
+                    patch_agreement=1.0, derived=derived)
+    assert shared_components(pieces, 2).tolist() == [0, 0, 2, 2, 0, 0]
+    # with no held corner, vertex 5 follows the one piece that holds it
+    derived = sp.csr_matrix(np.array([[0.2, 0.3, 0.5, 0.0], [0.0, 0.0, 0.5, 0.5]]))
+    pieces = Pieces(V=V, n_fracture=6, faces=faces, exterior=pieces.exterior, patch_agreement=1.0,
+                    derived=derived)
+    assert shared_components(pieces, 2).tolist() == [0, 0, 2, 2, 0, 1]

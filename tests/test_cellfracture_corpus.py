@@ -46,8 +46,7 @@ def test_every_export_imports_with_its_pieces_and_up_axis(corpus, case, fmt):
     assert cf.n_frames == info["frames"] and cf.up_axis == up
     # every piece takes part, or its leaving out is noted (thinner than a grid cell everywhere)
     left_out = [n for n in cf.notes if n.startswith("left out")]
-    if fmt != "ply":  # PLY has no objects: a piece in two parts is two pieces
-        assert cf.n_components == info["pieces"] or left_out
+    assert cf.n_components == info["pieces"] or left_out
     assert np.all(unique_edges(cf.exterior_F)[1] == 2)
     assert signed_volume(cf.exterior_V, cf.exterior_F) > 0
     assert np.all(cf.sides[:, 0] != cf.sides[:, 1])

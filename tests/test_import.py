@@ -280,3 +280,59 @@ def test_a_missing_duplicate_or_unnumbered_frame_is_named(tmp_path, drop, rename
 def test_frames_exported_every_other_frame_are_accepted(tmp_path):
     d = _renamed_sample(tmp_path, lambda t: f"frame{2 * t - 1}.obj")
     assert len(read_sequence(d)) == 40
+
+
+def _shells(lo, hi, cut_axis, cut_side):
+    """Two open shells of a box, each with vertices of its own: its face on
+    ``cut_axis``/``cut_side`` (the cut face, split into two triangles) and the other five."""
+    from fracture.primitives import box
+
+    V, F = box(lo, hi)
+    n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    cut = (np.abs(n[:, cut_axis]) > 0) & (np.sign(n[:, cut_axis]) == (1 if cut_side else -1))
+    out = []
+    for sel in (~cut, cut):
+        ids, local = np.unique(F[sel], return_inverse=True)
+        out.append((V[ids], local.reshape(-1, 3)))
+    return out
+
+
+def _polys(parts):
+    V, polys, offset = [], [], 0
+    for P, F in parts:
+        V.append(P)
+        polys += [f + offset for f in F]
+        offset += len(P)
+    return np.concatenate(V), polys
+
+
+def test_open_shells_of_one_piece_are_joined_and_neighbours_stay_apart():
+    from fracture.mesh_sequence import join_open_shells
+    from fracture.primitives import box
+
+    # a box cut in two: four shells on one loop pair up by file order (A's outer faces and
+    # its cut face, then B's), not A's outer faces with B's
+    A = _shells([0, 0, 0], [1, 1, 1], 0, 1)
+    B = _shells([1, 0, 0], [2, 1, 1], 0, 0)
+    V, polys = _polys(A + B)
+    joined = join_open_shells(V, polys, np.repeat(np.arange(4), [10, 2, 10, 2]))
+    assert joined.tolist() == [0] * 12 + [2] * 12
+    # a closed neighbour touching the shells' loop stays a piece of its own
+    V, polys = _polys(A + [box([1, 0, 0], [2, 1, 1])])
+    joined = join_open_shells(V, polys, np.repeat(np.arange(3), [10, 2, 12]))
+    assert joined.tolist() == [0] * 12 + [2] * 12
+    # the order of the labels does not matter, only where the vertices are in the file
+    V, polys = _polys(A + B)
+    joined = join_open_shells(V, polys, np.repeat([0, 2, 1, 3], [10, 2, 10, 2]))
+    assert joined.tolist() == [0] * 12 + [1] * 12
+
+
+def test_a_ply_of_split_shells_reads_as_its_pieces(tmp_path):
+    from fracture.mesh_sequence import read_frame
+    from fracture.plyio import write_ply
+
+    V, polys = _polys(_shells([0, 0, 0], [1, 1, 1], 0, 1) + _shells([1, 0, 0], [2, 1, 1], 0, 0))
+    write_ply(tmp_path / "f.ply", V, np.array(polys))
+    frame = read_frame(tmp_path / "f.ply")
+    assert frame.names == ["piece_000", "piece_001"]
+    assert [len(p) for p in frame.polygons] == [12, 12]
