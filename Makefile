@@ -12,8 +12,8 @@ BLENDER_VENV := .venv-blender
 BLENDER_STAMP := $(BLENDER_VENV)/.installed
 BPY := bpy==4.2.*
 # Shared libraries open3d loads (OpenGL, EGL, OpenMP, USB); Xvfb and xauth for the
-# viewer window on a machine with no display.
-DEBIAN_PACKAGES := libgl1 libegl1 libgomp1 libusb-1.0-0 xvfb xauth
+# viewer window on a machine with no display, xdotool for the mouse and keys its tests use.
+DEBIAN_PACKAGES := libgl1 libegl1 libgomp1 libusb-1.0-0 xvfb xauth xdotool
 
 .PHONY: demo test bench system-deps install clean
 

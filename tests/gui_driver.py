@@ -22,6 +22,107 @@ def _watchdog():
     os._exit(3)
 
 
+def _xdotool(app, *args) -> None:
+    """Run one xdotool command while the window keeps handling its events."""
+    import subprocess
+
+    p = subprocess.Popen(["xdotool", *map(str, args)])
+    while p.poll() is None:
+        app.run_one_tick()
+    for _ in range(5):
+        app.run_one_tick()
+
+
+def _origin(app, v) -> tuple[int, int]:
+    import subprocess
+
+    wid = subprocess.run(["xdotool", "search", "--name", v.window.title], capture_output=True,
+                         text=True).stdout.split()[0]
+    geo = subprocess.run(["xdotool", "getwindowgeometry", wid], capture_output=True, text=True).stdout
+    x, y = geo.split("Position: ")[1].split()[0].split(",")
+    return int(x), int(y)
+
+
+def _drag(app, v, origin, i: int, dx: int = 120, dy: int = 40, button: int = 1) -> None:
+    """A real mouse drag from the middle of panel ``i``."""
+    f = v.scenes[i].frame
+    x, y = origin[0] + f.x + f.width // 2, origin[1] + f.y + f.height // 2
+    _xdotool(app, "mousemove", x, y)
+    _xdotool(app, "mousedown", button)
+    for k in range(1, 9):
+        _xdotool(app, "mousemove", x + dx * k // 8, y + dy * k // 8)
+    _xdotool(app, "mouseup", button)
+
+
+def _panel_content(app, v, i: int) -> dict:
+    """What panel ``i`` shows with its camera now, at its size: share of non-background pixels and
+    the content's centre as a fraction of the panel (0.5, 0.5 is the middle)."""
+    import numpy as np
+
+    f = v.scenes[i].frame
+    img = np.asarray(app.render_to_image(v.scenes[i].scene, f.width, f.height))[..., :3].astype(int)
+    mask = np.abs(img - img[0, 0]).sum(axis=2) > 30
+    ys, xs = np.nonzero(mask)
+    centre = [float(xs.mean() / f.width), float(ys.mean() / f.height)] if len(xs) else [None, None]
+    return {"share": float(mask.mean()), "centre": centre}
+
+
+def _cameras(v) -> list:
+    import numpy as np
+
+    return [np.concatenate([np.asarray(sw.scene.camera.get_model_matrix()).ravel(),
+                            np.asarray(sw.scene.camera.get_projection_matrix()).ravel()]).tolist()
+            for sw in v.scenes]
+
+
+def navigate(app, v, out) -> dict:
+    """Drags in each panel, then with linked cameras; exports; a preset; the R key."""
+    res: dict = {"initial": [_panel_content(app, v, i) for i in range(3)]}
+    origin = _origin(app, v)
+    res["after_drag"] = []
+    for i in range(3):
+        _drag(app, v, origin, i)
+        res["after_drag"].append(_panel_content(app, v, i))
+    res["moved"] = _cameras(v)
+    v.reset_view()
+    v.link_box.checked = True
+    _drag(app, v, origin, 1, dx=-150, dy=60)
+    for _ in range(5):
+        app.run_one_tick()
+    res["linked"] = [_panel_content(app, v, i) for i in range(3)]
+    import numpy as np
+
+    M = [np.asarray(sw.scene.camera.get_model_matrix()) for sw in v.scenes]
+    res["linked_forward"] = [(-m[:3, 2]).tolist() for m in M]
+    before = _cameras(v)
+    v.export_w.int_value, v.export_h.int_value, v.export_fps.int_value = 640, 360, 5
+    res["screenshot"] = str(v.screenshot("all panels", out / "shot.png"))
+    v.screenshot("iterations", out / "shot_it.png")
+    v.export_video("iterations", out / "it.mp4")
+    while v._job is not None:
+        app.run_one_tick()
+    res["cameras_before_export"], res["cameras_after_export"] = before, _cameras(v)
+    res["after_export"] = [_panel_content(app, v, i) for i in range(3)]
+    v.link_box.checked = False
+    _drag(app, v, origin, 2)
+    f = v.scenes[2].frame
+    _xdotool(app, "mousemove", origin[0] + f.x + f.width // 2, origin[1] + f.y + f.height // 2)
+    _xdotool(app, "key", "r")
+    for j in (0, 1):  # the key reset panel 2 only
+        v.reset_view(j)
+    res["after_reset_key"], res["fresh"] = _cameras(v), _fresh(app, v)
+    v.set_preset("top")
+    res["top"] = [_panel_content(app, v, i) for i in range(3)]
+    return res
+
+
+def _fresh(app, v) -> list:
+    v.reset_view()
+    for _ in range(3):
+        app.run_one_tick()
+    return _cameras(v)
+
+
 def main() -> None:
     scenario, run_dir, out = sys.argv[1], Path(sys.argv[2]), Path(sys.argv[3])
     threading.Thread(target=_watchdog, daemon=True).start()
@@ -66,6 +167,8 @@ def main() -> None:
             app.run_one_tick()
         result["video"] = str(out / "window_animation.mp4")
         result["frames"] = v.run.n_frames
+    elif scenario == "navigate":
+        result.update(navigate(app, v, out))
     elif scenario == "rerun":
         before = v.run.iteration(len(v.run.iterations) - 1)
         v.edits["psi.stress_weight"].double_value = 0.0
@@ -76,17 +179,14 @@ def main() -> None:
         v.rerun()
         # the ticks while the re-run runs; the one that loads its result and the first renders of
         # that (seconds under Xvfb's software renderer, as when a window opens) come after it
-        gaps, last = [], time.monotonic()
+        ticks = 0
         while v._worker is not None and v._worker.is_alive():
             app.run_one_tick()
-            now = time.monotonic()
-            if not v.rerun_dirs:
-                gaps.append(now - last)
-            last = now
+            ticks += not v.rerun_dirs
         for _ in range(20):  # the finished run arrives through the main thread's queue
             app.run_one_tick()
         after = v.run.iteration(len(v.run.iterations) - 1)
-        result.update(max_tick_gap=max(gaps) if gaps else 0.0, ticks=len(gaps), live_updates=v.live_updates,
+        result.update(ticks=ticks, live_updates=v.live_updates,
                       rerun_dirs=[str(p) for p in v.rerun_dirs], shown=str(v.run.dir),
                       same_surface=bool(before.V.shape == after.V.shape and (before.V == after.V).all()),
                       stress_weight=v.cfg["psi"]["stress_weight"])

@@ -9,7 +9,7 @@ below it:
 2. iterations: the fracture surface at iteration k coloured by psi or
    speed (slider, step buttons, play), with iteration, triangles and energy;
 3. animation: the high-resolution pieces at frame t (slider, play), with
-   the coarse pieces as an optional wireframe overlay.
+   the coarse pieces as an optional see-through overlay.
 
 The side panel binds the config's tunable numbers; "Re-run" runs the
 pipeline on a worker thread into a new run directory (never over the shown
@@ -38,13 +38,15 @@ from fracture.errors import ConfigError, InputError, ResultError, StageError
 from viewer import annotate
 from viewer.data import FIELDS, RunData, Surface
 from viewer.looks import (
-    COLOR_BY, FIELD_CMAPS, SURFACE_CMAPS, CameraPose, View, animation_box, apply_camera, frame_box,
+    COLOR_BY, FIELD_CMAPS, SURFACE_CMAPS, CameraPose, View, animation_box, animation_pose,
+    frame_box,
     iteration_caption, iteration_pose, prepare, scene_box, set_frame, set_slice, set_surface, show_context,
     show_material, slice_pose, slice_title,
 )
 from viewer.media import Video, check_size
 
 PANELS = ("material", "iterations", "animation")
+PRESETS = ("iso", "front", "side", "top")
 SIDE_WIDTH_EM = 20
 PLAY_SECONDS = 0.3
 # Config numbers the side panel offers (sections; every int or float leaf under them, and the strength layers').
@@ -73,6 +75,15 @@ def set_key(cfg: dict, path: str, value) -> None:
     node[parts[-1]] = value
 
 
+def numbered(folder: Path, stem: str, suffix: str) -> Path:
+    """``folder/stem_NNN.suffix`` with the first number not taken: exports never overwrite."""
+    taken = {p.name for p in folder.glob(f"{stem}_*{suffix}")} if folder.is_dir() else set()
+    k = 1
+    while f"{stem}_{k:03d}{suffix}" in taken:
+        k += 1
+    return folder / f"{stem}_{k:03d}{suffix}"
+
+
 def _combobox(items, on_change=None) -> gui.Combobox:
     box = gui.Combobox()
     for item in items:
@@ -99,6 +110,7 @@ class Viewer:
             sw = gui.SceneWidget()
             sw.scene = rendering.Open3DScene(self.window.renderer)
             sw.set_on_mouse(self._on_mouse(len(self.scenes)))
+            sw.set_on_key(self._on_key(len(self.scenes)))
             self.window.add_child(sw)
             self.scenes.append(sw)
         self.controls = [self._material_controls(), self._iteration_controls(), self._animation_controls()]
@@ -210,6 +222,14 @@ class Viewer:
         self.link_box = gui.Checkbox("link cameras")
         row.add_child(self.link_box)
         v.add_child(row)
+        row = gui.Horiz(0.5 * em)
+        b = gui.Button("reset view")
+        b.set_on_clicked(lambda: self.reset_view())
+        row.add_child(b)
+        row.add_child(gui.Label("view"))
+        self.preset_box = _combobox(PRESETS, self.set_preset)
+        row.add_child(self.preset_box)
+        v.add_child(row)
         self.frame_label = gui.Label("")
         v.add_child(self.frame_label)
         return v
@@ -308,21 +328,70 @@ class Viewer:
         f = self.scenes[i].frame
         return f.width / max(f.height, 1) if f.width > 0 else 1.0
 
+    def subject_box(self, i: int) -> tuple[np.ndarray, np.ndarray]:
+        """The box panel ``i`` keeps in view: the object, the fracture surface over all iterations,
+        or the pieces over all frames."""
+        if i == 1 and self.run.has_iterations:
+            P = np.concatenate([it["positions"] for it in self.run.iterations])
+            return P.min(axis=0).astype(np.float64), P.max(axis=0).astype(np.float64)
+        if i == 2 and self.run.has_animation:
+            return animation_box(self.run)
+        return scene_box(self.run)
+
     def _pose(self, i: int) -> CameraPose:
         if self.poses[i] is None:
             a = self._aspect(i)
             if i == 0:
-                self.poses[i] = slice_pose(self.run, self.view, a)
+                pose = slice_pose(self.run, self.view, a)
             elif i == 1 and self.run.has_iterations:
-                self.poses[i] = iteration_pose(self.run, a)
+                pose = iteration_pose(self.run, a)
             elif i == 2 and self.run.has_animation:
-                self.poses[i] = frame_box(*animation_box(self.run), a)
+                pose = animation_pose(self.run, a)
             else:
-                self.poses[i] = frame_box(*scene_box(self.run), a)
-            f = self.scenes[i].frame
-            self._fitted[i] = f.width > 0
-            apply_camera(self.scenes[i].scene.camera, self.poses[i], max(f.width, 1), max(f.height, 1))
+                pose = frame_box(*scene_box(self.run), a)
+            self.poses[i] = pose
+            self._fitted[i] = self.scenes[i].frame.width > 0
+            self._place(i, pose)
         return self.poses[i]
+
+    def _place(self, i: int, pose: CameraPose) -> None:
+        """Put panel ``i``'s camera at ``pose``, with the widget's rotation centre at the pose's
+        centre and its clipping planes from the panel's subject, so that dragging turns the
+        subject about its middle."""
+        sw = self.scenes[i]
+        lo, hi = self.subject_box(i)
+        lo, hi = np.minimum(lo, pose.center), np.maximum(hi, pose.center)
+        sw.setup_camera(pose.fov, o3d.geometry.AxisAlignedBoundingBox(lo, hi), pose.center.astype(np.float32))
+        sw.look_at(pose.center.astype(np.float32), pose.eye.astype(np.float32), pose.up.astype(np.float32))
+
+    def reset_view(self, i: int | None = None) -> None:
+        """Panel ``i``'s camera (every panel's by default) back to its fitted view."""
+        for j in range(len(self.scenes)) if i is None else (i,):
+            self.poses[j] = None
+            self._pose(j)
+            self.scenes[j].force_redraw()
+
+    def current_pose(self, i: int) -> CameraPose:
+        """Panel ``i``'s camera as the user left it; the centre is on the view axis at the fitted distance."""
+        cam = self.scenes[i].scene.camera
+        M = np.asarray(cam.get_model_matrix(), np.float64)
+        eye, forward, up = M[:3, 3], -M[:3, 2], M[:3, 1]
+        pose = self._pose(i)
+        dist = float(np.linalg.norm(pose.eye - pose.center))
+        return CameraPose(eye + dist * forward, eye, up, float(cam.get_field_of_view()))
+
+    def _follow(self, src: int) -> None:
+        """Linked cameras: every other panel looks from the same direction, with the same up,
+        at its own subject from its own fitted distance (the subjects differ in size and place)."""
+        cur = self.current_pose(src)
+        forward = (cur.center - cur.eye) / max(np.linalg.norm(cur.center - cur.eye), 1e-12)
+        for j in range(len(self.scenes)):
+            if j != src:
+                pose = self._pose(j)
+                dist = float(np.linalg.norm(pose.eye - pose.center))
+                self.scenes[j].look_at(pose.center.astype(np.float32),
+                                       (pose.center - dist * forward).astype(np.float32), cur.up.astype(np.float32))
+                self.scenes[j].force_redraw()
 
     @property
     def cfg(self) -> dict:
@@ -429,14 +498,51 @@ class Viewer:
             return gui.Widget.EventCallbackResult.IGNORED
         return handler
 
+    def _on_key(self, i: int):
+        """Hotkeys over a panel: space play/pause, arrows step, R reset the view, S screenshot."""
+        def handler(event):
+            if event.type != gui.KeyEvent.Type.DOWN:
+                return gui.Widget.EventCallbackResult.IGNORED
+            which = "animation" if i == 2 else "iterations"
+            if event.key == gui.KeyName.SPACE:
+                self.toggle_play(which)
+            elif event.key in (gui.KeyName.LEFT, gui.KeyName.RIGHT):
+                step = 1 if event.key == gui.KeyName.RIGHT else -1
+                if which == "animation":
+                    self.set_frame(self.view.frame + step)
+                else:
+                    self.set_iteration(self.view.iteration + step)
+            elif event.key == gui.KeyName.R:
+                self.reset_view(None if self.link_box.checked else i)
+            elif event.key == gui.KeyName.S:
+                self.screenshot(self.shot_box.selected_text)
+            else:
+                return gui.Widget.EventCallbackResult.IGNORED
+            return gui.Widget.EventCallbackResult.CONSUMED
+        return handler
+
+    def set_preset(self, name: str) -> None:
+        """Every panel seen from the front, the side, the top or in three-quarter view (``PRESETS``),
+        with the run's up axis up, each at its own fitted distance."""
+        up = "xyz".index(self.run.up_axis)
+        a, b = [k for k in range(3) if k != up]
+        E = np.eye(3)
+        direction, screen_up = {
+            "front": (-E[a], E[up]), "side": (E[b], E[up]), "top": (E[up], E[b]),
+            "iso": (E[b] - E[a] + 0.8 * E[up], E[up]),
+        }[name]
+        direction = direction / np.linalg.norm(direction)
+        for j in range(len(self.scenes)):
+            pose = self._pose(j)
+            dist = float(np.linalg.norm(pose.eye - pose.center))
+            self.scenes[j].look_at(pose.center.astype(np.float32), (pose.center + dist * direction).astype(np.float32),
+                                   screen_up.astype(np.float32))
+            self.scenes[j].force_redraw()
+
     def _tick(self) -> bool:
         redraw = False
         if self._sync_from is not None:  # linked cameras follow the one the user moved
-            src = self.scenes[self._sync_from].scene.camera
-            for j, sw in enumerate(self.scenes):
-                if j != self._sync_from:
-                    sw.scene.camera.copy_from(src)
-                    sw.force_redraw()
+            self._follow(self._sync_from)
             self._sync_from = None
             redraw = True
         now = time.monotonic()
@@ -576,24 +682,23 @@ class Viewer:
         return w, h
 
     def panel_image(self, i: int, width: int, height: int) -> np.ndarray:
-        """Panel ``i`` rendered at ``width x height`` from its current camera (the window is unchanged)."""
+        """Panel ``i`` rendered at ``width x height`` from its current camera; the panel's camera
+        is put back exactly as it was (the window is unchanged)."""
         sw = self.scenes[i]
         cam = sw.scene.camera
-        M = np.asarray(cam.get_model_matrix())
-        eye, forward, up = M[:3, 3], -M[:3, 2], M[:3, 1]
-        pose = self._pose(i)
-        dist = float(np.linalg.norm(pose.eye - pose.center))
-        current = CameraPose(eye + dist * forward, eye, up, cam.get_field_of_view())
+        current = self.current_pose(i)
+        near, far = cam.get_near(), cam.get_far()
         # keep all that the panel shows: a narrower picture gets a taller field of view
         f = sw.frame
         panel_aspect, aspect = f.width / max(f.height, 1), width / height
         half = np.arctan(np.tan(np.radians(current.fov) / 2) * panel_aspect / aspect)
-        wide = replace(current, fov=max(current.fov, float(np.degrees(2 * half))))
-        apply_camera(cam, wide, width, height)
+        fov = max(current.fov, float(np.degrees(2 * half)))
+        cam.set_projection(fov, aspect, near, far, rendering.Camera.FovType.Vertical)
         try:
             img = np.asarray(self.app.render_to_image(sw.scene, width, height))[..., :3].copy()
         finally:
-            apply_camera(cam, current, max(f.width, 1), max(f.height, 1))
+            cam.set_projection(current.fov, panel_aspect, near, far, rendering.Camera.FovType.Vertical)
+            sw.force_redraw()
         if i == 0:
             img = annotate.with_colorbar(img, FIELD_CMAPS[self.view.field], self.run.field_range(self.view.field, self.view.level),
                                          slice_title(self.view))
@@ -613,7 +718,8 @@ class Viewer:
                 img = np.concatenate([self.panel_image(i, pw, h) for i in range(3)], axis=1)
             else:
                 img = self.panel_image(PANELS.index(which), w, h)
-            path = Path(path) if path else self.run.dir / "renders" / f"screenshot_{which.replace(' ', '_')}.png"
+            stem = f"screenshot_{which.replace(' ', '_')}"
+            path = Path(path) if path else numbered(self.run.dir / "renders", stem, ".png")
             path.parent.mkdir(parents=True, exist_ok=True)
             atomic_write_bytes(path, png_bytes(img))
         except (InputError, OSError, ValueError) as exc:
@@ -629,7 +735,7 @@ class Viewer:
             fps = int(self.export_fps.int_value)
             if what == "iterations" and not self.run.has_iterations or what == "animation" and not self.run.has_animation:
                 raise InputError(f"this run has no {what} to export")
-            path = Path(path) if path else self.run.dir / "renders" / f"window_{what}.mp4"
+            path = Path(path) if path else numbered(self.run.dir / "renders", f"window_{what}", ".mp4")
             path.parent.mkdir(parents=True, exist_ok=True)
             video = Video(path, w, h, fps)
         except (InputError, OSError) as exc:

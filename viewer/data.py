@@ -69,6 +69,11 @@ class RunData:
         return yaml.safe_load(self._require("config.yaml", "the config").read_text(encoding="utf-8"))
 
     @property
+    def up_axis(self) -> str:
+        """The axis gravity pulls against (``stats.coarse.up_axis``; z for runs that do not say)."""
+        return str(self.manifest.get("stats", {}).get("coarse", {}).get("up_axis", "z"))
+
+    @property
     def name(self) -> str:
         return str(self.manifest.get("name", self.dir.name))
 

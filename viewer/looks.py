@@ -65,13 +65,22 @@ class View:
 # -- geometry ---------------------------------------------------------------------------------
 
 
+def linear(rgb) -> np.ndarray:
+    """sRGB colours (as colour maps and colour bars give them) in linear light, which is what
+    Filament takes for vertex and base colours: it encodes its output to sRGB, so a colour
+    given as is would be encoded twice and come out pale."""
+    c = np.asarray(rgb, np.float64)
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+
 def triangle_mesh(V: np.ndarray, F: np.ndarray, colors: np.ndarray | None = None,
                   flat: bool = False) -> o3d.geometry.TriangleMesh:
     """An Open3D mesh; ``flat`` shades each triangle with its own normal (sharp creases, e.g. a box's edges)."""
     m = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(np.asarray(V, np.float64)),
                                   o3d.utility.Vector3iVector(np.asarray(F, np.int32)))
-    if colors is not None:
-        m.vertex_colors = o3d.utility.Vector3dVector(np.asarray(colors, np.float64))
+    if colors is not None:  # sRGB in, linear to the renderer
+        m.vertex_colors = o3d.utility.Vector3dVector(linear(colors))
     if flat:  # Open3D draws a mesh without vertex normals with its triangle normals
         m.compute_triangle_normals()
     else:
@@ -85,11 +94,27 @@ def wireframe(V: np.ndarray, E: np.ndarray) -> o3d.geometry.LineSet:
                                 o3d.utility.Vector2iVector(E.astype(np.int32)))
 
 
-def slice_plane(run: RunData, view: View) -> tuple[o3d.geometry.TriangleMesh, tuple[float, float]]:
-    """The field slice as a flat coloured mesh in material space, and its value range."""
+# The slice is drawn as a mesh with a colour per vertex; the renderer blends vertex colours in
+# linear light, not along the colour map, so the grid's cells are subdivided (bilinear values)
+# until a cell is a few pixels, up to this many vertices.
+SLICE_VERTICES = 250_000
+
+
+def slice_plane(run: RunData, view: View, mask: bool = True) -> tuple[o3d.geometry.TriangleMesh, tuple[float, float]]:
+    """The field slice as a flat coloured mesh in material space, and its value range.
+
+    The grid's values are interpolated bilinearly onto a finer lattice (the colours follow the
+    colour map within a cell); with ``mask``, only the triangles inside the object are kept
+    (libigl's fast winding number of B at their centres).
+    """
+    from scipy.ndimage import zoom
+
     values = run.field(view.field, view.level)
     plane, info = axis_slice(run.grid, values, view.axis, view.offset)
     vmin, vmax = run.field_range(view.field, view.level)
+    factor = int(np.clip(np.sqrt(SLICE_VERTICES / plane.size), 1, 8))
+    if factor > 1:
+        plane = zoom(plane.astype(np.float64), factor, order=1, grid_mode=False)
     nu, nv = plane.shape
     u = np.linspace(*info["extent"][0], nu)
     v = np.linspace(*info["extent"][1], nv)
@@ -99,9 +124,14 @@ def slice_plane(run: RunData, view: View) -> tuple[o3d.geometry.TriangleMesh, tu
     idx = np.arange(nu * nv).reshape(nu, nv)
     a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
     F = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+    if mask:
+        import igl
+
+        B = run.exterior
+        inside = igl.fast_winding_number(np.asarray(B.V, np.float64), np.asarray(B.F, np.int64),
+                                         P[F].mean(axis=1)) > 0.5
+        F = F[inside] if inside.any() else F
     return triangle_mesh(P, F, colormap(plane.ravel(), FIELD_CMAPS[view.field], vmin, vmax)), (vmin, vmax)
-
-
 
 
 # -- materials ----------------------------------------------------------------------------------
@@ -110,7 +140,7 @@ def slice_plane(run: RunData, view: View) -> tuple[o3d.geometry.TriangleMesh, tu
 def lit(color=(0.8, 0.8, 0.8, 1.0)) -> rendering.MaterialRecord:
     m = rendering.MaterialRecord()
     m.shader = "defaultLit"
-    m.base_color = list(color)
+    m.base_color = [*linear(color[:3]), color[3]]
     m.base_roughness = 0.7
     return m
 
@@ -124,7 +154,7 @@ def unlit() -> rendering.MaterialRecord:
 def glass(alpha: float = 0.18) -> rendering.MaterialRecord:
     m = rendering.MaterialRecord()
     m.shader = "defaultLitTransparency"
-    m.base_color = [0.55, 0.6, 0.7, alpha]
+    m.base_color = [*linear([0.55, 0.6, 0.7]), alpha]
     m.base_roughness = 0.5
     return m
 
@@ -132,7 +162,7 @@ def glass(alpha: float = 0.18) -> rendering.MaterialRecord:
 def lines(color=(0.1, 0.1, 0.1, 1.0), width: float = 1.5) -> rendering.MaterialRecord:
     m = rendering.MaterialRecord()
     m.shader = "unlitLine"
-    m.base_color = list(color)
+    m.base_color = [*linear(color[:3]), color[3]]
     m.line_width = width
     return m
 
@@ -206,12 +236,13 @@ def iteration_caption(run: RunData, k: int) -> str:
 
 def set_frame(scene: rendering.Open3DScene, run: RunData, view: View) -> None:
     """Panel 3 (after :func:`prepare`): the high-resolution pieces at frame ``view.frame``, replacing the
-    previous frame's, and the coarse pieces as wireframes while ``view.overlay_coarse`` is on."""
+    previous frame's, and the coarse pieces see-through while ``view.overlay_coarse`` is on."""
     for c, p in enumerate(run.pieces_at(view.frame)):
         _replace(scene, f"piece_{c}", triangle_mesh(p.V, p.F, flat=True), lit((*piece_color(c), 1.0)))
+    # the coarse pieces see-through over the detailed ones (their edges would hide them: B is fine)
     coarse = run.coarse_pieces(view.frame) if view.overlay_coarse else []
-    for c, (p, (_, _, E)) in enumerate(zip(coarse, run.coarse_parts)):  # edges found once per run
-        _replace(scene, f"coarse_{c}", wireframe(p.V, E), lines((0.15, 0.15, 0.15, 1.0), 1.0))
+    for c, p in enumerate(coarse):
+        _replace(scene, f"coarse_{c}", triangle_mesh(p.V, p.F, flat=True), glass(0.25))
     for c in range(len(coarse), len(run.coarse_parts)):
         if scene.has_geometry(f"coarse_{c}"):
             scene.remove_geometry(f"coarse_{c}")
@@ -328,6 +359,16 @@ def animation_box(run: RunData) -> tuple[np.ndarray, np.ndarray]:
             P = run.coarse_animation.trajectories(c, V[used])
             lo, hi = np.minimum(lo, P.min(axis=(0, 1))), np.maximum(hi, P.max(axis=(0, 1)))
     return lo, hi
+
+
+def animation_pose(run: RunData, aspect: float) -> CameraPose:
+    """Panel 3's camera: from the side, level with the ground (the run's up axis is the screen's
+    up, so the drop is seen), facing the wider side of the box the pieces move in."""
+    lo, hi = animation_box(run)
+    up = "xyz".index(run.up_axis)
+    flat = [a for a in range(3) if a != up]
+    look = flat[int(np.argmin((hi - lo)[flat]))]
+    return frame_box(lo, hi, aspect, look=np.eye(3)[look], up=np.eye(3)[up])
 
 
 def apply_camera(camera: rendering.Camera, pose: CameraPose, width: int, height: int) -> None:

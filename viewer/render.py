@@ -32,7 +32,7 @@ from viewer import annotate  # noqa: E402
 from viewer.data import RunData  # noqa: E402
 from viewer.media import Video, check_size  # noqa: E402
 from viewer.looks import (  # noqa: E402
-    FIELD_CMAPS, SURFACE_CMAPS, View, animation_box, apply_camera, frame_box, iteration_caption, iteration_pose,
+    FIELD_CMAPS, SURFACE_CMAPS, View, animation_pose, apply_camera, iteration_caption, iteration_pose,
     prepare, set_frame, set_slice, set_surface, show_context, show_material, slice_pose, slice_title,
 )
 
@@ -140,7 +140,7 @@ def _render_one(run: RunData, what: str, view: View, renderer: Renderer, out: Pa
                                width, height, fps, len(run.iterations), quiet)
     if not run.has_animation:
         raise InputError(f"{run.dir}: no animation to render (the run stopped before the animate stage)")
-    pose = frame_box(*animation_box(run), width / height)
+    pose = animation_pose(run, width / height)
     n = run.n_frames
     prepare(renderer.scene)
 
