@@ -40,7 +40,7 @@ from viewer.data import FIELDS, RunData, Surface
 from viewer.looks import (
     COLOR_BY, FIELD_CMAPS, SURFACE_CMAPS, CameraPose, View, animation_box, animation_pose,
     frame_box,
-    iteration_caption, iteration_pose, prepare, scene_box, set_frame, set_slice, set_surface, show_context,
+    iteration_box, iteration_caption, iteration_pose, prepare, scene_box, set_frame, set_slice, set_surface, show_context,
     show_material, slice_pose, slice_title,
 )
 from viewer.media import Video, check_size
@@ -332,8 +332,7 @@ class Viewer:
         """The box panel ``i`` keeps in view: the object, the fracture surface over all iterations,
         or the pieces over all frames."""
         if i == 1 and self.run.has_iterations:
-            P = np.concatenate([it["positions"] for it in self.run.iterations])
-            return P.min(axis=0).astype(np.float64), P.max(axis=0).astype(np.float64)
+            return iteration_box(self.run)
         if i == 2 and self.run.has_animation:
             return animation_box(self.run)
         return scene_box(self.run)
@@ -371,27 +370,32 @@ class Viewer:
             self._pose(j)
             self.scenes[j].force_redraw()
 
+    def _fitted_distance(self, i: int) -> float:
+        pose = self._pose(i)
+        return float(np.linalg.norm(pose.eye - pose.center))
+
     def current_pose(self, i: int) -> CameraPose:
         """Panel ``i``'s camera as the user left it; the centre is on the view axis at the fitted distance."""
         cam = self.scenes[i].scene.camera
         M = np.asarray(cam.get_model_matrix(), np.float64)
         eye, forward, up = M[:3, 3], -M[:3, 2], M[:3, 1]
-        pose = self._pose(i)
-        dist = float(np.linalg.norm(pose.eye - pose.center))
-        return CameraPose(eye + dist * forward, eye, up, float(cam.get_field_of_view()))
+        return CameraPose(eye + self._fitted_distance(i) * forward, eye, up, float(cam.get_field_of_view()))
+
+    def _look_along(self, j: int, forward: np.ndarray, up: np.ndarray) -> None:
+        """Panel ``j`` looking along ``forward`` at its own subject, from its fitted distance."""
+        center = self._pose(j).center
+        forward = forward / max(np.linalg.norm(forward), 1e-12)
+        eye = center - self._fitted_distance(j) * forward
+        self.scenes[j].look_at(center.astype(np.float32), eye.astype(np.float32), np.asarray(up, np.float32))
+        self.scenes[j].force_redraw()
 
     def _follow(self, src: int) -> None:
         """Linked cameras: every other panel looks from the same direction, with the same up,
         at its own subject from its own fitted distance (the subjects differ in size and place)."""
         cur = self.current_pose(src)
-        forward = (cur.center - cur.eye) / max(np.linalg.norm(cur.center - cur.eye), 1e-12)
         for j in range(len(self.scenes)):
             if j != src:
-                pose = self._pose(j)
-                dist = float(np.linalg.norm(pose.eye - pose.center))
-                self.scenes[j].look_at(pose.center.astype(np.float32),
-                                       (pose.center - dist * forward).astype(np.float32), cur.up.astype(np.float32))
-                self.scenes[j].force_redraw()
+                self._look_along(j, cur.center - cur.eye, cur.up)
 
     @property
     def cfg(self) -> dict:
@@ -531,13 +535,8 @@ class Viewer:
             "front": (-E[a], E[up]), "side": (E[b], E[up]), "top": (E[up], E[b]),
             "iso": (E[b] - E[a] + 0.8 * E[up], E[up]),
         }[name]
-        direction = direction / np.linalg.norm(direction)
         for j in range(len(self.scenes)):
-            pose = self._pose(j)
-            dist = float(np.linalg.norm(pose.eye - pose.center))
-            self.scenes[j].look_at(pose.center.astype(np.float32), (pose.center + dist * direction).astype(np.float32),
-                                   screen_up.astype(np.float32))
-            self.scenes[j].force_redraw()
+            self._look_along(j, -direction, screen_up)
 
     def _tick(self) -> bool:
         redraw = False

@@ -17,7 +17,6 @@ import numpy as np
 
 from fields.grid import Grid
 from fracture.errors import InputError
-from fracture.topology import unique_edges
 
 FIELDS = ("psi", "zeta", "xi")
 
@@ -136,6 +135,13 @@ class RunData:
         return Surface(V, F, {"component": fd.get("component", np.zeros(len(F), np.int64))})
 
     @cached_property
+    def solid(self):
+        """B with its winding-number hierarchy, built on the first inside test (the slice's mask)."""
+        from fracture.exterior import Exterior
+
+        return Exterior(self.exterior.V, self.exterior.F)
+
+    @cached_property
     def coarse_fracture(self) -> Surface:
         from fracture.plyio import read_ply
 
@@ -160,20 +166,19 @@ class RunData:
                                nodes=np.load(self._require("coarse/animation_nodes.npy", "the coarse animation")))
 
     @cached_property
-    def coarse_parts(self) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
-        """Per component: the coarse exterior's vertex ids on it, its triangles and its edges over them."""
+    def coarse_parts(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Per component: the coarse exterior's vertex ids on it and its triangles over them."""
         ext = self.exterior
         out = []
         for c in range(self.coarse_animation.n_components):
             used, local = np.unique(ext.F[ext.scalars["component"] == c], return_inverse=True)
-            F = local.reshape(-1, 3)
-            out.append((used, F, unique_edges(F)[0]))
+            out.append((used, local.reshape(-1, 3)))
         return out
 
     def coarse_pieces(self, t: int) -> list[Surface]:
         """The coarse exterior's triangles of each component, moved to frame ``t``."""
         V, anim = self.exterior.V, self.coarse_animation
-        return [Surface(anim.deform(c, t, V[used]), F) for c, (used, F, _) in enumerate(self.coarse_parts)]
+        return [Surface(anim.deform(c, t, V[used]), F) for c, (used, F) in enumerate(self.coarse_parts)]
 
     # -- iterations -------------------------------------------------------------------------
 

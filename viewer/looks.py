@@ -73,7 +73,6 @@ def linear(rgb) -> np.ndarray:
     return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
 
 
-
 def triangle_mesh(V: np.ndarray, F: np.ndarray, colors: np.ndarray | None = None,
                   flat: bool = False) -> o3d.geometry.TriangleMesh:
     """An Open3D mesh; ``flat`` shades each triangle with its own normal (sharp creases, e.g. a box's edges)."""
@@ -105,32 +104,36 @@ def slice_plane(run: RunData, view: View, mask: bool = True) -> tuple[o3d.geomet
 
     The grid's values are interpolated bilinearly onto a finer lattice (the colours follow the
     colour map within a cell); with ``mask``, only the triangles inside the object are kept
-    (libigl's fast winding number of B at their centres).
+    (B's winding number at the slice's grid nodes, interpolated the same way).
     """
     from scipy.ndimage import zoom
 
     values = run.field(view.field, view.level)
     plane, info = axis_slice(run.grid, values, view.axis, view.offset)
     vmin, vmax = run.field_range(view.field, view.level)
+    n0 = plane.shape
+    u = np.linspace(*info["extent"][0], n0[0])
+    v = np.linspace(*info["extent"][1], n0[1])
+
+    def lattice(u, v):
+        U, W = np.meshgrid(u, v, indexing="ij")
+        P = np.zeros((U.size, 3))
+        P[:, info["u"]], P[:, info["v"]], P[:, info["axis"]] = U.ravel(), W.ravel(), info["position"]
+        return P
+
+    inside = run.solid.inside(lattice(u, v)).reshape(n0).astype(np.float64) if mask else None
     factor = int(np.clip(np.sqrt(SLICE_VERTICES / plane.size), 1, 8))
     if factor > 1:
         plane = zoom(plane.astype(np.float64), factor, order=1, grid_mode=False)
+        inside = zoom(inside, factor, order=1, grid_mode=False) if mask else None
     nu, nv = plane.shape
-    u = np.linspace(*info["extent"][0], nu)
-    v = np.linspace(*info["extent"][1], nv)
-    U, W = np.meshgrid(u, v, indexing="ij")
-    P = np.zeros((nu * nv, 3))
-    P[:, info["u"]], P[:, info["v"]], P[:, info["axis"]] = U.ravel(), W.ravel(), info["position"]
+    P = lattice(np.linspace(*info["extent"][0], nu), np.linspace(*info["extent"][1], nv))
     idx = np.arange(nu * nv).reshape(nu, nv)
     a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
     F = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
     if mask:
-        import igl
-
-        B = run.exterior
-        inside = igl.fast_winding_number(np.asarray(B.V, np.float64), np.asarray(B.F, np.int64),
-                                         P[F].mean(axis=1)) > 0.5
-        F = F[inside] if inside.any() else F
+        keep = inside.ravel()[F].mean(axis=1) >= 0.5
+        F = F[keep] if keep.any() else F
     return triangle_mesh(P, F, colormap(plane.ravel(), FIELD_CMAPS[view.field], vmin, vmax)), (vmin, vmax)
 
 
@@ -335,14 +338,17 @@ def slice_pose(run: RunData, view: View, aspect: float) -> CameraPose:
 
 def iteration_pose(run: RunData, aspect: float) -> CameraPose:
     """Panel 2's camera: facing the fracture surface (its dominant normal), fitted to it over all iterations."""
-    its = run.iterations
-    P = np.concatenate([it["positions"] for it in its]).astype(np.float64)
-    last = its[-1]
+    last = run.iterations[-1]
     look = dominant_normal(last["positions"].astype(np.float64), last["faces"])
     lo, hi = scene_box(run)
     up_axis = np.eye(3)[int(np.argsort(hi - lo)[1])]
-    lo_s, hi_s = P.min(axis=0), P.max(axis=0)
-    return frame_points(box_corners(lo_s, hi_s), aspect, look, up_axis, margin=1.25)
+    return frame_points(box_corners(*iteration_box(run)), aspect, look, up_axis, margin=1.25)
+
+
+def iteration_box(run: RunData) -> tuple[np.ndarray, np.ndarray]:
+    """The box holding the fracture surface at every iteration."""
+    P = np.concatenate([it["positions"] for it in run.iterations]).astype(np.float64)
+    return P.min(axis=0), P.max(axis=0)
 
 
 def scene_box(run: RunData) -> tuple[np.ndarray, np.ndarray]:
@@ -354,7 +360,7 @@ def animation_box(run: RunData) -> tuple[np.ndarray, np.ndarray]:
     """The box holding every piece in every frame (the camera does not chase the pieces)."""
     V = run.exterior.V
     lo, hi = scene_box(run)
-    for c, (used, _, _) in enumerate(run.coarse_parts):
+    for c, (used, _) in enumerate(run.coarse_parts):
         if len(used):
             P = run.coarse_animation.trajectories(c, V[used])
             lo, hi = np.minimum(lo, P.min(axis=(0, 1))), np.maximum(hi, P.max(axis=(0, 1)))
