@@ -45,20 +45,36 @@ def _parser() -> argparse.ArgumentParser:
     v.add_argument("--out", type=Path, help="run directory for a config (default: runs/<name>)")
     v.add_argument("--width", type=int, default=1800)
     v.add_argument("--height", type=int, default=900)
+    v.add_argument("--camera", type=Path, metavar="FILE",
+                   help="start with the panels and cameras of a view file (Save view) or a saved config")
 
-    d = sub.add_parser("render", help="render PNGs and an MP4 of a run with no window")
+    d = sub.add_parser("render", help="render figures (PNG) and videos (MP4) of a run with no window")
     d.add_argument("run_dir", type=Path, metavar="RUN_DIR")
-    d.add_argument("--what", action="append", choices=["slices", "iterations", "animation"],
-                   help="what to render (repeatable; default: all three)")
+    d.add_argument("--what", action="append", choices=["slices", "iterations", "animation", "compare", "turntable"],
+                   help="what to render (repeatable; default: slices, iterations, animation)")
     d.add_argument("--out", type=Path, help="output directory (default: RUN_DIR/renders)")
-    d.add_argument("--width", type=int, default=1280)
+    d.add_argument("--width", type=int, default=1280, help="figure width in pixels (compare: both halves)")
     d.add_argument("--height", type=int, default=720)
-    d.add_argument("--fps", type=int, default=10)
-    d.add_argument("--field", default="psi", help="slices: psi, zeta or xi")
-    d.add_argument("--axis", default="z", help="slices: normal axis x, y or z")
-    d.add_argument("--level", type=int, default=0, help="slices: psi's pyramid level (0 = finest)")
-    d.add_argument("--color-by", default="psi", help="iterations: psi or speed")
-    d.add_argument("--overlay-coarse", action="store_true", help="animation: draw the coarse pieces too")
+    d.add_argument("--supersample", type=int, default=1, metavar="K",
+                   help="render K times larger and average down (1..4; smoother edges)")
+    d.add_argument("--transparent", action="store_true", help="PNGs with a transparent background")
+    d.add_argument("--camera", type=Path, metavar="FILE",
+                   help="the panels' settings and cameras of a view file (Save view) or a saved config "
+                        "(default: the run's config)")
+    d.add_argument("--fps", type=int, default=24, help="video frames per second")
+    d.add_argument("--image-seconds", type=float, metavar="S",
+                   help="how long each image is shown in a video (default: slices 0.4, iterations 0.25, "
+                        "animation its own frame rate)")
+    d.add_argument("--hold", type=float, default=1.0, metavar="S", help="the last image held S seconds more")
+    d.add_argument("--turntable-seconds", type=float, default=6.0, metavar="S", help="length of one turn")
+    d.add_argument("--field", help="slices: psi, zeta or xi")
+    d.add_argument("--axis", help="slices: normal axis x, y or z")
+    d.add_argument("--level", type=int, help="slices: psi's pyramid level (0 = finest)")
+    d.add_argument("--cutaway", action="store_true", default=None, help="slices: the pieces below the slice")
+    d.add_argument("--color-by", help="iterations: psi or speed")
+    d.add_argument("--frame", type=int, help="compare, turntable: the frame (1 = the first; default: the last)")
+    d.add_argument("--overlay-coarse", action="store_true", default=None,
+                   help="animation: draw the coarse pieces too")
     d.add_argument("--quiet", action="store_true", help="no progress bars")
     return p
 
@@ -120,23 +136,47 @@ def _main(argv: list[str] | None) -> int:
         return 130
 
 
-def _render(args) -> int:
-    from viewer.looks import View
-    from viewer.render import WHAT, render
+def _start_view(run_dir: Path, camera: Path | None):
+    """The view a render or the window starts from: the run's config ``view:`` section, or ``camera``'s."""
+    from viewer.data import RunData
+    from viewer.state import from_section, read_view_file
 
-    view = View(field=args.field, axis=args.axis, level=args.level, color_by=args.color_by,
-                overlay_coarse=args.overlay_coarse)
-    done = render(args.run_dir, tuple(args.what or WHAT), args.out, args.width, args.height, args.fps, view,
-                  args.quiet)
+    if camera is not None:
+        return read_view_file(camera)
+    run = RunData(run_dir)
+    return from_section(run.config.get("view"), str(run.dir / "config.yaml"))
+
+
+def _render(args) -> int:
+    from dataclasses import replace
+
+    from viewer.data import RunData
+    from viewer.render import DEFAULT_WHAT, Timing, render
+
+    state = _start_view(args.run_dir, args.camera)
+    flags = {"field": args.field, "axis": args.axis, "level": args.level, "cutaway": args.cutaway,
+             "color_by": args.color_by, "overlay_coarse": args.overlay_coarse}
+    view = replace(state.view, **{k: v for k, v in flags.items() if v is not None})
+    whats = tuple(args.what or DEFAULT_WHAT)
+    if args.frame is not None:
+        view = replace(view, frame=args.frame - 1)
+    elif {"compare", "turntable"} & set(whats) and args.camera is None:
+        view = replace(view, frame=RunData(args.run_dir).n_frames - 1)  # the pieces apart
+    timing = Timing(args.fps, args.image_seconds, args.hold)
+    done = render(args.run_dir, whats, args.out, args.width, args.height, timing, view, args.quiet,
+                  args.supersample, args.transparent, args.turntable_seconds, state.cameras)
     for what, files in done.items():
-        print(f"{what}: {len(files) - 1} images and {files[-1]}")
+        pngs = [f for f in files if f.suffix == ".png"]
+        videos = [f for f in files if f.suffix == ".mp4"]
+        print(f"{what}: " + ", ".join(([f"{len(pngs)} images"] if pngs else []) + [str(v) for v in videos]
+                                     + ([str(pngs[0])] if len(pngs) == 1 else [])))
     return 0
 
 
 def _view(args) -> int:
     from viewer.app import main as view_main
 
-    return view_main(args.target, args.out, args.width, args.height)
+    return view_main(args.target, args.out, args.width, args.height, args.camera)
 
 
 if __name__ == "__main__":

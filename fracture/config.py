@@ -120,6 +120,23 @@ SCHEMA: dict[str, Any] = {
                                doc="random points at which the pieces' winding numbers are checked (their volumes, "
                                    "no overlap); every run checks its pieces"),
     },
+    "view": {  # what `fracref view` and `fracref render` show first; nothing the pipeline reads
+        "field": Param("psi", "str", choices=("psi", "zeta", "xi"), doc="material panel: the field sliced"),
+        "axis": Param("z", "str", choices=("x", "y", "z"), doc="material panel: the slice's normal axis"),
+        "offset": Param(0.5, lo=0.0, hi=1.0, doc="material panel: the slice's relative position"),
+        "level": Param(0, "int", lo=0, hi=64, doc="material panel: psi's pyramid level (0 = finest)"),
+        "cutaway": Param(False, "bool", doc="material panel: the pieces below the slice"),
+        "iteration": Param(-1, "int", lo=-1, hi=10**6, doc="iterations panel: the iteration shown (-1: the last)"),
+        "color_by": Param("psi", "str", choices=("psi", "speed"), doc="iterations panel: the surface's colours"),
+        "frame": Param(1, "int", lo=1, hi=10**6, doc="animation panel: the frame shown (1 = the first)"),
+        "overlay_coarse": Param(False, "bool", doc="animation panel: the coarse pieces see-through"),
+        "cameras": {panel: {
+            "eye": Param(None, "vec3", nullable=True, doc=f"{panel} panel: the camera's position; null: fitted"),
+            "center": Param(None, "vec3", nullable=True, doc=f"{panel} panel: the point looked at"),
+            "up": Param(None, "vec3", nullable=True, doc=f"{panel} panel: the screen's up"),
+            "fov": Param(35.0, lo=1.0, hi=150.0, doc=f"{panel} panel: vertical field of view in degrees"),
+        } for panel in ("material", "iterations", "animation")},
+    },
     "preview": {
         "axis": Param(None, "str", choices=("x", "y", "z"), nullable=True,
                       doc="normal of the preview slices; null: the axis with the fewest nodes"),

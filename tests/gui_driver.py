@@ -161,6 +161,7 @@ def main() -> None:
         v.set_field("zeta")
         result["zeta"] = shot(0, "zeta")
         v.export_w.int_value, v.export_h.int_value, v.export_fps.int_value = 640, 360, 5
+        v.export_seconds.double_value, v.export_hold.double_value = 0.4, 0.6  # 2 video frames each, 3 more at the end
         result["screenshot"] = str(v.screenshot("all panels", out / "window_all.png"))
         v.export_video("animation", out / "window_animation.mp4")
         while v._job is not None:

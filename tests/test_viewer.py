@@ -59,7 +59,8 @@ def _cli(args, timeout=300):
 
 def test_headless_renders_are_figures_and_videos(run_dir, tmp_path):
     r = _cli(["render", str(run_dir), "--what", "iterations", "--what", "animation", "--out", str(tmp_path),
-              "--width", "320", "--height", "240", "--fps", "4", "--quiet"])
+              "--width", "320", "--height", "240", "--fps", "4", "--image-seconds", "0.5", "--hold", "1.5",
+              "--quiet"])
     assert r.returncode == 0, r.stderr[-2000:]
     its = sorted(tmp_path.glob("iterations_psi_*.png"))
     iterations = json.loads((run_dir / "manifest.json").read_text())["counts"]["iterations"]
@@ -68,10 +69,11 @@ def test_headless_renders_are_figures_and_videos(run_dir, tmp_path):
     assert first.shape == (240, 320, 3)
     assert content_share(first) > 0.03 and content_share(last) > 0.03
     assert np.abs(first.astype(int) - last.astype(int)).mean() > 1.0  # another iteration, another image
-    assert video_frames(tmp_path / "iterations_psi.mp4") == (iterations + 1, (320, 240))
+    # each image 0.5 s at 4 frames a second, the last held 1.5 s more
+    assert video_frames(tmp_path / "iterations_psi.mp4") == (2 * (iterations + 1) + 6, (320, 240))
     frames = sorted(tmp_path.glob("animation_*.png"))
     assert len(frames) == 6 and content_share(read(frames[-1])) > 0.05
-    assert video_frames(tmp_path / "animation.mp4") == (6, (320, 240))
+    assert video_frames(tmp_path / "animation.mp4") == (2 * 6 + 6, (320, 240))
 
 
 def test_headless_slices_follow_the_field_and_level(run_dir, tmp_path):
@@ -123,8 +125,8 @@ def test_the_window_shows_three_panels_that_follow_their_controls(run_dir, tmp_p
     assert diff(res["initial"][0], res["offset"]) > 0.5  # slice offset
     assert diff(res["offset"], res["zeta"]) > 0.5  # field
     shot = read(res["screenshot"])
-    assert shot.shape == (360, 3 * 212, 3) and content_share(shot) > 0.05
-    assert video_frames(res["video"]) == (res["frames"], (640, 360))
+    assert shot.shape == (360, 640, 3) and content_share(shot) > 0.05  # exactly the size asked for
+    assert video_frames(res["video"]) == (2 * res["frames"] + 3, (640, 360))
 
 
 def test_dragging_turns_each_panel_about_its_subject_and_exports_leave_the_cameras(run_dir, tmp_path):

@@ -36,19 +36,19 @@ from fields.colormap import colorbar
 from fracture.atomic import atomic_write_bytes, atomic_write_text, png_bytes
 from fracture.errors import ConfigError, InputError, ResultError, StageError
 from viewer import annotate
+from viewer.annotate import Bar
 from viewer.data import FIELDS, RunData, Surface
 from viewer.looks import (
-    COLOR_BY, FIELD_CMAPS, SURFACE_CMAPS, CameraPose, View, animation_box, animation_pose,
-    frame_box,
-    iteration_box, iteration_caption, iteration_pose, prepare, scene_box, set_frame, set_slice, set_surface, show_context,
-    show_material, slice_pose, slice_title,
+    COLOR_BY, FIELD_CMAPS, SURFACE_CMAPS, CameraPose, animation_box, animation_pose, frame_box, iteration_box,
+    iteration_caption, iteration_pose, scene_box, set_cutaway, set_frame, set_frustum, set_slice, set_surface,
+    show_context, show_material, show_pieces, show_stage, slice_pose, slice_title,
 )
 from viewer.media import Video, check_size
+from viewer.state import PANELS, ViewState, from_section, write_view_file
 
-PANELS = ("material", "iterations", "animation")
 PRESETS = ("iso", "front", "side", "top")
 SIDE_WIDTH_EM = 20
-PLAY_SECONDS = 0.3
+PLAY_FPS = 4  # images a second while playing (the side panel's "play speed")
 # Config numbers the side panel offers (sections; every int or float leaf under them, and the strength layers').
 TUNABLE_SECTIONS = ("psi", "stress", "pyramid", "refine")
 
@@ -93,13 +93,36 @@ def _combobox(items, on_change=None) -> gui.Combobox:
     return box
 
 
+def _number_edit(value, lo, hi) -> gui.NumberEdit:
+    edit = gui.NumberEdit(gui.NumberEdit.INT if isinstance(value, int) else gui.NumberEdit.DOUBLE)
+    edit.set_limits(lo, hi)
+    if isinstance(value, int):
+        edit.int_value = value
+    else:
+        edit.double_value = value
+        edit.decimal_precision = 2
+    return edit
+
+
+def _bar_row(em: float) -> tuple[gui.Widget, gui.Label, gui.ImageWidget, gui.Label]:
+    """A horizontal colour bar with its low and high values beside it (the panel's key)."""
+    row = gui.Horiz(0.5 * em)
+    low, high = gui.Label("        "), gui.Label("                ")
+    image = gui.ImageWidget(o3d.geometry.Image(np.zeros((12, 200, 3), np.uint8)))
+    for w in (low, image, high):
+        row.add_child(w)
+    return row, low, image, high
+
+
 class Viewer:
     """The window and its state; the handlers are methods, so scripts and tests drive it like a user."""
 
-    def __init__(self, run: RunData, width: int = 1800, height: int = 900):
+    def __init__(self, run: RunData, width: int = 1800, height: int = 900, start: ViewState | None = None):
         self.app = gui.Application.instance
         self.run = run
-        self.view = View()  # checked against the run by load()
+        # the view to start with: ``start`` (a view file), else the run's config ``view:`` section
+        start = start or from_section(run.config.get("view"), str(run.dir / "config.yaml"))
+        self.view = start.view  # checked against the run by load()
         self.window = self.app.create_window(f"fracref: {run.name}", width, height)
         self.window.set_on_layout(self._layout)
         self.window.set_on_tick_event(self._tick)
@@ -130,14 +153,18 @@ class Viewer:
         self.rerun_dirs: list[Path] = []
         self.errors: list[str] = []
         self.live_updates = 0  # iterations of a re-run drawn while it ran
-        self.load(run)
+        self.load(run, keep_view=True)
+        for i, panel in enumerate(PANELS):
+            if start.cameras.get(panel) is not None:
+                self.poses[i], self._fitted[i] = start.cameras[panel], True
+                self._place(i, start.cameras[panel])
 
     # -- layout ---------------------------------------------------------------------------
 
     def _layout(self, ctx) -> None:
         r = self.window.content_rect
         side_w = SIDE_WIDTH_EM * self.em
-        ctrl_h = int(9 * self.em)
+        ctrl_h = max(c.calc_preferred_size(ctx, gui.Widget.Constraints()).height for c in self.controls)
         pw = (r.width - side_w) // 3
         for i, (sw, c) in enumerate(zip(self.scenes, self.controls)):
             sw.frame = gui.Rect(r.x + i * pw, r.y, pw, r.height - ctrl_h)
@@ -171,15 +198,12 @@ class Viewer:
         self.level_slider = gui.Slider(gui.Slider.INT)
         self.level_slider.set_on_value_changed(lambda x: self.set_level(int(x)))
         row.add_child(self.level_slider)
+        self.cutaway_box = gui.Checkbox("cutaway")
+        self.cutaway_box.set_on_checked(self.set_cutaway)
+        row.add_child(self.cutaway_box)
         v.add_child(row)
-        row = gui.Horiz(0.5 * em)
-        self.bar_low = gui.Label("      ")
-        self.bar_image = gui.ImageWidget(o3d.geometry.Image(np.zeros((12, 200, 3), np.uint8)))
-        self.bar_high = gui.Label("      ")
-        row.add_child(self.bar_low)
-        row.add_child(self.bar_image)
-        row.add_child(self.bar_high)
-        v.add_child(row)
+        self.slice_bar = _bar_row(em)
+        v.add_child(self.slice_bar[0])
         return v
 
     def _iteration_controls(self) -> gui.Widget:
@@ -202,6 +226,8 @@ class Viewer:
         self.color_box = _combobox(COLOR_BY, self.set_color_by)
         row.add_child(self.color_box)
         v.add_child(row)
+        self.surface_bar = _bar_row(em)
+        v.add_child(self.surface_bar[0])
         self.iter_label = gui.Label("")
         v.add_child(self.iter_label)
         return v
@@ -262,30 +288,39 @@ class Viewer:
             group.add_child(row)
             self.edits[key] = edit
         buttons = gui.Horiz(0.5 * em)
-        b = gui.Button("Re-run")
-        b.set_on_clicked(self.rerun)
-        buttons.add_child(b)
-        b = gui.Button("Save config")
-        b.set_on_clicked(lambda: self.save_config())
-        buttons.add_child(b)
+        for text, handler in (("Re-run", self.rerun), ("Save config", lambda: self.save_config()),
+                              ("Save view", lambda: self.save_view())):
+            b = gui.Button(text)
+            b.set_on_clicked(handler)
+            buttons.add_child(b)
         side.add_child(buttons)
         self.status = gui.Label("ready")
         side.add_child(self.status)
 
+        side.add_child(gui.Label("Playback"))
+        grid = gui.VGrid(2, 0.25 * em)
+        self.play_fps = _number_edit(PLAY_FPS, 1, 60)
+        grid.add_child(gui.Label("images / s"))
+        grid.add_child(self.play_fps)
+        side.add_child(grid)
+
         side.add_child(gui.Label("Export"))
+        grid = gui.VGrid(4, 0.25 * em)
+        self.export_w, self.export_h = _number_edit(1280, 64, 8192), _number_edit(720, 64, 8192)
+        self.export_fps = _number_edit(24, 1, 240)
+        self.export_scale = _number_edit(1, 1, 4)
+        self.export_seconds = _number_edit(0.25, 0.01, 60.0)
+        self.export_hold = _number_edit(1.0, 0.0, 60.0)
+        for label, w in (("width", self.export_w), ("height", self.export_h), ("fps", self.export_fps),
+                         ("supersample", self.export_scale), ("s / image", self.export_seconds),
+                         ("hold s", self.export_hold)):
+            grid.add_child(gui.Label(label))
+            grid.add_child(w)
+        side.add_child(grid)
+        self.transparent_box = gui.Checkbox("transparent background (PNG)")
+        side.add_child(self.transparent_box)
         row = gui.Horiz(0.5 * em)
-        self.export_w = gui.NumberEdit(gui.NumberEdit.INT)
-        self.export_w.int_value = 1280
-        self.export_h = gui.NumberEdit(gui.NumberEdit.INT)
-        self.export_h.int_value = 720
-        self.export_fps = gui.NumberEdit(gui.NumberEdit.INT)
-        self.export_fps.int_value = 10
-        for label, w in (("w", self.export_w), ("h", self.export_h), ("fps", self.export_fps)):
-            row.add_child(gui.Label(label))
-            row.add_child(w)
-        side.add_child(row)
-        row = gui.Horiz(0.5 * em)
-        self.shot_box = _combobox(("all panels",) + PANELS)
+        self.shot_box = _combobox(("all panels",) + PANELS + ("coarse vs refined",))
         row.add_child(self.shot_box)
         b = gui.Button("Screenshot")
         b.set_on_clicked(lambda: self.screenshot(self.shot_box.selected_text))
@@ -299,27 +334,41 @@ class Viewer:
         side.add_child(row)
         return side
 
+    def say(self, text: str) -> None:
+        """The status line, wrapped to the side panel's width (the whole text stays in ``status_text``)."""
+        import textwrap
+
+        self.status_text = text
+        lines = textwrap.wrap(text, width=int(1.9 * SIDE_WIDTH_EM), break_long_words=True) or [""]
+        self.status.text = "\n".join(lines[:4])
+
     # -- loading and drawing -------------------------------------------------------------------
 
-    def load(self, run: RunData) -> None:
-        """Show ``run`` in all panels (after start-up or a re-run)."""
+    def load(self, run: RunData, keep_view: bool = False) -> None:
+        """Show ``run`` in all panels (after start-up or a re-run: the last iteration and the first frame,
+        unless ``keep_view``)."""
         self.run = run
-        self.view = replace(self.view, iteration=-1, frame=0).check(run)
+        self.view = (self.view if keep_view else replace(self.view, iteration=-1, frame=0)).check(run)
+        n_it = len(run.iterations) if run.has_iterations else 1
+        self.view = replace(self.view, iteration=int(np.clip(self.view.iteration, 0, n_it - 1)),
+                            frame=int(np.clip(self.view.frame, 0, max(run.n_frames - 1, 0))))
         self.level_slider.set_limits(0, max(run.pyramid_levels - 1, 0))
         n_it = len(run.iterations) if run.has_iterations else 1
         self.iter_slider.set_limits(0, max(n_it - 1, 0))
-        self.iter_slider.int_value = self.view.iteration if run.has_iterations else 0
+        self.iter_slider.int_value = self.view.iteration
         self.frame_slider.set_limits(1, max(run.n_frames, 1))
-        self.frame_slider.int_value = 1
+        self.frame_slider.int_value = self.view.frame + 1
         self.offset_slider.double_value = self.view.offset
+        self.level_slider.int_value = self.view.level
         self.field_box.selected_index = FIELDS.index(self.view.field)
         self.axis_box.selected_index = "xyz".index(self.view.axis)
         self.color_box.selected_index = COLOR_BY.index(self.view.color_by)
+        self.cutaway_box.checked = self.view.cutaway
+        self.overlay_box.checked = self.view.overlay_coarse
         self.poses = [None, None, None]
         show_material(self.scenes[0].scene, run)
         show_context(self.scenes[1].scene, run)
-        prepare(self.scenes[2].scene)
-        self._draw_colorbar()
+        show_stage(self.scenes[2].scene, run)
         self.draw_material()
         self.draw_iteration()
         self.draw_frame()
@@ -406,14 +455,16 @@ class Viewer:
     def _iter_range(self) -> tuple[float, float] | None:
         return self.run.surface_range(self.view.color_by) if self.run.has_iterations else None
 
-    def _draw_colorbar(self) -> None:
-        bar = colorbar(FIELD_CMAPS[self.view.field], 200, 12, vertical=False)  # low values at the left
-        self.bar_image.update_image(o3d.geometry.Image(bar))
+    @staticmethod
+    def _show_bar(row, cmap: str, lo: float, hi: float, name: str) -> None:
+        _, low, image, high = row
+        image.update_image(o3d.geometry.Image(colorbar(cmap, 200, 12, vertical=False)))  # low values at the left
+        low.text, high.text = f"{lo:.3g}", f"{hi:.3g} ({name})"
 
     def draw_material(self) -> None:
-        rng = set_slice(self.scenes[0].scene, self.run, self.view)
-        self.bar_low.text = f"{rng[0]:.3g}"
-        self.bar_high.text = f"{rng[1]:.3g} ({self.view.field})"
+        lo, hi = set_slice(self.scenes[0].scene, self.run, self.view)
+        set_cutaway(self.scenes[0].scene, self.run, self.view)
+        self._show_bar(self.slice_bar, FIELD_CMAPS[self.view.field], lo, hi, self.view.field)
         self._pose(0)
         self.scenes[0].force_redraw()
 
@@ -428,6 +479,7 @@ class Viewer:
                                     f"E = {live['energy']:.4g}")
         elif self.run.has_iterations:
             set_surface(scene, self.run.iteration(self.view.iteration), self.view.color_by, self._iter_range)
+            self._show_bar(self.surface_bar, SURFACE_CMAPS[self.view.color_by], *self._iter_range, self.view.color_by)
             self.iter_label.text = iteration_caption(self.run, self.view.iteration)
         else:
             self.iter_label.text = "no iterations in this run (refine.snapshots: false, or stopped early)"
@@ -447,7 +499,11 @@ class Viewer:
 
     def set_field(self, name: str) -> None:
         self.view = replace(self.view, field=name)
-        self._draw_colorbar()
+        self.draw_material()
+
+    def set_cutaway(self, on: bool) -> None:
+        self.view = replace(self.view, cutaway=bool(on))
+        self.cutaway_box.checked = bool(on)
         self.draw_material()
 
     def set_axis(self, axis: str) -> None:
@@ -545,7 +601,7 @@ class Viewer:
             self._sync_from = None
             redraw = True
         now = time.monotonic()
-        if now - self._last_step >= PLAY_SECONDS and any(self.playing.values()):
+        if now - self._last_step >= 1.0 / max(self.play_fps.int_value, 1) and any(self.playing.values()):
             self._last_step = now
             if self.playing["iterations"] and self.run.has_iterations:
                 self.set_iteration((self.view.iteration + 1) % len(self.run.iterations))
@@ -571,7 +627,7 @@ class Viewer:
 
     def _on_close(self) -> bool:
         if self._worker is not None and self._worker.is_alive():
-            self.status.text = "a re-run is still going; it finishes in the background"
+            self.say("a re-run is still going; it finishes in the background")
         return True
 
     # -- re-run and config ---------------------------------------------------------------------------
@@ -586,7 +642,9 @@ class Viewer:
         """The side panel's config, validated as ``fracref run`` would read it, and its YAML."""
         from fracture.config import check_config, dump_config
 
-        cfg = check_config(self.edited_config(), "the viewer's parameters")
+        cfg = self.edited_config()
+        cfg["view"] = self.view_state().to_section()  # the slice, iteration, frame and cameras on screen
+        cfg = check_config(cfg, "the viewer's parameters")
         return cfg, dump_config(cfg)
 
     def save_config(self, path: str | Path | None = None) -> Path | None:
@@ -597,7 +655,7 @@ class Viewer:
         except (ConfigError, OSError) as exc:
             self.report_error("cannot save the config", exc)
             return None
-        self.status.text = f"saved {path}"
+        self.say(f"saved {path}")
         return path
 
     def _next_run_dir(self) -> Path:
@@ -611,7 +669,7 @@ class Viewer:
     def rerun(self) -> None:
         """Run the pipeline with the side panel's parameters on a worker thread, into a new run directory."""
         if self._worker is not None and self._worker.is_alive():
-            self.status.text = "a re-run is already going"
+            self.say("a re-run is already going")
             return
         out = self._next_run_dir()
         try:
@@ -619,7 +677,7 @@ class Viewer:
         except (ConfigError, OSError) as exc:
             self.report_error("the parameters are not valid", exc)
             return
-        self.status.text = f"re-running into {out} ..."
+        self.say(f"re-running into {out} ...")
 
         def work():
             # the pipeline runs in a child process (its compiled loops hold the GIL for
@@ -641,8 +699,7 @@ class Viewer:
                         return
                     continue
                 if event == "stage":
-                    self.app.post_to_main_thread(self.window, lambda n=data["name"]: setattr(
-                        self.status, "text", f"re-run: {n} ..."))
+                    self.app.post_to_main_thread(self.window, lambda n=data["name"]: self.say(f"re-run: {n} ..."))
                 elif event == "iteration":
                     with self._live_lock:
                         self._live = data
@@ -664,13 +721,13 @@ class Viewer:
         self.rerun_dirs.append(out)
         self.load(RunData(out))
         self.window.title = f"fracref: {self.run.name} ({out.name})"
-        self.status.text = f"re-run done: {out}"
+        self.say(f"re-run done: {out}")
 
     def report_error(self, what: str, exc: BaseException) -> None:
         known = isinstance(exc, (ConfigError, InputError, ResultError, StageError, OSError))
         text = f"{what}: {exc}" if known else f"{what}: {exc!r}\n{traceback.format_exc(limit=4)}"
         self.errors.append(text)
-        self.status.text = text.splitlines()[0][:120]
+        self.say(text.splitlines()[0])
         self.window.show_message_box("fracref", text)
 
     # -- export ------------------------------------------------------------------------------------
@@ -678,43 +735,98 @@ class Viewer:
     def _export_size(self) -> tuple[int, int]:
         w, h = int(self.export_w.int_value), int(self.export_h.int_value)
         check_size(w, h, "export")
+        k = int(self.export_scale.int_value)
+        if max(w, h) * k > 8192:
+            raise InputError(f"export: {w}x{h} supersampled {k} times is over 8192 pixels; expected a smaller "
+                             "size or less supersampling")
         return w, h
 
-    def panel_image(self, i: int, width: int, height: int) -> np.ndarray:
-        """Panel ``i`` rendered at ``width x height`` from its current camera; the panel's camera
-        is put back exactly as it was (the window is unchanged)."""
+    def _labels(self, i: int) -> tuple[Bar | None, str | None]:
+        """Panel ``i``'s colour bar and caption in a figure."""
+        v = self.view
+        if i == 0:
+            return Bar(FIELD_CMAPS[v.field], *self.run.field_range(v.field, v.level), v.field), slice_title(v)
+        if i == 1 and self._iter_range is not None:
+            return Bar(SURFACE_CMAPS[v.color_by], *self._iter_range, v.color_by), self.iter_label.text
+        return None, self.frame_label.text
+
+    def _picture(self, i: int, width: int, height: int, picture: tuple[int, int],
+                 transparent: bool | None = None) -> np.ndarray:
+        """Panel ``i`` from its current camera, at ``width x height`` with the panel's view over the
+        upper-left ``picture`` part (supersampled and matted as the export settings say). The panel's
+        camera is put back exactly as it was (the window is unchanged)."""
+        from viewer.looks import BACKGROUND
+
+        k = int(self.export_scale.int_value)
+        transparent = self.transparent_box.checked if transparent is None else transparent
         sw = self.scenes[i]
         cam = sw.scene.camera
         current = self.current_pose(i)
         near, far = cam.get_near(), cam.get_far()
         # keep all that the panel shows: a narrower picture gets a taller field of view
         f = sw.frame
-        panel_aspect, aspect = f.width / max(f.height, 1), width / height
+        panel_aspect, aspect = f.width / max(f.height, 1), picture[0] / picture[1]
         half = np.arctan(np.tan(np.radians(current.fov) / 2) * panel_aspect / aspect)
         fov = max(current.fov, float(np.degrees(2 * half)))
-        cam.set_projection(fov, aspect, near, far, rendering.Camera.FovType.Vertical)
+        set_frustum(cam, fov, width * k, height * k, (picture[0] * k, picture[1] * k), near, far)
+
+        def shot():
+            return np.asarray(self.app.render_to_image(sw.scene, width * k, height * k))[..., :3]
         try:
-            img = np.asarray(self.app.render_to_image(sw.scene, width, height))[..., :3].copy()
+            on_white = shot()
+            if transparent:
+                sw.scene.set_background([0.0, 0.0, 0.0, 1.0])
+                try:
+                    on_black = shot()
+                finally:
+                    sw.scene.set_background(list(BACKGROUND))
         finally:
             cam.set_projection(current.fov, panel_aspect, near, far, rendering.Camera.FovType.Vertical)
             sw.force_redraw()
-        if i == 0:
-            img = annotate.with_colorbar(img, FIELD_CMAPS[self.view.field], self.run.field_range(self.view.field, self.view.level),
-                                         slice_title(self.view))
-        elif i == 1 and self.run.has_iterations and self._iter_range is not None:
-            img = annotate.with_colorbar(img, SURFACE_CMAPS[self.view.color_by], self._iter_range,
-                                         self.view.color_by, self.iter_label.text)
-        elif i == 2:
-            img = annotate.caption(img, self.frame_label.text)
-        return img
+        return annotate.shrink(annotate.matte(on_white, on_black) if transparent else on_white, k)
+
+    def panel_image(self, i: int, width: int, height: int, caption: str | None = None,
+                    transparent: bool | None = None) -> np.ndarray:
+        """Panel ``i`` as a ``width x height`` figure: its picture, its colour bar and its caption."""
+        bar, text = self._labels(i)
+        lay = annotate.layout(width, height, bar is not None, True)
+        img = self._picture(i, width, height, lay.picture, transparent)
+        return annotate.compose(img[:lay.picture[1], :lay.picture[0]], lay, bar, caption or text)
+
+    def compare_image(self, width: int, height: int) -> np.ndarray:
+        """The coarse pieces and the refined pieces at the shown frame, side by side, from the animation
+        panel's camera."""
+        if not self.run.has_animation:
+            raise InputError("this run has no animation: the coarse and refined pieces are compared in it")
+        scene, t = self.scenes[2].scene, self.view.frame
+        half = width // 2 // 2 * 2
+        coarse, refined = self.run.coarse_pieces(t), self.run.pieces_at(t)
+        figures = []
+        try:
+            for name, pieces in (("coarse", coarse), ("refined", refined)):
+                for c in range(max(len(coarse), len(refined))):
+                    for n in (f"piece_{c}", f"piece_{c}_fracture"):
+                        if scene.has_geometry(n):
+                            scene.remove_geometry(n)
+                show_pieces(scene, pieces)
+                triangles = sum(len(p.F) for p in pieces)
+                figures.append(self.panel_image(2, half, height, f"{name}: {len(pieces)} pieces, "
+                                                f"{triangles:,} triangles, frame {t + 1}"))
+        finally:
+            self.draw_frame()
+        return annotate.side_by_side(figures)
 
     def screenshot(self, which: str = "all panels", path: str | Path | None = None) -> Path | None:
-        """A PNG of one panel (``material``, ``iterations``, ``animation``) or of all three side by side."""
+        """A PNG of one panel (``material``, ``iterations``, ``animation``), of all three side by side,
+        or of the coarse and refined pieces side by side (``coarse vs refined``)."""
         try:
             w, h = self._export_size()
             if which == "all panels":
-                pw = (w // 3) // 2 * 2
-                img = np.concatenate([self.panel_image(i, pw, h) for i in range(3)], axis=1)
+                widths = [w // 3 // 2 * 2] * 2
+                widths.append(w - sum(widths))
+                img = np.concatenate([self.panel_image(i, pw, h) for i, pw in enumerate(widths)], axis=1)
+            elif which == "coarse vs refined":
+                img = self.compare_image(w, h)
             else:
                 img = self.panel_image(PANELS.index(which), w, h)
             stem = f"screenshot_{which.replace(' ', '_')}"
@@ -724,14 +836,17 @@ class Viewer:
         except (InputError, OSError, ValueError) as exc:
             self.report_error("screenshot failed", exc)
             return None
-        self.status.text = f"saved {path}"
+        self.say(f"saved {path}")
         return path
 
     def export_video(self, what: str, path: str | Path | None = None) -> None:
-        """An MP4 of the iterations or the animation, one frame per window tick (the window stays live)."""
+        """An MP4 of the iterations or the animation, one image per window tick (the window stays live);
+        each image is shown for the export's seconds per image, the last held for its hold seconds."""
         try:
             w, h = self._export_size()
             fps = int(self.export_fps.int_value)
+            each = max(1, round(float(self.export_seconds.double_value) * fps))
+            hold = round(float(self.export_hold.double_value) * fps)
             if what == "iterations" and not self.run.has_iterations or what == "animation" and not self.run.has_animation:
                 raise InputError(f"this run has no {what} to export")
             path = Path(path) if path else numbered(self.run.dir / "renders", f"window_{what}", ".mp4")
@@ -751,15 +866,17 @@ class Viewer:
                         self.set_iteration(k)
                     else:
                         self.set_frame(k)
-                    video.add(self.panel_image(i, w, h))
-                    self.status.text = f"video: {k + 1} / {n}"
+                    img = self.panel_image(i, w, h, transparent=False)
+                    for _ in range(each + (hold if k == n - 1 else 0)):
+                        video.add(img)
+                    self.say(f"video: {k + 1} / {n}")
                     yield
             except BaseException:
                 video.abort()
                 raise
             else:
                 video.close()
-                self.status.text = f"saved {path}"
+                self.say(f"saved {path}")
             finally:  # the panel and its slider back where they were
                 if what == "iterations":
                     self.set_iteration(keep.iteration)
@@ -767,6 +884,24 @@ class Viewer:
                     self.set_frame(keep.frame)
 
         self._job = job()
+
+    # -- views ---------------------------------------------------------------------------------------
+
+    def view_state(self) -> ViewState:
+        """What the panels show and every panel's camera as the user left it."""
+        return ViewState(self.view, {panel: self.current_pose(i) for i, panel in enumerate(PANELS)})
+
+    def save_view(self, path: str | Path | None = None) -> Path | None:
+        """Write the panels' settings and cameras as a view file (``--camera FILE`` of view and render)."""
+        try:
+            path = Path(path) if path else numbered(self.run.dir / "renders", "view", ".yaml")
+            path.parent.mkdir(parents=True, exist_ok=True)
+            write_view_file(path, self.view_state())
+        except OSError as exc:
+            self.report_error("cannot save the view", exc)
+            return None
+        self.say(f"saved {path}")
+        return path
 
 
 def _run_child(cfg: dict, out: str, q) -> None:
@@ -807,11 +942,15 @@ def open_target(target: Path, out: Path | None) -> RunData:
     return RunData(out)
 
 
-def main(target: Path, out: Path | None = None, width: int = 1800, height: int = 900) -> int:
+def main(target: Path, out: Path | None = None, width: int = 1800, height: int = 900,
+         camera: Path | None = None) -> int:
+    from viewer.state import read_view_file
+
+    start = read_view_file(camera) if camera is not None else None  # a bad file is reported before any work
     run = open_target(target, out)
     app = gui.Application.instance
     app.initialize()
-    Viewer(run, width, height)
+    Viewer(run, width, height, start)
     app.run()
     return 0
 

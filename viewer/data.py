@@ -218,16 +218,30 @@ class RunData:
         return load_transfer(self._require("animation/transfer.npz", "the animation view"))
 
     @cached_property
-    def piece_faces(self) -> list[np.ndarray]:
-        """Each piece's triangles, indexing its rows of the transfer (``transfer.piece``)."""
+    def _piece_files(self) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """Each piece's (material-space vertices, triangles, exterior flag per triangle)."""
         from fracture.plyio import read_ply
 
-        tr = self.transfer
         out = []
-        for c in range(len(tr.offsets) - 1):
-            _, F, _, _ = read_ply(self._require(f"pieces/piece_{c:03d}.ply", "the animation view"))
-            out.append(F.astype(np.int64))
+        for c in range(len(self.transfer.offsets) - 1):
+            V, F, _, fd = read_ply(self._require(f"pieces/piece_{c:03d}.ply", "the animation view"))
+            ext = np.asarray(fd.get("exterior", np.ones(len(F))), bool)
+            out.append((V, F.astype(np.int64), ext))
         return out
+
+    @property
+    def piece_faces(self) -> list[np.ndarray]:
+        """Each piece's triangles, indexing its rows of the transfer (``transfer.piece``)."""
+        return [F for _, F, _ in self._piece_files]
+
+    @property
+    def piece_exterior(self) -> list[np.ndarray]:
+        """Per piece, which triangles are on the object's outside (the others are fracture faces)."""
+        return [ext for _, _, ext in self._piece_files]
+
+    def pieces_rest(self) -> list[Surface]:
+        """The high-resolution pieces in material space (as assembled), with ``exterior`` face flags."""
+        return [Surface(V, F, {"exterior": ext}) for V, F, ext in self._piece_files]
 
     @property
     def n_frames(self) -> int:
@@ -239,4 +253,5 @@ class RunData:
         if not 0 <= t < tr.n_frames:
             raise InputError(f"frame must be in 1..{tr.n_frames}, got {t + 1}")
         X = tr.positions(t)
-        return [Surface(tr.piece(X, c), F) for c, F in enumerate(self.piece_faces)]
+        return [Surface(tr.piece(X, c), F, {"exterior": ext})
+                for c, (_, F, ext) in enumerate(self._piece_files)]

@@ -22,7 +22,12 @@ from fracture.errors import InputError
 from fracture.topology import face_frames, unique_edges
 from viewer.data import FIELDS, RunData, Surface
 
-BACKGROUND = (1.0, 1.0, 1.0, 1.0)
+# White: the renderer's colour grading maps 1.0 to 248, so the background is given a little above it.
+BACKGROUND = (1.07, 1.07, 1.07, 1.0)
+# The ground under the pieces, a light warm grey that takes their shadows.
+GROUND_COLOR = (0.93, 0.92, 0.90, 1.0)
+# Fracture faces: the piece's colour mixed this much toward a stone colour (the inside of the material).
+INTERIOR_MIX, INTERIOR_COLOR = 0.6, np.array([0.93, 0.90, 0.84])
 # Piece colours: the Okabe-Ito palette (distinguishable with colour-blindness), then a hue walk.
 PIECE_COLORS = np.array([[0.90, 0.62, 0.00], [0.34, 0.71, 0.91], [0.00, 0.62, 0.45], [0.94, 0.89, 0.26],
                          [0.00, 0.45, 0.70], [0.84, 0.37, 0.00], [0.80, 0.47, 0.65], [0.60, 0.60, 0.60]])
@@ -43,6 +48,7 @@ class View:
     color_by: str = "psi"
     frame: int = 0  # 0-based
     overlay_coarse: bool = False
+    cutaway: bool = False
 
     def check(self, run: RunData) -> "View":
         """This view with ``iteration`` resolved, or an error naming the bad value and what is allowed."""
@@ -173,12 +179,14 @@ def lines(color=(0.1, 0.1, 0.1, 1.0), width: float = 1.5) -> rendering.MaterialR
 # -- scenes -------------------------------------------------------------------------------------
 
 
-def prepare(scene: rendering.Open3DScene) -> None:
-    """White background (linear tone mapping keeps it white), soft light from the upper front, no axes."""
+def prepare(scene: rendering.Open3DScene, sun=(0.3, -0.5, -0.8)) -> None:
+    """White background, soft light from ``sun`` (the direction the light travels) with the shadows
+    it casts, no axes."""
     scene.clear_geometry()
     scene.set_background(list(BACKGROUND))
     scene.show_axes(False)
-    scene.set_lighting(rendering.Open3DScene.LightingProfile.SOFT_SHADOWS, np.array([0.3, -0.5, -0.8]))
+    scene.set_lighting(rendering.Open3DScene.LightingProfile.SOFT_SHADOWS, np.asarray(sun, np.float32))
+    scene.view.set_shadowing(True, rendering.View.ShadowType.PCF)
     scene.view.set_color_grading(rendering.ColorGrading(rendering.ColorGrading.Quality.HIGH,
                                                         rendering.ColorGrading.ToneMapping.LINEAR))
 
@@ -237,11 +245,55 @@ def iteration_caption(run: RunData, k: int) -> str:
             + (f", E = {e:.4g}" if e is not None else ""))
 
 
+def show_stage(scene: rendering.Open3DScene, run: RunData) -> None:
+    """Panel 3 without its pieces: a ground under the box the pieces move in, lit from above so
+    that the pieces cast shadows on it."""
+    up = "xyz".index(run.up_axis)
+    sun = -np.eye(3)[up] + 0.35 * np.eye(3)[(up + 1) % 3] + 0.2 * np.eye(3)[(up + 2) % 3]
+    prepare(scene, sun)
+    lo, hi = animation_box(run)
+    scene.add_geometry("ground", ground_quad(lo, hi, up), lit(GROUND_COLOR))
+
+
+def ground_quad(lo, hi, up: int, scale: float = 30.0) -> o3d.geometry.TriangleMesh:
+    """A square under the box ``lo, hi`` (just below its lowest point along axis ``up``), ``scale``
+    times the box's widest side, facing up."""
+    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+    a, b = (up + 1) % 3, (up + 2) % 3
+    mid, half = 0.5 * (lo + hi), 0.5 * scale * max(hi[a] - lo[a], hi[b] - lo[b], 1e-9)
+    V = np.zeros((4, 3))
+    V[:, a] = mid[a] + half * np.array([-1, 1, 1, -1])
+    V[:, b] = mid[b] + half * np.array([-1, -1, 1, 1])
+    V[:, up] = lo[up] - 1e-3 * np.linalg.norm(hi - lo)
+    return triangle_mesh(V, np.array([[0, 1, 2], [0, 2, 3]]), flat=True)
+
+
+def interior_color(c: int) -> tuple[float, float, float]:
+    """The fracture faces' colour of piece ``c``: its colour toward stone."""
+    return tuple((1 - INTERIOR_MIX) * np.asarray(piece_color(c)) + INTERIOR_MIX * INTERIOR_COLOR)
+
+
+def piece_meshes(p: Surface):
+    """A piece's outside and its fracture faces as two meshes (each drawn in its own colour)."""
+    ext = p.scalars.get("exterior", np.ones(len(p.F), bool))
+    return triangle_mesh(p.V, p.F[ext], flat=True), triangle_mesh(p.V, p.F[~ext], flat=True)
+
+
+def show_pieces(scene: rendering.Open3DScene, pieces: list[Surface], prefix: str = "piece") -> None:
+    """The pieces in their colours, fracture faces lighter (replacing any drawn under the same names)."""
+    for c, p in enumerate(pieces):
+        outside, inside = piece_meshes(p)
+        _replace(scene, f"{prefix}_{c}", outside, lit((*piece_color(c), 1.0)))
+        if len(inside.triangles):
+            _replace(scene, f"{prefix}_{c}_fracture", inside, lit((*interior_color(c), 1.0)))
+        elif scene.has_geometry(f"{prefix}_{c}_fracture"):
+            scene.remove_geometry(f"{prefix}_{c}_fracture")
+
+
 def set_frame(scene: rendering.Open3DScene, run: RunData, view: View) -> None:
-    """Panel 3 (after :func:`prepare`): the high-resolution pieces at frame ``view.frame``, replacing the
-    previous frame's, and the coarse pieces see-through while ``view.overlay_coarse`` is on."""
-    for c, p in enumerate(run.pieces_at(view.frame)):
-        _replace(scene, f"piece_{c}", triangle_mesh(p.V, p.F, flat=True), lit((*piece_color(c), 1.0)))
+    """Panel 3 (after :func:`show_stage`): the high-resolution pieces at frame ``view.frame``, replacing
+    the previous frame's, and the coarse pieces see-through while ``view.overlay_coarse`` is on."""
+    show_pieces(scene, run.pieces_at(view.frame))
     # the coarse pieces see-through over the detailed ones (their edges would hide them: B is fine)
     coarse = run.coarse_pieces(view.frame) if view.overlay_coarse else []
     for c, p in enumerate(coarse):
@@ -249,6 +301,31 @@ def set_frame(scene: rendering.Open3DScene, run: RunData, view: View) -> None:
     for c in range(len(coarse), len(run.coarse_parts)):
         if scene.has_geometry(f"coarse_{c}"):
             scene.remove_geometry(f"coarse_{c}")
+
+
+def set_cutaway(scene: rendering.Open3DScene, run: RunData, view: View) -> None:
+    """Panel 1's cutaway: with ``view.cutaway``, the high-resolution pieces (as assembled) on the
+    low side of the slice plane, so the slice caps them; without it, none."""
+    names = [n for c in range(len(run.piece_faces) if run.has_animation else 0)
+             for n in (f"cut_{c}", f"cut_{c}_fracture")]
+    for n in names:
+        if scene.has_geometry(n):
+            scene.remove_geometry(n)
+    if not (view.cutaway and run.has_animation):
+        return
+    a = "xyz".index(view.axis)
+    lo, hi = run.grid.lo, run.grid.hi
+    point = np.zeros(3)
+    point[a] = lo[a] + view.offset * (hi[a] - lo[a])
+    for c, p in enumerate(run.pieces_rest()):
+        for name, mesh, color in zip((f"cut_{c}", f"cut_{c}_fracture"), piece_meshes(p),
+                                     (piece_color(c), interior_color(c))):
+            if len(mesh.triangles) == 0:
+                continue
+            cut = o3d.t.geometry.TriangleMesh.from_legacy(mesh).clip_plane(point, -np.eye(3)[a]).to_legacy()
+            if len(cut.triangles):
+                cut.compute_triangle_normals()
+                scene.add_geometry(name, cut, lit((*color, 1.0)))
 
 
 def piece_color(c: int) -> tuple[float, float, float]:
@@ -272,17 +349,16 @@ class CameraPose:
 
 
 def frame_points(P: np.ndarray, aspect: float = 16 / 9, look: np.ndarray | None = None,
-                 up: np.ndarray | None = None, fov: float = 35.0, margin: float = 1.15) -> CameraPose:
+                 up: np.ndarray | None = None, fov: float = 35.0, margin: float = 1.1) -> CameraPose:
     """A three-quarter view that fits points ``P`` (e.g. a box's corners) into the picture.
 
     ``look`` is the main viewing direction (default: the points' thinnest
     principal axis, so a slab is seen face-on) and ``up`` the screen's up
     (default: the middle principal axis). The camera turns a little off
     ``look`` (right and down), and its distance is the smallest at which
-    every point is inside both fields of view, times ``margin``.
+    every point is inside both fields of view, times ``margin``; the points are centred in the picture.
     """
     P = np.asarray(P, np.float64).reshape(-1, 3)
-    center = 0.5 * (P.min(axis=0) + P.max(axis=0))
     axes = np.linalg.svd(P - P.mean(axis=0), full_matrices=False)[2] if len(P) >= 3 else np.eye(3)
     look = axes[-1] if look is None else np.asarray(look, np.float64)
     look = look / np.linalg.norm(look)
@@ -300,11 +376,18 @@ def frame_points(P: np.ndarray, aspect: float = 16 / 9, look: np.ndarray | None 
     cam_right = np.cross(direction, cam_up)
     tan_v = np.tan(np.radians(fov) / 2)
     tan_h = tan_v * aspect
-    C = P - center
-    depth = C @ direction  # toward the camera
-    d = np.max(np.maximum(np.abs(C @ cam_right) / tan_h, np.abs(C @ cam_up) / tan_v) + depth)
-    d = margin * max(d, 1e-9) + 1e-9
-    return CameraPose(center, center + d * direction, cam_up, fov)
+    # The nearest eye (coordinates ex, ey, ez along cam_right, cam_up, direction) with every point
+    # inside the four planes of the view: |x - ex| <= tan * (ez - z) for each point, and the points
+    # centred between the opposite planes. Each pair of planes gives ez and the centring offset.
+    x, y, z = P @ cam_right, P @ cam_up, P @ direction
+    a, b = np.max(tan_h * z + x), np.max(tan_h * z - x)
+    c, d = np.max(tan_v * z + y), np.max(tan_v * z - y)
+    ex, ey = 0.5 * (a - b), 0.5 * (c - d)
+    ez = max(0.5 * (a + b) / tan_h, 0.5 * (c + d) / tan_v)
+    zc = 0.5 * (z.min() + z.max())  # the point looked at: the points' middle depth
+    ez = zc + margin * max(ez - zc, 1e-9) + 1e-9
+    center = ex * cam_right + ey * cam_up + zc * direction
+    return CameraPose(center, ex * cam_right + ey * cam_up + ez * direction, cam_up, fov)
 
 
 def box_corners(lo, hi) -> np.ndarray:
@@ -327,13 +410,19 @@ def dominant_normal(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     return np.linalg.eigh((n * area[:, None]).T @ n)[1][:, -1]
 
 
+def spread(P: np.ndarray, n: int = 4000) -> np.ndarray:
+    """At most ``n`` of the points ``P``, evenly through the array (enough to frame a camera)."""
+    P = np.asarray(P, np.float64).reshape(-1, 3)
+    return P if len(P) <= n else P[np.linspace(0, len(P) - 1, n).astype(np.int64)]
+
+
 def slice_pose(run: RunData, view: View, aspect: float) -> CameraPose:
-    """Panel 1's camera: facing the slice plane."""
+    """Panel 1's camera: facing the slice plane, fitted to the object."""
     lo, hi = scene_box(run)
     a = "xyz".index(view.axis)
     others = [b for b in range(3) if b != a]
     up = others[int(np.argmin(hi[others] - lo[others]))]
-    return frame_box(lo, hi, aspect, look=np.eye(3)[a], up=np.eye(3)[up])
+    return frame_points(spread(run.exterior.V), aspect, np.eye(3)[a], np.eye(3)[up])
 
 
 def iteration_pose(run: RunData, aspect: float) -> CameraPose:
@@ -342,7 +431,12 @@ def iteration_pose(run: RunData, aspect: float) -> CameraPose:
     look = dominant_normal(last["positions"].astype(np.float64), last["faces"])
     lo, hi = scene_box(run)
     up_axis = np.eye(3)[int(np.argsort(hi - lo)[1])]
-    return frame_points(box_corners(*iteration_box(run)), aspect, look, up_axis, margin=1.25)
+    return frame_points(iteration_points(run), aspect, look, up_axis)
+
+
+def iteration_points(run: RunData) -> np.ndarray:
+    """The fracture surface's vertices over all iterations (a spread of them)."""
+    return spread(np.concatenate([spread(it["positions"], 2000) for it in run.iterations]))
 
 
 def iteration_box(run: RunData) -> tuple[np.ndarray, np.ndarray]:
@@ -356,28 +450,65 @@ def scene_box(run: RunData) -> tuple[np.ndarray, np.ndarray]:
     return V.min(axis=0), V.max(axis=0)
 
 
-def animation_box(run: RunData) -> tuple[np.ndarray, np.ndarray]:
-    """The box holding every piece in every frame (the camera does not chase the pieces)."""
+def animation_points(run: RunData, per_piece: int = 400) -> np.ndarray:
+    """Points of every coarse piece in every frame (a spread of each piece's vertices, moved):
+    the camera frames the whole motion and does not chase the pieces."""
     V = run.exterior.V
-    lo, hi = scene_box(run)
+    out = [spread(V)]
     for c, (used, _) in enumerate(run.coarse_parts):
         if len(used):
-            P = run.coarse_animation.trajectories(c, V[used])
-            lo, hi = np.minimum(lo, P.min(axis=(0, 1))), np.maximum(hi, P.max(axis=(0, 1)))
-    return lo, hi
+            out.append(run.coarse_animation.trajectories(c, spread(V[used], per_piece)).reshape(-1, 3))
+    return np.concatenate(out)
 
 
-def animation_pose(run: RunData, aspect: float) -> CameraPose:
-    """Panel 3's camera: from the side, level with the ground (the run's up axis is the screen's
-    up, so the drop is seen), facing the wider side of the box the pieces move in."""
-    lo, hi = animation_box(run)
+def animation_box(run: RunData) -> tuple[np.ndarray, np.ndarray]:
+    """The box holding every piece in every frame."""
+    P = animation_points(run)
+    return P.min(axis=0), P.max(axis=0)
+
+
+def animation_pose(run: RunData, aspect: float, points: np.ndarray | None = None) -> CameraPose:
+    """Panel 3's camera: from the side and a little above, the run's up axis up (the drop is seen),
+    facing the wider side of the box the pieces move in; fitted to ``points`` (default: the pieces
+    over all frames)."""
+    P = animation_points(run)
+    lo, hi = P.min(axis=0), P.max(axis=0)
     up = "xyz".index(run.up_axis)
     flat = [a for a in range(3) if a != up]
     look = flat[int(np.argmin((hi - lo)[flat]))]
-    return frame_box(lo, hi, aspect, look=np.eye(3)[look], up=np.eye(3)[up])
+    return frame_points(P if points is None else points, aspect, np.eye(3)[look], np.eye(3)[up])
 
 
-def apply_camera(camera: rendering.Camera, pose: CameraPose, width: int, height: int) -> None:
-    camera.set_projection(pose.fov, width / max(height, 1), 0.01 * np.linalg.norm(pose.eye - pose.center),
-                          100.0 * np.linalg.norm(pose.eye - pose.center), rendering.Camera.FovType.Vertical)
+def turntable_poses(run: RunData, pieces: list[Surface], aspect: float, n: int) -> list[CameraPose]:
+    """``n`` cameras on one turn about the up axis through the pieces' middle, each fitted
+    to the pieces, a little above them."""
+    up = np.eye(3)["xyz".index(run.up_axis)]
+    P = spread(np.concatenate([p.V for p in pieces]), 20000)
+    a, b = np.eye(3)[("xyz".index(run.up_axis) + 1) % 3], np.eye(3)[("xyz".index(run.up_axis) + 2) % 3]
+    poses = []
+    for k in range(n):
+        t = 2 * np.pi * k / n
+        poses.append(frame_points(P, aspect, np.cos(t) * a + np.sin(t) * b, up))
+    d = max(np.linalg.norm(p.eye - p.center) for p in poses)  # one distance: the object does not breathe
+    return [CameraPose(p.center, p.center + d * (p.eye - p.center) / np.linalg.norm(p.eye - p.center), p.up, p.fov)
+            for p in poses]
+
+
+def apply_camera(camera: rendering.Camera, pose: CameraPose, width: int, height: int,
+                 picture: tuple[int, int] | None = None) -> None:
+    """Set ``camera`` to ``pose`` for an image of ``width x height``. With ``picture = (w, h)``, the
+    pose's field of view spans only the image's upper-left ``w x h`` (a figure's picture; its
+    colour bar and caption strips cover the rest)."""
+    d = float(np.linalg.norm(pose.eye - pose.center))
+    set_frustum(camera, pose.fov, width, height, picture, 0.01 * d, 100.0 * d)
     camera.look_at(pose.center, pose.eye, pose.up)
+
+
+def set_frustum(camera: rendering.Camera, fov: float, width: int, height: int, picture: tuple[int, int] | None,
+                near: float, far: float) -> None:
+    """A perspective projection of vertical field of view ``fov`` over the ``picture`` part (upper left)
+    of a ``width x height`` image."""
+    pw, ph = picture if picture is not None else (width, height)
+    px = 2.0 * near * np.tan(np.radians(fov) / 2) / ph  # one pixel at the near plane
+    camera.set_projection(rendering.Camera.Projection.Perspective, -0.5 * pw * px, (width - 0.5 * pw) * px,
+                          -(height - 0.5 * ph) * px, 0.5 * ph * px, near, far)

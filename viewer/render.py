@@ -1,4 +1,4 @@
-"""Headless figures and videos of a run: ``fracref render RUN_DIR --what slices|iterations|animation``.
+"""Headless figures and videos of a run: ``fracref render RUN_DIR --what slices|iterations|animation|compare|turntable``.
 
 Open3D's OffscreenRenderer draws the same scenes as the window (see
 :mod:`viewer.looks`) through EGL with no display. Every image is written
@@ -9,7 +9,12 @@ never leaves a half-written file under a final name.
   axis (PNG each, with a colour bar) and an MP4 sweeping through them;
 * ``iterations``: the fracture surface at every stored iteration (PNG each,
   with a colour bar and the iteration, triangle count and energy) and an MP4;
-* ``animation``: the pieces at every frame (PNG each) and an MP4.
+* ``animation``: the pieces at every frame over a ground with their shadows (PNG each) and an MP4;
+* ``compare``: the coarse and the refined pieces side by side at one frame, one camera (PNG);
+* ``turntable``: one turn of the camera around the refined pieces at one frame (MP4).
+
+Figures can be supersampled (rendered ``k`` times larger and averaged down) and
+written with a transparent background (PNG; the videos are composited on white).
 """
 
 from __future__ import annotations
@@ -21,7 +26,7 @@ import os
 if not os.environ.get("DISPLAY"):
     os.environ.setdefault("EGL_PLATFORM", "surfaceless")
 
-from dataclasses import replace  # noqa: E402
+from dataclasses import dataclass, replace  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -29,57 +34,122 @@ import numpy as np  # noqa: E402
 from fracture.atomic import atomic_write_bytes, png_bytes  # noqa: E402
 from fracture.errors import InputError  # noqa: E402
 from viewer import annotate  # noqa: E402
+from viewer.annotate import Bar  # noqa: E402
 from viewer.data import RunData  # noqa: E402
 from viewer.media import Video, check_size  # noqa: E402
 from viewer.looks import (  # noqa: E402
-    FIELD_CMAPS, SURFACE_CMAPS, View, animation_pose, apply_camera, iteration_caption, iteration_pose,
-    prepare, set_frame, set_slice, set_surface, show_context, show_material, slice_pose, slice_title,
+    FIELD_CMAPS, SURFACE_CMAPS, CameraPose, View, animation_pose, apply_camera, iteration_caption,
+    iteration_pose, set_cutaway, set_frame, set_slice, set_surface, show_context, show_material, show_pieces,
+    show_stage, slice_pose, slice_title, spread, turntable_poses,
 )
 
-WHAT = ("slices", "iterations", "animation")
-# Views with a colour bar frame their content in this share of the width (the bar is at the right).
-BAR_ROOM = 0.8
+WHAT = ("slices", "iterations", "animation", "compare", "turntable")
+DEFAULT_WHAT = ("slices", "iterations", "animation")
+MAX_SUPERSAMPLE = 4
+
+
+@dataclass(frozen=True)
+class Timing:
+    """How long a video shows each image: ``fps`` video frames a second, each image ``image_seconds``
+    (None: the view's own pace), the last image held ``hold`` seconds more."""
+
+    fps: int = 24
+    image_seconds: float | None = None
+    hold: float = 1.0
+
+    def check(self) -> "Timing":
+        if not 1 <= self.fps <= 240:
+            raise InputError(f"fps must be in 1..240, got {self.fps}")
+        if self.image_seconds is not None and not 0 < self.image_seconds <= 60:
+            raise InputError(f"seconds per image must be in (0, 60], got {self.image_seconds}")
+        if not 0 <= self.hold <= 60:
+            raise InputError(f"hold must be in 0..60 seconds, got {self.hold}")
+        return self
+
+    def repeats(self, default_seconds: float) -> tuple[int, int]:
+        """Video frames per image and extra frames of the last image."""
+        s = self.image_seconds if self.image_seconds is not None else default_seconds
+        return max(1, round(s * self.fps)), round(self.hold * self.fps)
 
 
 class Renderer:
-    """One offscreen renderer of a fixed size, reused for every image."""
+    """One offscreen renderer of the figure's size (times the supersampling), reused for every image."""
 
-    def __init__(self, width: int, height: int):
+    def __init__(self, width: int, height: int, supersample: int = 1, transparent: bool = False):
         from open3d.visualization import rendering
 
-        self.width, self.height = width, height
-        self.r = rendering.OffscreenRenderer(width, height)
+        if not isinstance(supersample, (int, np.integer)) or not 1 <= supersample <= MAX_SUPERSAMPLE:
+            raise InputError(f"supersample must be an integer in 1..{MAX_SUPERSAMPLE}, got {supersample!r}")
+        if max(width, height) * supersample > 8192:
+            raise InputError(f"{width}x{height} supersampled {supersample} times is over 8192 pixels; "
+                             "expected a smaller size or less supersampling")
+        self.width, self.height, self.k, self.transparent = width, height, int(supersample), transparent
+        self.r = rendering.OffscreenRenderer(width * self.k, height * self.k)
         self.r.scene.view.set_post_processing(True)
 
     @property
     def scene(self):
         return self.r.scene
 
-    def image(self, pose) -> np.ndarray:
-        apply_camera(self.r.scene.camera, pose, self.width, self.height)
-        return np.asarray(self.r.render_to_image())[..., :3].copy()
+    def _shot(self) -> np.ndarray:
+        return np.asarray(self.r.render_to_image())[..., :3].astype(np.float32)
+
+    def image(self, pose: CameraPose, picture: tuple[int, int] | None = None) -> np.ndarray:
+        """The scene from ``pose`` at the figure's size (RGBA when transparent), the pose's view
+        filling the upper-left ``picture`` (default: all of it)."""
+        k = self.k
+        pic = (picture[0] * k, picture[1] * k) if picture is not None else None
+        apply_camera(self.r.scene.camera, pose, self.width * k, self.height * k, pic)
+        on_white = self._shot()
+        if self.transparent:  # the same picture on black gives the coverage
+            from viewer.looks import BACKGROUND
+
+            self.scene.set_background([0.0, 0.0, 0.0, 1.0])
+            on_black = self._shot()
+            self.scene.set_background(list(BACKGROUND))
+            return annotate.shrink(annotate.matte(on_white, on_black), k)
+        return annotate.shrink(on_white, k)
+
+    def figure(self, pose: CameraPose, bar: Bar | None = None, caption: str | None = None,
+               width: int | None = None) -> np.ndarray:
+        """A figure ``width`` wide (default: the renderer's): the picture from ``pose`` with its colour
+        bar strip and caption strip."""
+        lay = annotate.layout(width or self.width, self.height, bar is not None, caption is not None)
+        img = self.image(pose, lay.picture)
+        pw, ph = lay.picture
+        return annotate.compose(img[:ph, :pw], lay, bar, caption)
+
+    def picture_aspect(self, bar: bool, caption: bool, width: int | None = None) -> float:
+        w, h = annotate.layout(width or self.width, self.height, bar, caption).picture
+        return w / h
 
 
 def _progress(total: int, desc: str, quiet: bool):
     from tqdm import tqdm
 
-    return tqdm(total=total, desc=desc, disable=quiet, leave=False)
+    return tqdm(total=total, desc=desc, disable=quiet, unit="image")
 
 
-def _write_sequence(images, out: Path, stem: str, width: int, height: int, fps: int, total: int,
-                    quiet: bool) -> list[Path]:
-    """PNG per image (``stem_NNNN.png``) and ``stem.mp4``; returns the files written."""
+def _write_sequence(images, out: Path, stem: str, width: int, height: int, timing: Timing, pace: float,
+                    total: int, quiet: bool, pngs: bool = True) -> list[Path]:
+    """PNG per image (``stem_NNNN.png``, unless ``pngs`` is off) and ``stem.mp4``; returns the files written."""
     out.mkdir(parents=True, exist_ok=True)
-    video = Video(out / f"{stem}.mp4", width, height, fps)
-    written = []
+    each, hold = timing.repeats(pace)
+    video = Video(out / f"{stem}.mp4", width, height, timing.fps)
+    written, last = [], None
     try:
         with _progress(total, stem, quiet) as bar:
             for i, img in enumerate(images):
-                p = out / f"{stem}_{i:04d}.png"
-                atomic_write_bytes(p, png_bytes(img))
-                written.append(p)
-                video.add(img)
+                if pngs:
+                    p = out / f"{stem}_{i:04d}.png"
+                    atomic_write_bytes(p, png_bytes(img))
+                    written.append(p)
+                last = annotate.over_white(img)
+                for _ in range(each):
+                    video.add(last)
                 bar.update()
+        for _ in range(hold if last is not None else 0):
+            video.add(last)
     except BaseException:
         video.abort()
         raise
@@ -87,30 +157,60 @@ def _write_sequence(images, out: Path, stem: str, width: int, height: int, fps: 
     return written + [video.path]
 
 
-def slice_images(run: RunData, view: View, renderer: Renderer, offsets):
-    pose = slice_pose(run, view, BAR_ROOM * renderer.width / renderer.height)
+def slice_images(run: RunData, view: View, renderer: Renderer, offsets, pose: CameraPose | None = None):
+    pose = pose or slice_pose(run, view, renderer.picture_aspect(True, True))
     show_material(renderer.scene, run)
     for off in offsets:
         v = replace(view, offset=float(off))
-        rng = set_slice(renderer.scene, run, v)
-        yield annotate.with_colorbar(renderer.image(pose), FIELD_CMAPS[v.field], rng, slice_title(v))
+        lo, hi = set_slice(renderer.scene, run, v)
+        set_cutaway(renderer.scene, run, v)
+        yield renderer.figure(pose, Bar(FIELD_CMAPS[v.field], lo, hi, v.field), slice_title(v))
 
 
-def iteration_images(run: RunData, view: View, renderer: Renderer):
-    pose = iteration_pose(run, BAR_ROOM * renderer.width / renderer.height)
-    rng = run.surface_range(view.color_by)
+def iteration_images(run: RunData, view: View, renderer: Renderer, pose: CameraPose | None = None):
+    pose = pose or iteration_pose(run, renderer.picture_aspect(True, True))
+    lo, hi = run.surface_range(view.color_by)
     show_context(renderer.scene, run)
     for k in range(len(run.iterations)):
-        set_surface(renderer.scene, run.iteration(k), view.color_by, rng)
-        yield annotate.with_colorbar(renderer.image(pose), SURFACE_CMAPS[view.color_by], rng, view.color_by,
-                                     iteration_caption(run, k))
+        set_surface(renderer.scene, run.iteration(k), view.color_by, (lo, hi))
+        yield renderer.figure(pose, Bar(SURFACE_CMAPS[view.color_by], lo, hi, view.color_by),
+                              iteration_caption(run, k))
 
 
-def render(run_dir: str | Path, what: str | tuple[str, ...] = WHAT, out: str | Path | None = None,
-           width: int = 1280, height: int = 720, fps: int = 10, view: View | None = None,
-           quiet: bool = False) -> dict[str, list[Path]]:
+def animation_images(run: RunData, view: View, renderer: Renderer, pose: CameraPose | None = None):
+    pose = pose or animation_pose(run, renderer.picture_aspect(False, True))
+    show_stage(renderer.scene, run)
+    n = run.n_frames
+    for t in range(n):
+        set_frame(renderer.scene, run, replace(view, frame=t))
+        yield renderer.figure(pose, caption=f"frame {t + 1} / {n}")
+
+
+def compare_image(run: RunData, t: int, renderer: Renderer, pose: CameraPose | None = None) -> np.ndarray:
+    """The coarse pieces and the refined pieces at frame ``t``, side by side, one camera, each half
+    of the renderer's width."""
+    coarse, refined = run.coarse_pieces(t), run.pieces_at(t)
+    P = np.concatenate([spread(p.V, 2000) for p in coarse + refined])
+    half = renderer.width // 2 // 2 * 2
+    pose = pose or animation_pose(run, renderer.picture_aspect(False, True, half), P)
+    halves = []
+    for name, pieces in (("coarse", coarse), ("refined", refined)):
+        show_stage(renderer.scene, run)
+        show_pieces(renderer.scene, pieces)
+        triangles = sum(len(p.F) for p in pieces)
+        halves.append(renderer.figure(pose, caption=f"{name}: {len(pieces)} pieces, {triangles:,} triangles, "
+                                                    f"frame {t + 1}", width=half))
+    return annotate.side_by_side(halves)
+
+
+def render(run_dir: str | Path, what: str | tuple[str, ...] = DEFAULT_WHAT, out: str | Path | None = None,
+           width: int = 1280, height: int = 720, timing: Timing | None = None, view: View | None = None,
+           quiet: bool = False, supersample: int = 1, transparent: bool = False,
+           turntable_seconds: float = 6.0, cameras: dict | None = None) -> dict[str, list[Path]]:
     """Render PNGs and an MP4 of each view ``what`` of a run into ``out`` (default ``RUN_DIR/renders``),
-    reading the run and making the renderer once.
+    reading the run and making the renderer once. ``cameras`` (per panel name, as in a view file)
+    replace the fitted cameras: ``material`` for slices, ``iterations``, ``animation`` for the
+    animation and the comparison.
 
     Returns the files written, per view.
     """
@@ -119,33 +219,55 @@ def render(run_dir: str | Path, what: str | tuple[str, ...] = WHAT, out: str | P
         if w not in WHAT:
             raise InputError(f"--what must be one of {', '.join(WHAT)}, got {w!r}")
     check_size(width, height)
+    timing = (timing or Timing()).check()
+    if not 0.5 <= turntable_seconds <= 600:
+        raise InputError(f"turntable seconds must be in 0.5..600, got {turntable_seconds}")
     run = RunData(run_dir)
     view = (view or View()).check(run)
+    needs_animation = [w for w in whats if w in ("animation", "compare", "turntable")]
+    if needs_animation and not run.has_animation:
+        raise InputError(f"{run.dir}: no animation to render for {', '.join(needs_animation)} "
+                         f"(the run stopped before the animate stage)")
+    if "iterations" in whats and not run.has_iterations:
+        raise InputError(f"{run.dir}: no iterations to render (run the refine stage with refine.snapshots: true)")
+    if run.has_animation and not 0 <= view.frame < run.n_frames:
+        raise InputError(f"frame must be in 1..{run.n_frames}, got {view.frame + 1}")
     out = Path(out) if out is not None else run.dir / "renders"
-    renderer = Renderer(width, height)
-    return {w: _render_one(run, w, view, renderer, out, fps, quiet) for w in whats}
+    cameras = cameras or {}
+    renderer = Renderer(width, height, supersample, transparent)  # one per process: Open3D's are not independent
+    done = {}
+    for w in whats:
+        if w == "compare":
+            img = compare_image(run, view.frame, renderer, cameras.get("animation"))
+            out.mkdir(parents=True, exist_ok=True)
+            p = out / f"compare_frame_{view.frame + 1:04d}.png"
+            atomic_write_bytes(p, png_bytes(img))
+            done[w] = [p]
+        else:
+            done[w] = _render_one(run, w, view, renderer, out, timing, quiet, turntable_seconds, cameras)
+    return done
 
 
-def _render_one(run: RunData, what: str, view: View, renderer: Renderer, out: Path, fps: int,
-                quiet: bool) -> list[Path]:
+def _render_one(run: RunData, what: str, view: View, renderer: Renderer, out: Path, timing: Timing,
+                quiet: bool, turntable_seconds: float, cameras: dict) -> list[Path]:
     width, height = renderer.width, renderer.height
     if what == "slices":
         offsets = np.linspace(0.1, 0.9, 9)
-        return _write_sequence(slice_images(run, view, renderer, offsets), out, f"slices_{view.field}_{view.axis}",
-                               width, height, fps, len(offsets), quiet)
+        return _write_sequence(slice_images(run, view, renderer, offsets, cameras.get("material")), out, f"slices_{view.field}_{view.axis}",
+                               width, height, timing, 0.4, len(offsets), quiet)
     if what == "iterations":
-        if not run.has_iterations:
-            raise InputError(f"{run.dir}: no iterations to render (run the refine stage with refine.snapshots: true)")
-        return _write_sequence(iteration_images(run, view, renderer), out, f"iterations_{view.color_by}",
-                               width, height, fps, len(run.iterations), quiet)
-    if not run.has_animation:
-        raise InputError(f"{run.dir}: no animation to render (the run stopped before the animate stage)")
-    pose = animation_pose(run, width / height)
-    n = run.n_frames
-    prepare(renderer.scene)
-
-    def frames():
-        for t in range(n):
-            set_frame(renderer.scene, run, replace(view, frame=t))
-            yield annotate.caption(renderer.image(pose), f"frame {t + 1} / {n}")
-    return _write_sequence(frames(), out, "animation", width, height, fps, n, quiet)
+        return _write_sequence(iteration_images(run, view, renderer, cameras.get("iterations")), out, f"iterations_{view.color_by}",
+                               width, height, timing, 0.25, len(run.iterations), quiet)
+    if what == "animation":
+        return _write_sequence(animation_images(run, view, renderer, cameras.get("animation")), out, "animation", width, height, timing,
+                               1.0 / float(run.config.get("animate", {}).get("fps", 24.0)), run.n_frames, quiet)
+    # turntable: every video frame a new camera, the pieces still
+    n = max(2, round(turntable_seconds * timing.fps))
+    pieces = run.pieces_at(view.frame)
+    show_stage(renderer.scene, run)
+    show_pieces(renderer.scene, pieces)
+    poses = turntable_poses(run, pieces, renderer.picture_aspect(False, True), n)
+    caption = f"frame {view.frame + 1} / {run.n_frames}, {len(pieces)} pieces"
+    images = (renderer.figure(p, caption=caption) for p in poses)
+    return _write_sequence(images, out, f"turntable_frame_{view.frame + 1:04d}", width, height,
+                           replace(timing, hold=0.0), 1.0 / timing.fps, n, quiet, pngs=False)
