@@ -121,6 +121,10 @@ def _main(argv: list[str] | None) -> int:
         runner.stages_until(args.until)  # reject a bad --until before any work
         out = args.out if args.out is not None else Path("runs") / cfg["name"]
         done = runner.run(cfg, out, until=args.until, force=args.force, progress=not args.quiet)
+        if not args.quiet:
+            import json
+
+            print(runner.timing_table(json.loads((done / "manifest.json").read_text(encoding="utf-8"))))
         print(f"run complete: {done}  (manifest: {done / 'manifest.json'})")
         return 0
     except (ConfigError, InputError, ResultError, StageError, RunDirectoryExists, OutputError) as exc:

@@ -126,9 +126,9 @@ SCHEMA: dict[str, Any] = {
         "offset": Param(0.5, lo=0.0, hi=1.0, doc="material panel: the slice's relative position"),
         "level": Param(0, "int", lo=0, hi=64, doc="material panel: psi's pyramid level (0 = finest)"),
         "cutaway": Param(False, "bool", doc="material panel: the pieces below the slice"),
-        "iteration": Param(-1, "int", lo=-1, hi=10**6, doc="iterations panel: the iteration shown (-1: the last)"),
+        "iteration": Param(-1, "int", lo=-1, doc="iterations panel: the iteration shown (-1: the last)"),
         "color_by": Param("psi", "str", choices=("psi", "speed"), doc="iterations panel: the surface's colours"),
-        "frame": Param(1, "int", lo=1, hi=10**6, doc="animation panel: the frame shown (1 = the first)"),
+        "frame": Param(1, "int", lo=1, doc="animation panel: the frame shown (1 = the first)"),
         "overlay_coarse": Param(False, "bool", doc="animation panel: the coarse pieces see-through"),
         "cameras": {panel: {
             "eye": Param(None, "vec3", nullable=True, doc=f"{panel} panel: the camera's position; null: fitted"),

@@ -109,8 +109,22 @@ class RunContext:
         self.path(rel).write_bytes(png_bytes(image))
 
     def bar(self, total: int, desc: str):
-        """A progress bar (silent when progress is off)."""
-        return tqdm(total=total, desc=desc, disable=not self.progress, leave=False, file=sys.stderr)
+        """A progress bar (silent when progress is off); it stays on screen when done."""
+        return tqdm(total=total, desc=desc, disable=not self.progress, leave=True, file=sys.stderr)
+
+    def say(self, text: str) -> None:
+        """A line for the user among the progress bars (silent when progress is off)."""
+        if self.progress:
+            tqdm.write(text, file=sys.stderr)
+
+
+def timing_table(manifest: dict) -> str:
+    """Seconds per stage and in all, as a small table (printed at the end of a run)."""
+    stages = manifest.get("stages", {})
+    width = max([len(n) for n in stages] + [5])
+    rows = [f"  {name:<{width}}  {info['seconds']:8.1f} s" for name, info in stages.items()]
+    total = sum(info["seconds"] for info in stages.values())
+    return "\n".join(["time per stage:", *rows, f"  {'total':<{width}}  {total:8.1f} s"])
 
 
 def _sha256(path: Path) -> str:

@@ -116,6 +116,66 @@ def navigate(app, v, out) -> dict:
     return res
 
 
+def views(app, v, out) -> dict:
+    """The layout at the default size, Save view read back by a second window, Save config, the
+    comparison and transparent screenshots, then the window left idle under app.run()."""
+    from dataclasses import asdict
+
+    from viewer.state import read_view_file
+
+    res: dict = {}
+    r = v.window.content_rect
+    res["content"] = [r.x, r.y, r.width, r.height]
+    widgets = {"fps": v.export_fps, "hold": v.export_hold, "supersample": v.export_scale,
+               "transparent": v.transparent_box, "shot": v.shot_box, "play": v.play_fps, "status": v.status,
+               "cutaway": v.cutaway_box, "preset": v.preset_box, "link": v.link_box,
+               "slice_bar_high": v.slice_bar[3], "surface_bar_high": v.surface_bar[3], "colour": v.color_box}
+    res["frames"] = {k: [w.frame.x, w.frame.y, w.frame.width, w.frame.height] for k, w in widgets.items()}
+    res["side"] = [v.side.frame.x, v.side.frame.y, v.side.frame.width, v.side.frame.height]
+    res["panels"] = [[c.frame.x, c.frame.y, c.frame.width, c.frame.height] for c in v.controls]
+    # a view of its own: another slice, iteration, frame and dragged cameras
+    v.set_offset(0.3)
+    v.set_iteration(1)
+    v.set_frame(v.run.n_frames - 1)
+    v.set_cutaway(True)
+    origin = _origin(app, v)
+    for i in range(3):
+        _drag(app, v, origin, i, dx=-90, dy=30)
+    saved_view = v.save_view(out / "view.yaml")
+    saved_config = v.save_config(out / "config_saved.yaml")
+    res["cameras_first"], first = _cameras(v), asdict(v.view)
+    # elsewhere, then back to the saved view (as `fracref view --camera FILE` starts)
+    v.reset_view()
+    v.set_offset(0.7)
+    v.set_iteration(0)
+    v.set_cutaway(False)
+    v.show_view(read_view_file(saved_view))
+    for _ in range(10):
+        app.run_one_tick()
+    res["cameras_second"] = _cameras(v)
+    res["views"] = [first, asdict(v.view)]
+    res["saved_config"] = str(saved_config)
+    v.export_w.int_value, v.export_h.int_value = 640, 360
+    res["compare"] = str(v.screenshot("coarse vs refined", out / "compare.png"))
+    v.transparent_box.checked = True
+    v.export_scale.int_value = 2
+    res["transparent"] = str(v.screenshot("animation", out / "transparent.png"))
+    v.transparent_box.checked = False
+    v.export_scale.int_value = 1
+    res["errors"] = list(v.errors)
+
+    # idle: the real event loop with nothing to do, its CPU time against the wall clock's
+    def measure():
+        time.sleep(3.0)  # the loop settles
+        c0, w0 = time.process_time(), time.monotonic()
+        time.sleep(4.0)
+        res["idle_cpu"] = (time.process_time() - c0) / (time.monotonic() - w0)
+        app.post_to_main_thread(v.window, app.quit)
+    threading.Thread(target=measure, daemon=True).start()
+    app.run()  # the window is gone when it returns
+    return res
+
+
 def _fresh(app, v) -> list:
     v.reset_view()
     for _ in range(3):
@@ -134,7 +194,7 @@ def main() -> None:
 
     app = gui.Application.instance
     app.initialize()
-    v = Viewer(RunData(run_dir), 1500, 800)
+    v = Viewer(RunData(run_dir), *((1800, 900) if scenario == "views" else (1500, 800)))  # views: the default size
     for _ in range(10):
         app.run_one_tick()
     out.mkdir(parents=True, exist_ok=True)
@@ -170,6 +230,8 @@ def main() -> None:
         result["frames"] = v.run.n_frames
     elif scenario == "navigate":
         result.update(navigate(app, v, out))
+    elif scenario == "views":
+        result.update(views(app, v, out))
     elif scenario == "rerun":
         before = v.run.iteration(len(v.run.iterations) - 1)
         v.edits["psi.stress_weight"].double_value = 0.0

@@ -180,6 +180,10 @@ def test_camera_fits_every_point_in_the_picture():
         x = np.abs(C @ right) / depth / (tan_v * aspect)
         y = np.abs(C @ pose.up) / depth / tan_v
         assert max(x.max(), y.max()) == pytest.approx(1.0, abs=1e-9)  # tight: the farthest point on the edge
+        # centred: on the tight axis the points reach both edges
+        sx, sy = (C @ right) / depth / (tan_v * aspect), (C @ pose.up) / depth / tan_v
+        tight = sx if x.max() > y.max() else sy
+        assert tight.min() == pytest.approx(-1.0, abs=1e-9) and tight.max() == pytest.approx(1.0, abs=1e-9)
 
 
 def test_run_data_and_view_say_what_is_wrong(run_dir, tmp_path):
@@ -259,3 +263,139 @@ def test_exports_are_numbered_and_never_overwrite(tmp_path):
     (tmp_path / "renders" / "screenshot_all_panels_002.png").write_bytes(b"2")
     assert numbered(tmp_path / "renders", "screenshot_all_panels", ".png").name == "screenshot_all_panels_003.png"
     assert numbered(tmp_path / "renders", "window_animation", ".mp4").name == "window_animation_001.mp4"
+
+
+def test_saved_views_come_back_and_the_window_fits_its_default_size(run_dir, tmp_path):
+    from viewer.state import read_view_file
+
+    res = _window("views", run_dir, tmp_path)
+    assert res["errors"] == []
+    # every control inside the window (at the default 1800 x 900 they ran off the right edge)
+    x0, y0, w, h = res["content"]
+    for name, (x, y, fw, fh) in res["frames"].items():
+        assert fw > 0 and fh > 0 and x >= x0 and x + fw <= x0 + w, (name, (x, y, fw, fh), w)
+        if name not in ("shot", "transparent"):  # the side panel scrolls; the rest must be in the window
+            assert y + fh <= y0 + h, (name, (x, y, fw, fh), h)
+    for x, y, fw, fh in res["panels"]:
+        assert y + fh <= y0 + h
+    # a second window opened on the saved view shows the same things from the same cameras
+    first, second = res["views"]
+    assert first == second and first["offset"] == pytest.approx(0.3) and first["cutaway"]
+    assert np.allclose(res["cameras_second"], res["cameras_first"], rtol=1e-5, atol=1e-6)
+    # Save config holds the same view, and the pipeline reads the file
+    cfg = load_config(res["saved_config"])
+    state = read_view_file(res["saved_config"])
+    assert cfg["view"]["iteration"] == first["iteration"] and state.view == read_view_file(tmp_path / "view.yaml").view
+    compare = read(res["compare"])
+    assert compare.shape == (360, 640, 3)
+    assert content_share(compare[:, :320]) > 0.05 and content_share(compare[:, 320:]) > 0.05
+    import imageio.v3 as iio
+
+    rgba = iio.imread(res["transparent"])
+    assert rgba.shape == (360, 640, 4) and rgba[2, 2, 3] == 0 and (rgba[..., 3] == 255).mean() > 0.05
+    # idle, the window uses next to no processor time
+    assert res["idle_cpu"] < 0.25, res["idle_cpu"]
+
+
+def test_compare_turntable_and_transparent_supersampled_figures(run_dir, tmp_path):
+    import imageio.v3 as iio
+
+    r = _cli(["render", str(run_dir), "--what", "compare", "--what", "turntable", "--out", str(tmp_path),
+              "--width", "320", "--height", "240", "--fps", "4", "--turntable-seconds", "2", "--transparent",
+              "--supersample", "2", "--quiet"])
+    assert r.returncode == 0, r.stderr[-2000:]
+    n = RunData_frames(run_dir)
+    rgba = iio.imread(tmp_path / f"compare_frame_{n:04d}.png")  # the last frame by default: the pieces apart
+    assert rgba.shape == (240, 320, 4)
+    alpha = rgba[..., 3]
+    assert alpha[0, 0] == 0 and alpha[0, -1] == 0  # the sky is transparent, the ground and pieces are not
+    left, right = rgba[:200, :160, :3].astype(int), rgba[:200, 160:, :3].astype(int)
+    assert (alpha[:200, :160] == 255).mean() > 0.1 and (alpha[:200, 160:] == 255).mean() > 0.1
+    assert np.abs(left - right).mean() > 0.5  # coarse and refined pieces differ
+    assert video_frames(tmp_path / f"turntable_frame_{n:04d}.mp4") == (8, (320, 240))
+
+
+def RunData_frames(run_dir) -> int:
+    from viewer.data import RunData
+
+    return RunData(run_dir).n_frames
+
+
+def test_render_follows_a_view_file_and_refuses_a_bad_one(run_dir, tmp_path):
+    from viewer.data import RunData
+    from viewer.looks import CameraPose, View, scene_box
+    from viewer.state import ViewState, write_view_file
+
+    lo, hi = scene_box(RunData(run_dir))
+    c = 0.5 * (lo + hi)
+    below = CameraPose(c, c - np.array([0.0, 0.0, 3.0]) * np.linalg.norm(hi - lo), np.array([0.0, 1.0, 0.0]), 30.0)
+    write_view_file(tmp_path / "view.yaml", ViewState(View(field="zeta", offset=0.3), {"material": below}))
+    args = ["--what", "slices", "--width", "320", "--height", "240", "--quiet"]
+    r = _cli(["render", str(run_dir), "--out", str(tmp_path / "a"), *args])
+    assert r.returncode == 0, r.stderr[-2000:]
+    r = _cli(["render", str(run_dir), "--out", str(tmp_path / "b"), "--camera", str(tmp_path / "view.yaml"), *args])
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert [p.name for p in sorted((tmp_path / "b").glob("*.png"))][0] == "slices_zeta_z_0000.png"
+    a, b = read(tmp_path / "a" / "slices_psi_z_0004.png"), read(tmp_path / "b" / "slices_zeta_z_0004.png")
+    assert np.abs(a.astype(int) - b.astype(int)).mean() > 1.0
+    (tmp_path / "bad.yaml").write_text("view:\n  cameras:\n    material: {eye: [0, 0, 1], center: [0, 0, 1], "
+                                       "up: [0, 1, 0]}\n")
+    r = _cli(["render", str(run_dir), "--out", str(tmp_path / "c"), "--camera", str(tmp_path / "bad.yaml"), *args])
+    assert r.returncode == 2 and "bad.yaml" in r.stderr and "view.cameras.material" in r.stderr
+    assert "same point" in r.stderr and "Traceback" not in r.stderr
+    assert not (tmp_path / "c").exists()
+
+
+def test_view_sections_round_trip_and_name_what_is_wrong(tmp_path):
+    from fracture.errors import ConfigError
+    from viewer.looks import CameraPose, View
+    from viewer.state import ViewState, from_section, read_view_file, write_view_file
+
+    pose = CameraPose(np.array([0.1, 0.2, 0.3]), np.array([1.0, 2.0, 3.0]), np.array([0.0, 0.0, 1.0]), 40.0)
+    state = ViewState(View(field="xi", axis="x", offset=0.25, level=2, iteration=3, color_by="speed", frame=4,
+                           overlay_coarse=True, cutaway=True), {"material": None, "iterations": pose, "animation": None})
+    back = read_view_file(write_view_file(tmp_path / "v.yaml", state))
+    assert back.view == state.view and back.cameras["material"] is None
+    got = back.cameras["iterations"]
+    assert np.allclose(got.eye, pose.eye) and np.allclose(got.center, pose.center) and got.fov == 40.0
+    assert from_section(None, "x").view == View(iteration=-1)
+    cases = [({"field": "strength"}, "view.field", "one of 'psi', 'zeta', 'xi'"),
+             ({"cameras": {"animation": {"eye": [0, 0, 1]}}}, "view.cameras.animation", "all three"),
+             ({"cameras": {"animation": {"eye": [0, 0, 1], "center": [0, 0, 0], "up": [0, 0, 2]}}},
+              "view.cameras.animation.up", "along the viewing direction"),
+             ({"frame": 0}, "view.frame", ">= 1"), ({"zoom": 2}, "view.zoom", "unknown key")]
+    for section, key, words in cases:
+        with pytest.raises(ConfigError) as e:
+            from_section(section, "my_view.yaml")
+        assert key in str(e.value) and words in str(e.value) and "my_view.yaml" in str(e.value)
+    (tmp_path / "plain.yaml").write_text("seed: 3\n")
+    with pytest.raises(ConfigError, match="no view: section"):
+        read_view_file(tmp_path / "plain.yaml")
+
+
+def test_figures_keep_the_picture_whole_and_label_the_bar_with_round_ticks():
+    from viewer import annotate
+    from viewer.annotate import Bar, nice_ticks
+
+    rng = np.random.default_rng(1)
+    for lo, hi in ((-0.27, 0.43), (0.0, 1.0), (3.1, 3.15), (-1200.0, 80.0), (0.2, 0.2000001)):
+        t = nice_ticks(lo, hi)
+        assert 2 <= len(t) <= 6 and t.min() >= lo - 1e-12 and t.max() <= hi + 1e-12
+        step = np.diff(t)
+        assert np.allclose(step, step[0])
+        mantissa = step[0] / 10 ** np.floor(np.log10(step[0]) + 1e-6)
+        assert any(np.isclose(mantissa, m, rtol=1e-4) for m in (1, 2, 2.5, 5))
+        labels = annotate.tick_labels(t)
+        assert len(set(labels)) == len(labels) and "-0" not in labels  # each tick its own label
+    for width, height, bar, caption in ((640, 360, True, True), (320, 240, False, True), (1280, 720, True, False)):
+        lay = annotate.layout(width, height, bar, caption)
+        pw, ph = lay.picture
+        for channels in (3, 4):
+            picture = rng.integers(0, 256, (ph, pw, channels), dtype=np.uint8)
+            fig = annotate.compose(picture, lay, Bar("viridis", -0.27, 0.43, "psi") if bar else None,
+                                   "iteration 12 / 40, 123,456 triangles, E = 0.7005" if caption else None)
+            assert fig.shape == (height, width, channels)
+            assert (fig[:ph, :pw] == picture).all()  # nothing drawn over the picture
+            if bar:
+                strip = fig[:ph, pw:, :3].astype(int)
+                assert (np.abs(strip - 255).sum(axis=2) > 0).mean() > 0.02  # the bar and its ticks are there

@@ -74,11 +74,18 @@ def nice_ticks(lo: float, hi: float, most: int = 6) -> np.ndarray:
     step = next(m * mag for m in (1, 2, 2.5, 5, 10) if m * mag >= raw)
     first = np.ceil(lo / step - 1e-9) * step
     ticks = np.arange(first, hi + 1e-9 * step, step)
-    return np.round(ticks / step) * step  # no -0.0 or 0.30000000000000004
+    return np.round(ticks / step) * step + 0.0  # no 0.30000000000000004, no -0.0
 
 
-def _fmt(x: float) -> str:
-    return f"{x:.3g}" if abs(x) > 1e-12 else "0"
+def tick_labels(ticks: np.ndarray) -> list[str]:
+    """The ticks written with as many significant digits as tell them apart (at least three)."""
+    t = np.asarray(ticks, np.float64)
+    step = np.min(np.diff(t)) if len(t) > 1 else 0.0
+    big = np.max(np.abs(t)) if len(t) else 0.0
+    digits = 3 if step <= 0 or big <= 0 else max(3, int(np.ceil(np.log10(big / step))) + 1)
+    if big >= 1:  # whole numbers written out (1000, not 1e+03)
+        digits = max(digits, int(np.floor(np.log10(big))) + 1)
+    return [f"{x:.{digits}g}" if x != 0 else "0" for x in t]
 
 
 def _fit(draw: ImageDraw.ImageDraw, text: str, size: int, room: int) -> tuple[str, ImageFont.FreeTypeFont]:
@@ -120,10 +127,11 @@ def compose(picture: np.ndarray, lay: Layout, bar: Bar | None = None, caption: s
         d.text((x0, y0 - t), name, fill=ink, font=f, anchor="lb")
         f = _font(max(10, int(0.85 * t)))
         span = bar.hi - bar.lo
-        for v in nice_ticks(bar.lo, bar.hi):
+        ticks = nice_ticks(bar.lo, bar.hi)
+        for v, text in zip(ticks, tick_labels(ticks)):
             y = y0 + bar_h - 1 - round((v - bar.lo) / span * (bar_h - 1)) if span > 0 else y0 + bar_h // 2
             d.line([x0 + bar_w, y, x0 + bar_w + t // 2, y], fill=ink, width=max(1, t // 12))
-            d.text((x0 + bar_w + (2 * t) // 3, y), _fmt(v), fill=ink, font=f, anchor="lm")
+            d.text((x0 + bar_w + (2 * t) // 3, y), text, fill=ink, font=f, anchor="lm")
     if caption and lay.caption_height:
         text, f = _fit(d, caption, t, lay.width - 2 * t)
         d.text((t, ph + lay.caption_height // 2), text, fill=ink, font=f, anchor="lm")

@@ -153,11 +153,7 @@ class Viewer:
         self.rerun_dirs: list[Path] = []
         self.errors: list[str] = []
         self.live_updates = 0  # iterations of a re-run drawn while it ran
-        self.load(run, keep_view=True)
-        for i, panel in enumerate(PANELS):
-            if start.cameras.get(panel) is not None:
-                self.poses[i], self._fitted[i] = start.cameras[panel], True
-                self._place(i, start.cameras[panel])
+        self.show_view(start)
 
     # -- layout ---------------------------------------------------------------------------
 
@@ -272,7 +268,7 @@ class Viewer:
             if head != section:
                 section = head
                 group = gui.CollapsableVert(head, 0.2 * em, gui.Margins(0.5 * em, 0, 0, 0))
-                group.set_is_open(head in ("run", "psi", "refine"))
+                group.set_is_open(head in ("run", "psi"))  # the rest folded: Export stays in sight
                 side.add_child(group)
             row = gui.Horiz(0.5 * em)
             edit = gui.NumberEdit(gui.NumberEdit.INT if isinstance(value, int) else gui.NumberEdit.DOUBLE)
@@ -305,7 +301,7 @@ class Viewer:
         side.add_child(grid)
 
         side.add_child(gui.Label("Export"))
-        grid = gui.VGrid(4, 0.25 * em)
+        grid = gui.VGrid(2, 0.25 * em)
         self.export_w, self.export_h = _number_edit(1280, 64, 8192), _number_edit(720, 64, 8192)
         self.export_fps = _number_edit(24, 1, 240)
         self.export_scale = _number_edit(1, 1, 4)
@@ -886,6 +882,17 @@ class Viewer:
         self._job = job()
 
     # -- views ---------------------------------------------------------------------------------------
+
+    def show_view(self, state: ViewState) -> None:
+        """Show what ``state`` says (a view file's or a config's ``view:`` section): its slice,
+        iteration, frame and colours, and its cameras (a panel without one is fitted)."""
+        self.view = state.view
+        self.load(self.run, keep_view=True)
+        for i, panel in enumerate(PANELS):
+            if state.cameras.get(panel) is not None:
+                self.poses[i], self._fitted[i] = state.cameras[panel], True
+                self._place(i, state.cameras[panel])
+                self.scenes[i].force_redraw()
 
     def view_state(self) -> ViewState:
         """What the panels show and every panel's camera as the user left it."""

@@ -241,7 +241,7 @@ def slice_title(view: View) -> str:
 def iteration_caption(run: RunData, k: int) -> str:
     """``iteration k / n, m triangles, E = e`` (iteration 0: the coarse surface)."""
     e = run.energy[k] if 0 <= k < len(run.energy) else None
-    return (f"iteration {k} / {len(run.iterations) - 1}, {len(run.iterations[k]['faces'])} triangles"
+    return (f"iteration {k} / {len(run.iterations) - 1}, {len(run.iterations[k]['faces']):,} triangles"
             + (f", E = {e:.4g}" if e is not None else ""))
 
 

@@ -10,6 +10,7 @@ when the package's sources differ from those it was compiled from.
 from __future__ import annotations
 
 import hashlib
+import re
 from pathlib import Path
 
 
@@ -36,6 +37,20 @@ def clear_stale_numba_cache(package: Path) -> bool:
     except OSError:  # a read-only install: numba caches elsewhere or not at all
         return False
     return bool(stale)
+
+
+def kernels_cached(package: Path | None = None) -> bool:
+    """Whether numba's cache holds the compiled (not inlined) functions of ``package`` (default: this
+    one), i.e. whether a run starts at once rather than after a one-off compilation. A run compiles
+    only what it calls, so most of them (not every one) is enough."""
+    package = package or Path(__file__).parent
+    want = set()
+    for p in package.glob("*.py"):
+        for m in re.finditer(r"@numba\.njit\(([^)]*)\)\s*\ndef (\w+)", p.read_text(encoding="utf-8")):
+            if "cache=True" in m.group(1) and "inline" not in m.group(1):
+                want.add(f"{p.stem}.{m.group(2)}")
+    have = {f.name.split("-")[0] for f in (package / "__pycache__").glob("*.nbi")}
+    return len(want & have) >= 0.5 * len(want)
 
 
 clear_stale_numba_cache(Path(__file__).parent)

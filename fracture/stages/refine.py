@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from fracture.plyio import write_ply
+from fracture.refine import kernels_cached
 from fracture.refine.collide import self_intersections
 from fracture.refine.engine import RefineParams, Refiner
 from fracture.refine.mesh import RefineMesh
@@ -44,6 +45,8 @@ def refine_stage(ctx: RunContext) -> None:
     snaps = Snapshots() if ctx.cfg["refine"]["snapshots"] else None
     if snaps is not None:
         snaps.add(refiner)
+    if not kernels_cached():
+        ctx.say("refine: compiling the refinement kernels (once per install, about a minute) ...")
     with ctx.bar(params.iterations, "refine") as bar:  # an upper bound: stages end when they settle
         def progress(it, r):
             if snaps is not None:
@@ -54,6 +57,9 @@ def refine_stage(ctx: RunContext) -> None:
                 ctx.tell("iteration", iteration=it + 1, positions=r.mesh.V.copy(), faces=r.mesh.F.copy(),
                          psi=r.psi.copy(), speed=np.linalg.norm(r.velocity, axis=1), energy=r.log.functional[-1])
         log = refiner.run(progress)
+        bar.total = bar.n  # the surface settled: the bar ends full at the iterations it took
+        bar.set_postfix_str(f"{len(mesh.F)} triangles, {log.stop}")
+        bar.refresh()
     ctx.products["refined"] = mesh
 
     write_ply(ctx.path("refined/fracture_surface.ply"), mesh.V, mesh.F,
