@@ -240,3 +240,35 @@ def test_a_cut_with_mixed_face_orientations_makes_the_same_pieces(tmp_path):
     assert any("25 faces turned" in n for n in manifest["notes"])
     assert volumes["mixed.obj"] == pytest.approx(volumes["cube_cut.obj"], abs=1e-6)
     assert volumes["mixed.obj"][0] > 0.4
+
+
+def test_a_run_shows_full_bars_and_ends_with_its_seconds_per_stage(tmp_path, small_config):
+    out = tmp_path / "run"
+    res = fracref("run", small_config, "--out", out)
+    assert res.returncode == 0, res.stderr
+    manifest = json.loads((out / "manifest.json").read_text())
+    lines = res.stderr.replace("\r", "\n").splitlines()
+    for name in manifest["stages"]:
+        bars = [ln for ln in lines if ln.startswith(f"{name}")]
+        if bars:  # the stage has a bar: its last state is full
+            assert "100%" in bars[-1], (name, bars[-1])
+    table = res.stdout.split("time per stage:")[1]
+    for name, info in manifest["stages"].items():
+        assert f"{name}" in table and f"{info['seconds']:.1f} s" in table
+    assert "total" in table
+
+
+def test_a_cold_kernel_cache_is_told_apart_from_a_warm_one(tmp_path):
+    from fracture.refine import kernels_cached
+
+    pkg = tmp_path / "kernels"
+    (pkg / "__pycache__").mkdir(parents=True)
+    (pkg / "a.py").write_text("import numba\n\n@numba.njit(cache=True)\ndef one(x):\n    return x\n\n"
+                              "@numba.njit(cache=True, inline='always')\ndef helper(x):\n    return x\n\n"
+                              "@numba.njit(cache=True)\ndef two(x):\n    return x\n")
+    assert not kernels_cached(pkg)  # nothing compiled yet: a first run compiles
+    (pkg / "__pycache__" / "a.one-4.py311.nbi").write_bytes(b"")
+    assert kernels_cached(pkg)  # most of it (a run compiles only what it calls)
+    (pkg / "__pycache__" / "a.one-4.py311.nbi").unlink()
+    (pkg / "__pycache__" / "b.one-4.py311.nbi").write_bytes(b"")  # another module's
+    assert not kernels_cached(pkg)
