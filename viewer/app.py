@@ -645,7 +645,7 @@ class Viewer:
 
     def save_config(self, path: str | Path | None = None) -> Path | None:
         """Write the on-screen parameters as YAML (checked by loading it back); returns the file."""
-        path = Path(path) if path is not None else self.run.dir.parent / f"{self.run.name}_viewer.yaml"
+        path = Path(path) if path is not None else numbered(self.run.dir.parent, f"{self.run.name}_viewer", ".yaml")
         try:
             atomic_write_text(path, self.checked_config()[1])
         except (ConfigError, OSError) as exc:

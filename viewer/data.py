@@ -175,6 +175,23 @@ class RunData:
             out.append((used, local.reshape(-1, 3)))
         return out
 
+    @cached_property
+    def motion_points(self) -> np.ndarray:
+        """Each coarse piece's convex hull corners at every frame: they hold the pieces' extremes
+        throughout the animation (the pieces move rigidly or nearly)."""
+        from scipy.spatial import ConvexHull, QhullError
+
+        V, out = self.exterior.V, [np.zeros((0, 3))]
+        for c, (used, _) in enumerate(self.coarse_parts):
+            if len(used):
+                P = V[used]
+                try:
+                    P = P[ConvexHull(P).vertices]
+                except (QhullError, ValueError):  # flat or too few points: all of them
+                    pass
+                out.append(self.coarse_animation.trajectories(c, P).reshape(-1, 3))
+        return np.concatenate(out)
+
     def coarse_pieces(self, t: int) -> list[Surface]:
         """The coarse exterior's triangles of each component, moved to frame ``t``."""
         V, anim = self.exterior.V, self.coarse_animation

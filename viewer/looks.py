@@ -450,15 +450,10 @@ def scene_box(run: RunData) -> tuple[np.ndarray, np.ndarray]:
     return V.min(axis=0), V.max(axis=0)
 
 
-def animation_points(run: RunData, per_piece: int = 400) -> np.ndarray:
-    """Points of every coarse piece in every frame (a spread of each piece's vertices, moved):
-    the camera frames the whole motion and does not chase the pieces."""
-    V = run.exterior.V
-    out = [spread(V)]
-    for c, (used, _) in enumerate(run.coarse_parts):
-        if len(used):
-            out.append(run.coarse_animation.trajectories(c, spread(V[used], per_piece)).reshape(-1, 3))
-    return np.concatenate(out)
+def animation_points(run: RunData) -> np.ndarray:
+    """Points of every coarse piece in every frame (:attr:`RunData.motion_points`, with a spread of
+    the object at rest): the camera frames the whole motion and does not chase the pieces."""
+    return np.concatenate([spread(run.exterior.V), run.motion_points])
 
 
 def animation_box(run: RunData) -> tuple[np.ndarray, np.ndarray]:
