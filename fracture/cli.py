@@ -70,10 +70,11 @@ def _parser() -> argparse.ArgumentParser:
     d.add_argument("--field", help="slices: psi, zeta or xi")
     d.add_argument("--axis", help="slices: normal axis x, y or z")
     d.add_argument("--level", type=int, help="slices: psi's pyramid level (0 = finest)")
-    d.add_argument("--cutaway", action="store_true", default=None, help="slices: the pieces below the slice")
+    d.add_argument("--cutaway", action=argparse.BooleanOptionalAction, help="slices: the pieces below the slice")
     d.add_argument("--color-by", help="iterations: psi or speed")
-    d.add_argument("--frame", type=int, help="compare, turntable: the frame (1 = the first; default: the last)")
-    d.add_argument("--overlay-coarse", action="store_true", default=None,
+    d.add_argument("--frame", type=int, help="compare, turntable: the frame (1 = the first; default: the view "
+                   "file's, else the run config's view.frame, and the last when that is 1)")
+    d.add_argument("--overlay-coarse", action=argparse.BooleanOptionalAction,
                    help="animation: draw the coarse pieces too")
     d.add_argument("--quiet", action="store_true", help="no progress bars")
     return p
@@ -164,7 +165,7 @@ def _render(args) -> int:
     whats = tuple(args.what or DEFAULT_WHAT)
     if args.frame is not None:
         view = replace(view, frame=args.frame - 1)
-    elif {"compare", "turntable"} & set(whats) and args.camera is None:
+    elif {"compare", "turntable"} & set(whats) and args.camera is None and view.frame == 0:
         view = replace(view, frame=RunData(args.run_dir).n_frames - 1)  # the pieces apart
     timing = Timing(args.fps, args.image_seconds, args.hold)
     done = render(args.run_dir, whats, args.out, args.width, args.height, timing, view, args.quiet,
@@ -178,7 +179,12 @@ def _render(args) -> int:
 
 
 def _view(args) -> int:
+    from fracture.errors import InputError
     from viewer.app import main as view_main
+
+    for name, value in (("width", args.width), ("height", args.height)):
+        if not 480 <= value <= 16384:
+            raise InputError(f"view: --{name} must be a window size in pixels in 480..16384, got {value}")
 
     return view_main(args.target, args.out, args.width, args.height, args.camera)
 

@@ -151,20 +151,35 @@ def over_white(image: np.ndarray) -> np.ndarray:
     return np.round(image[..., :3] * a + 255.0 * (1 - a)).astype(np.uint8)
 
 
-def matte(on_white: np.ndarray, on_black: np.ndarray) -> np.ndarray:
-    """RGBA from one picture rendered on white and on black (difference matting): the coverage is
-    one minus their difference, the colour the black one's divided by it."""
-    w, b = on_white.astype(np.float32), on_black.astype(np.float32)
-    alpha = np.clip(1.0 - (w - b).max(axis=2, keepdims=True) / 255.0, 0.0, 1.0)
-    rgb = np.where(alpha > 1e-3, b / np.maximum(alpha, 1e-3), 0.0)
-    return np.concatenate([np.clip(rgb, 0, 255), 255.0 * alpha], axis=2)
+def _to_linear(c: np.ndarray) -> np.ndarray:
+    c = c / 255.0
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
 
 
-def shrink(image: np.ndarray, k: int) -> np.ndarray:
-    """``image`` (float or uint8) ``k`` times smaller, each pixel the mean of a k x k block (supersampling),
-    as uint8."""
-    img = np.asarray(image, np.float32)
-    if k > 1:
-        h, w, c = img.shape
-        img = img.reshape(h // k, k, w // k, k, c).mean(axis=(1, 3))
-    return np.round(img).astype(np.uint8)
+def _to_srgb(c: np.ndarray) -> np.ndarray:
+    c = np.clip(c, 0.0, 1.0)
+    return 255.0 * np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055)
+
+
+def _block_mean(img: np.ndarray, k: int) -> np.ndarray:
+    if k == 1:
+        return img
+    h, w, c = img.shape
+    return img.reshape(h // k, k, w // k, k, c).mean(axis=(1, 3))
+
+
+def finish(on_white: np.ndarray, on_black: np.ndarray | None = None, k: int = 1) -> np.ndarray:
+    """A rendered picture made ``k`` times smaller (each pixel the mean of a k x k block: supersampling)
+    and, given the same picture rendered on black, with its coverage as alpha (difference matting:
+    one minus the two pictures' difference; the colour is the black one's divided by it).
+
+    Both are done in linear light, where the renderer blends: in sRGB values a see-through surface's
+    coverage and an edge's mean colour would come out wrong. RGB or RGBA uint8.
+    """
+    white = _block_mean(_to_linear(np.asarray(on_white, np.float64)), k)
+    if on_black is None:
+        return np.round(_to_srgb(white)).astype(np.uint8)
+    black = _block_mean(_to_linear(np.asarray(on_black, np.float64)), k)
+    alpha = np.clip(1.0 - (white - black).max(axis=2, keepdims=True), 0.0, 1.0)
+    rgb = np.where(alpha > 1e-4, black / np.maximum(alpha, 1e-4), 0.0)
+    return np.round(np.concatenate([_to_srgb(rgb), 255.0 * alpha], axis=2)).astype(np.uint8)

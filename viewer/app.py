@@ -43,7 +43,7 @@ from viewer.looks import (
     iteration_caption, iteration_pose, scene_box, set_cutaway, set_frame, set_frustum, set_slice, set_surface,
     show_context, show_material, show_pieces, show_stage, slice_pose, slice_title,
 )
-from viewer.media import Video, check_size
+from viewer.media import Video, check_size, frame_counts
 from viewer.state import PANELS, ViewState, from_section, write_view_file
 
 PRESETS = ("iso", "front", "side", "top")
@@ -308,7 +308,7 @@ class Viewer:
         self.export_seconds = _number_edit(0.25, 0.01, 60.0)
         self.export_hold = _number_edit(1.0, 0.0, 60.0)
         for label, w in (("width", self.export_w), ("height", self.export_h), ("fps", self.export_fps),
-                         ("supersample", self.export_scale), ("s / image", self.export_seconds),
+                         ("supersample", self.export_scale), ("s / iteration", self.export_seconds),
                          ("hold s", self.export_hold)):
             grid.add_child(gui.Label(label))
             grid.add_child(w)
@@ -768,6 +768,7 @@ class Viewer:
 
         def shot():
             return np.asarray(self.app.render_to_image(sw.scene, width * k, height * k))[..., :3]
+        on_black = None
         try:
             on_white = shot()
             if transparent:
@@ -779,7 +780,7 @@ class Viewer:
         finally:
             cam.set_projection(current.fov, panel_aspect, near, far, rendering.Camera.FovType.Vertical)
             sw.force_redraw()
-        return annotate.shrink(annotate.matte(on_white, on_black) if transparent else on_white, k)
+        return annotate.finish(on_white, on_black, k)
 
     def panel_image(self, i: int, width: int, height: int, caption: str | None = None,
                     transparent: bool | None = None) -> np.ndarray:
@@ -795,11 +796,10 @@ class Viewer:
         if not self.run.has_animation:
             raise InputError("this run has no animation: the coarse and refined pieces are compared in it")
         scene, t = self.scenes[2].scene, self.view.frame
-        half = width // 2 // 2 * 2
         coarse, refined = self.run.coarse_pieces(t), self.run.pieces_at(t)
         figures = []
         try:
-            for name, pieces in (("coarse", coarse), ("refined", refined)):
+            for name, pieces, half in (("coarse", coarse, width // 2), ("refined", refined, width - width // 2)):
                 for c in range(max(len(coarse), len(refined))):
                     for n in (f"piece_{c}", f"piece_{c}_fracture"):
                         if scene.has_geometry(n):
@@ -838,20 +838,26 @@ class Viewer:
     def export_video(self, what: str, path: str | Path | None = None) -> None:
         """An MP4 of the iterations or the animation, one image per window tick (the window stays live);
         each image is shown for the export's seconds per image, the last held for its hold seconds."""
+        if self._job is not None:
+            self.say("a video export is already going; wait for it to finish")
+            return
         try:
             w, h = self._export_size()
             fps = int(self.export_fps.int_value)
-            each = max(1, round(float(self.export_seconds.double_value) * fps))
-            hold = round(float(self.export_hold.double_value) * fps)
             if what == "iterations" and not self.run.has_iterations or what == "animation" and not self.run.has_animation:
                 raise InputError(f"this run has no {what} to export")
+            n = len(self.run.iterations) if what == "iterations" else self.run.n_frames
+            # the animation at its own frame rate; iterations at the chosen seconds per image
+            seconds = (float(self.export_seconds.double_value) if what == "iterations"
+                       else 1.0 / float(self.run.config.get("animate", {}).get("fps", 24.0)))
+            counts = frame_counts(n, seconds, fps)
+            counts[-1] += round(float(self.export_hold.double_value) * fps)
             path = Path(path) if path else numbered(self.run.dir / "renders", f"window_{what}", ".mp4")
             path.parent.mkdir(parents=True, exist_ok=True)
             video = Video(path, w, h, fps)
         except (InputError, OSError) as exc:
             self.report_error("video export failed", exc)
             return
-        n = len(self.run.iterations) if what == "iterations" else self.run.n_frames
         i = 1 if what == "iterations" else 2
         keep = self.view
 
@@ -863,7 +869,7 @@ class Viewer:
                     else:
                         self.set_frame(k)
                     img = self.panel_image(i, w, h, transparent=False)
-                    for _ in range(each + (hold if k == n - 1 else 0)):
+                    for _ in range(counts[k]):
                         video.add(img)
                     self.say(f"video: {k + 1} / {n}")
                     yield

@@ -251,11 +251,6 @@ class RunData:
         """Each piece's triangles, indexing its rows of the transfer (``transfer.piece``)."""
         return [F for _, F, _ in self._piece_files]
 
-    @property
-    def piece_exterior(self) -> list[np.ndarray]:
-        """Per piece, which triangles are on the object's outside (the others are fracture faces)."""
-        return [ext for _, _, ext in self._piece_files]
-
     def pieces_rest(self) -> list[Surface]:
         """The high-resolution pieces in material space (as assembled), with ``exterior`` face flags."""
         return [Surface(V, F, {"exterior": ext}) for V, F, ext in self._piece_files]

@@ -38,7 +38,8 @@ COLOR_BY = tuple(SURFACE_CMAPS)
 
 @dataclass
 class View:
-    """What the panels show; every field is a control of the window and an option of ``fracref render``."""
+    """What the panels show: each field is a control of the window and part of a view file (``view:``);
+    most are also options of ``fracref render``."""
 
     field: str = "psi"
     axis: str = "z"
@@ -356,7 +357,7 @@ def frame_points(P: np.ndarray, aspect: float = 16 / 9, look: np.ndarray | None 
     principal axis, so a slab is seen face-on) and ``up`` the screen's up
     (default: the middle principal axis). The camera turns a little off
     ``look`` (right and down), and its distance is the smallest at which
-    every point is inside both fields of view, times ``margin``; the points are centred in the picture.
+    every point is inside both fields of view narrowed by ``margin``; the points are centred in the picture.
     """
     P = np.asarray(P, np.float64).reshape(-1, 3)
     axes = np.linalg.svd(P - P.mean(axis=0), full_matrices=False)[2] if len(P) >= 3 else np.eye(3)
@@ -374,7 +375,7 @@ def frame_points(P: np.ndarray, aspect: float = 16 / 9, look: np.ndarray | None 
     cam_up = up - (up @ direction) * direction
     cam_up /= np.linalg.norm(cam_up)
     cam_right = np.cross(direction, cam_up)
-    tan_v = np.tan(np.radians(fov) / 2)
+    tan_v = np.tan(np.radians(fov) / 2) / margin  # the points fill the picture less ``margin``
     tan_h = tan_v * aspect
     # The nearest eye (coordinates ex, ey, ez along cam_right, cam_up, direction) with every point
     # inside the four planes of the view: |x - ex| <= tan * (ez - z) for each point, and the points
@@ -385,7 +386,7 @@ def frame_points(P: np.ndarray, aspect: float = 16 / 9, look: np.ndarray | None 
     ex, ey = 0.5 * (a - b), 0.5 * (c - d)
     ez = max(0.5 * (a + b) / tan_h, 0.5 * (c + d) / tan_v)
     zc = 0.5 * (z.min() + z.max())  # the point looked at: the points' middle depth
-    ez = zc + margin * max(ez - zc, 1e-9) + 1e-9
+    ez = max(ez, zc + 1e-9)
     center = ex * cam_right + ey * cam_up + zc * direction
     return CameraPose(center, ex * cam_right + ey * cam_up + ez * direction, cam_up, fov)
 

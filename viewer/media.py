@@ -51,3 +51,13 @@ class Video:
             self.writer.close()
         finally:
             self.tmp.unlink(missing_ok=True)
+
+
+def frame_counts(n: int, seconds: float, fps: int) -> list[int]:
+    """Video frames for each of ``n`` images shown ``seconds`` each at ``fps``: image i ends at frame
+    round((i + 1) * seconds * fps), so the pace is kept on average (an animation plays at its own
+    rate whatever the video's; images are dropped when they come faster than the video's frames).
+    The first image is always shown."""
+    r = seconds * fps
+    ends = [max(1, round((i + 1) * r)) for i in range(n)]
+    return [b - a for a, b in zip([0] + ends[:-1], ends)]

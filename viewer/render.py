@@ -26,6 +26,8 @@ import os
 if not os.environ.get("DISPLAY"):
     os.environ.setdefault("EGL_PLATFORM", "surfaceless")
 
+import shutil  # noqa: E402
+import tempfile  # noqa: E402
 from dataclasses import dataclass, replace  # noqa: E402
 from pathlib import Path  # noqa: E402
 
@@ -36,7 +38,7 @@ from fracture.errors import InputError  # noqa: E402
 from viewer import annotate  # noqa: E402
 from viewer.annotate import Bar  # noqa: E402
 from viewer.data import RunData  # noqa: E402
-from viewer.media import Video, check_size  # noqa: E402
+from viewer.media import Video, check_size, frame_counts  # noqa: E402
 from viewer.looks import (  # noqa: E402
     FIELD_CMAPS, SURFACE_CMAPS, CameraPose, View, animation_pose, apply_camera, iteration_caption,
     iteration_pose, set_cutaway, set_frame, set_slice, set_surface, show_context, show_material, show_pieces,
@@ -66,10 +68,13 @@ class Timing:
             raise InputError(f"hold must be in 0..60 seconds, got {self.hold}")
         return self
 
-    def repeats(self, default_seconds: float) -> tuple[int, int]:
-        """Video frames per image and extra frames of the last image."""
+    def counts(self, n: int, default_seconds: float) -> list[int]:
+        """Video frames of each of ``n`` images, the last one's hold included."""
         s = self.image_seconds if self.image_seconds is not None else default_seconds
-        return max(1, round(s * self.fps)), round(self.hold * self.fps)
+        counts = frame_counts(n, s, self.fps)
+        if counts:
+            counts[-1] += round(self.hold * self.fps)
+        return counts
 
 
 class Renderer:
@@ -101,14 +106,14 @@ class Renderer:
         pic = (picture[0] * k, picture[1] * k) if picture is not None else None
         apply_camera(self.r.scene.camera, pose, self.width * k, self.height * k, pic)
         on_white = self._shot()
+        on_black = None
         if self.transparent:  # the same picture on black gives the coverage
             from viewer.looks import BACKGROUND
 
             self.scene.set_background([0.0, 0.0, 0.0, 1.0])
             on_black = self._shot()
             self.scene.set_background(list(BACKGROUND))
-            return annotate.shrink(annotate.matte(on_white, on_black), k)
-        return annotate.shrink(on_white, k)
+        return annotate.finish(on_white, on_black, k)
 
     def figure(self, pose: CameraPose, bar: Bar | None = None, caption: str | None = None,
                width: int | None = None) -> np.ndarray:
@@ -132,29 +137,51 @@ def _progress(total: int, desc: str, quiet: bool):
 
 def _write_sequence(images, out: Path, stem: str, width: int, height: int, timing: Timing, pace: float,
                     total: int, quiet: bool, pngs: bool = True) -> list[Path]:
-    """PNG per image (``stem_NNNN.png``, unless ``pngs`` is off) and ``stem.mp4``; returns the files written."""
+    """PNG per image (``stem_NNNN.png``, unless ``pngs`` is off) and ``stem.mp4``, each image shown for
+    the timing's seconds (``pace`` by default); returns the files written.
+
+    Everything is written into a staging folder first and moved into ``out`` once complete, replacing
+    that sequence's files of an earlier render (and only them): an interrupted render leaves ``out``
+    as it was.
+    """
     out.mkdir(parents=True, exist_ok=True)
-    each, hold = timing.repeats(pace)
-    video = Video(out / f"{stem}.mp4", width, height, timing.fps)
-    written, last = [], None
+    stage = Path(tempfile.mkdtemp(prefix=f".{stem}.partial-", dir=out))
     try:
-        with _progress(total, stem, quiet) as bar:
-            for i, img in enumerate(images):
-                if pngs:
-                    p = out / f"{stem}_{i:04d}.png"
-                    atomic_write_bytes(p, png_bytes(img))
-                    written.append(p)
-                last = annotate.over_white(img)
-                for _ in range(each):
-                    video.add(last)
-                bar.update()
-        for _ in range(hold if last is not None else 0):
-            video.add(last)
-    except BaseException:
-        video.abort()
-        raise
-    video.close()
-    return written + [video.path]
+        counts = timing.counts(total, pace)
+        video = Video(stage / f"{stem}.mp4", width, height, timing.fps)
+        written = []
+        try:
+            with _progress(total, stem, quiet) as bar:
+                for i, img in enumerate(images):
+                    if pngs:
+                        p = stage / f"{stem}_{i:04d}.png"
+                        p.write_bytes(png_bytes(img))
+                        written.append(p)
+                    frame = annotate.over_white(img)
+                    for _ in range(counts[i] if i < len(counts) else 1):
+                        video.add(frame)
+                    bar.update()
+        except BaseException:
+            video.abort()
+            raise
+        video.close()
+        return _publish(stage, out, stem, written + [video.path])
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
+
+
+def _publish(stage: Path, out: Path, stem: str, files: list[Path]) -> list[Path]:
+    """Move a finished sequence's ``files`` from ``stage`` into ``out``; files of an earlier render of
+    the same sequence that this one does not have (more iterations, say) are removed."""
+    names = {f.name for f in files}
+    for old in list(out.glob(f"{stem}_[0-9][0-9][0-9][0-9].png")) + [out / f"{stem}.mp4"]:
+        if old.name not in names:
+            old.unlink(missing_ok=True)
+    moved = []
+    for f in files:
+        os.replace(f, out / f.name)
+        moved.append(out / f.name)
+    return moved
 
 
 def slice_images(run: RunData, view: View, renderer: Renderer, offsets, pose: CameraPose | None = None):
@@ -191,10 +218,10 @@ def compare_image(run: RunData, t: int, renderer: Renderer, pose: CameraPose | N
     of the renderer's width."""
     coarse, refined = run.coarse_pieces(t), run.pieces_at(t)
     P = np.concatenate([spread(p.V, 2000) for p in coarse + refined])
-    half = renderer.width // 2 // 2 * 2
-    pose = pose or animation_pose(run, renderer.picture_aspect(False, True, half), P)
+    widths = (renderer.width // 2, renderer.width - renderer.width // 2)
+    pose = pose or animation_pose(run, renderer.picture_aspect(False, True, widths[0]), P)
     halves = []
-    for name, pieces in (("coarse", coarse), ("refined", refined)):
+    for name, pieces, half in (("coarse", coarse, widths[0]), ("refined", refined, widths[1])):
         show_stage(renderer.scene, run)
         show_pieces(renderer.scene, pieces)
         triangles = sum(len(p.F) for p in pieces)
@@ -207,8 +234,9 @@ def render(run_dir: str | Path, what: str | tuple[str, ...] = DEFAULT_WHAT, out:
            width: int = 1280, height: int = 720, timing: Timing | None = None, view: View | None = None,
            quiet: bool = False, supersample: int = 1, transparent: bool = False,
            turntable_seconds: float = 6.0, cameras: dict | None = None) -> dict[str, list[Path]]:
-    """Render PNGs and an MP4 of each view ``what`` of a run into ``out`` (default ``RUN_DIR/renders``),
-    reading the run and making the renderer once. ``cameras`` (per panel name, as in a view file)
+    """Render each view ``what`` of a run into ``out`` (default ``RUN_DIR/renders``): PNGs and an MP4
+    (slices, iterations, animation), a PNG (compare) or an MP4 (turntable), reading the run and
+    making the renderer once. ``cameras`` (per panel name, as in a view file)
     replace the fitted cameras: ``material`` for slices, ``iterations``, ``animation`` for the
     animation and the comparison.
 
@@ -230,7 +258,7 @@ def render(run_dir: str | Path, what: str | tuple[str, ...] = DEFAULT_WHAT, out:
                          f"(the run stopped before the animate stage)")
     if "iterations" in whats and not run.has_iterations:
         raise InputError(f"{run.dir}: no iterations to render (run the refine stage with refine.snapshots: true)")
-    if run.has_animation and not 0 <= view.frame < run.n_frames:
+    if {"compare", "turntable"} & set(whats) and not 0 <= view.frame < run.n_frames:
         raise InputError(f"frame must be in 1..{run.n_frames}, got {view.frame + 1}")
     out = Path(out) if out is not None else run.dir / "renders"
     cameras = cameras or {}
@@ -270,4 +298,4 @@ def _render_one(run: RunData, what: str, view: View, renderer: Renderer, out: Pa
     caption = f"frame {view.frame + 1} / {run.n_frames}, {len(pieces)} pieces"
     images = (renderer.figure(p, caption=caption) for p in poses)
     return _write_sequence(images, out, f"turntable_frame_{view.frame + 1:04d}", width, height,
-                           replace(timing, hold=0.0), 1.0 / timing.fps, n, quiet, pngs=False)
+                           replace(timing, hold=0.0, image_seconds=None), 1.0 / timing.fps, n, quiet, pngs=False)

@@ -18,7 +18,7 @@ import yaml
 from fracture.atomic import atomic_write_text
 from fracture.config import SCHEMA, read_yaml
 from fracture.errors import ConfigError
-from fracture.schema import validate, schema_defaults
+from fracture.schema import validate
 from viewer.looks import CameraPose, View
 
 PANELS = ("material", "iterations", "animation")
@@ -51,7 +51,7 @@ def _list(x) -> list[float]:
 
 def from_section(section: dict | None, where: str) -> ViewState:
     """A config's ``view:`` section (validated; defaults for what it leaves out) as a :class:`ViewState`."""
-    section = validate(section or {}, SCHEMA["view"], lambda key: where, prefix="view")
+    section = validate({} if section is None else section, SCHEMA["view"], lambda key: where, prefix="view")
     view = View(**{k: section[k] for k in ("field", "axis", "offset", "level", "cutaway", "iteration", "color_by",
                                           "overlay_coarse")}, frame=section["frame"] - 1)
     cameras = {}
@@ -92,7 +92,3 @@ def write_view_file(path: str | Path, state: ViewState) -> Path:
     text += yaml.safe_dump({"view": state.to_section()}, sort_keys=False, default_flow_style=None, width=100)
     atomic_write_text(path, text)
     return path
-
-
-def default_section() -> dict:
-    return schema_defaults(SCHEMA["view"])
