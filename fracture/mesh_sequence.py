@@ -38,38 +38,44 @@ class MeshFrame:
     V : (n, 3) float
     polygons : list of list of (k,) int arrays
         ``polygons[p]`` are the faces of piece ``p``.
+    face_piece : (m,) int or None
+        For a PLY (which has no objects): each face's piece, in file order.
     """
 
     path: Path
     names: list[str]
     V: np.ndarray
     polygons: list[list[np.ndarray]]
+    face_piece: np.ndarray | None = None  # PLY: each face's piece, in file order (found once per sequence)
 
     def piece_vertices(self, p: int) -> np.ndarray:
         """Indices of the vertices used by piece ``p`` (sorted)."""
         return np.unique(np.concatenate(self.polygons[p]))
 
 
-def _read_ply_pieces(path: Path) -> MeshFrame:
+def _read_ply_pieces(path: Path, face_piece: np.ndarray | None = None) -> MeshFrame:
     """A PLY frame (ASCII or binary, any polygon sizes, as Blender writes it) read with plyfile.
 
     PLY has no objects: the pieces are the connected components of its faces, joined
-    where their open boundaries close each other (:func:`join_open_shells`).
+    where their open boundaries close each other (:func:`join_open_shells`). Given the
+    rest pose's ``face_piece`` (every frame has the same faces), they are taken from it.
     """
     V, polys = read_ply_polygons(path)
     if not polys:
         return MeshFrame(path, [], V.reshape(-1, 3), [])
-    n = len(V)
-    flat = np.concatenate(polys)
-    first = np.repeat(np.array([f[0] for f in polys]), [len(f) for f in polys])
-    A = coo_matrix((np.ones(len(flat)), (first, flat)), shape=(n, n))
-    _, label = connected_components(A, directed=False)
-    face_label = join_open_shells(V, polys, label[[f[0] for f in polys]])
-    # connected_components numbers components by their lowest vertex, which
-    # is the "order of the first vertex" rule; keep only labels with faces.
-    labels = np.unique(face_label)
-    pieces = [[f for f, lab in zip(polys, face_label) if lab == want] for want in labels]
-    return MeshFrame(path, [f"piece_{i:03d}" for i in range(len(labels))], V, pieces)
+    if face_piece is None or len(face_piece) != len(polys):
+        n = len(V)
+        flat = np.concatenate(polys)
+        first = np.repeat(np.array([f[0] for f in polys]), [len(f) for f in polys])
+        A = coo_matrix((np.ones(len(flat)), (first, flat)), shape=(n, n))
+        _, label = connected_components(A, directed=False)
+        # connected_components numbers components by their lowest vertex, which
+        # is the "order of the first vertex" rule; keep only labels with faces.
+        face_piece = np.unique(join_open_shells(V, polys, label[[f[0] for f in polys]]), return_inverse=True)[1]
+    order = np.argsort(face_piece, kind="stable")
+    ends = np.cumsum(np.bincount(face_piece))[:-1]
+    pieces = [[polys[i] for i in group] for group in np.split(order, ends)]
+    return MeshFrame(path, [f"piece_{i:03d}" for i in range(len(pieces))], V, pieces, face_piece)
 
 
 def join_open_shells(V: np.ndarray, polys: list[np.ndarray], face_label: np.ndarray) -> np.ndarray:
@@ -142,8 +148,9 @@ def join_open_shells(V: np.ndarray, polys: list[np.ndarray], face_label: np.ndar
     return root[face_label]
 
 
-def read_frame(path: str | Path) -> MeshFrame:
-    """Read one frame file and check it is not empty and finite."""
+def read_frame(path: str | Path, rest: MeshFrame | None = None) -> MeshFrame:
+    """Read one frame file and check it is not empty and finite (a PLY's pieces as in ``rest``, the
+    sequence's first frame, when given)."""
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: frame file not found")
@@ -153,7 +160,7 @@ def read_frame(path: str | Path) -> MeshFrame:
     if suffix == ".obj":
         frame = MeshFrame(path, *read_obj_objects(path))
     elif suffix == ".ply":
-        frame = _read_ply_pieces(path)
+        frame = _read_ply_pieces(path, rest.face_piece if rest is not None else None)
     else:
         raise InputError(f"{path}: unsupported frame format {path.suffix!r}, expected .obj or .ply")
     if len(frame.V) == 0 or not frame.names:
@@ -233,7 +240,7 @@ def read_sequence(directory: str | Path, pattern: str = "*.obj") -> list[MeshFra
     frames = [read_frame(paths[0])]
     rest = frames[0]
     for number, path in enumerate(paths[1:], 2):
-        frame = read_frame(path)
+        frame = read_frame(path, rest)
         where = f"{path} (frame {number})"
         missing = [n for n in rest.names if n not in frame.names]
         extra = [n for n in frame.names if n not in rest.names]
