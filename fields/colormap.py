@@ -50,6 +50,18 @@ def colormap(values: np.ndarray, name: str = "viridis", vmin: float | None = Non
     return np.stack([np.interp(t, x, anchors[:, c]) for c in range(3)], axis=-1)
 
 
+def srgb_to_linear(c) -> np.ndarray:
+    """sRGB values in [0, 1] (as colour maps give them) in linear light (the IEC 61966-2-1 curve)."""
+    c = np.asarray(c, np.float64)
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def linear_to_srgb(c) -> np.ndarray:
+    """Linear light in [0, 1] as sRGB values (the inverse of :func:`srgb_to_linear`)."""
+    c = np.clip(np.asarray(c, np.float64), 0.0, 1.0)
+    return np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055)
+
+
 def to_uint8(rgb: np.ndarray) -> np.ndarray:
     return np.round(np.clip(rgb, 0.0, 1.0) * 255.0).astype(np.uint8)
 

@@ -155,7 +155,6 @@ def _start_view(run_dir: Path, camera: Path | None):
 def _render(args) -> int:
     from dataclasses import replace
 
-    from viewer.data import RunData
     from viewer.render import DEFAULT_WHAT, Timing, render
 
     state = _start_view(args.run_dir, args.camera)
@@ -166,7 +165,7 @@ def _render(args) -> int:
     if args.frame is not None:
         view = replace(view, frame=args.frame - 1)
     elif {"compare", "turntable"} & set(whats) and args.camera is None and view.frame == 0:
-        view = replace(view, frame=RunData(args.run_dir).n_frames - 1)  # the pieces apart
+        view = replace(view, frame=-1)  # the last: the pieces apart
     timing = Timing(args.fps, args.image_seconds, args.hold)
     done = render(args.run_dir, whats, args.out, args.width, args.height, timing, view, args.quiet,
                   args.supersample, args.transparent, args.turntable_seconds, state.cameras)

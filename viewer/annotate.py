@@ -14,7 +14,7 @@ from functools import lru_cache
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
-from fields.colormap import colorbar
+from fields.colormap import colorbar, linear_to_srgb, srgb_to_linear
 
 INK = (30, 30, 30)
 PAPER = (255, 255, 255)
@@ -151,16 +151,6 @@ def over_white(image: np.ndarray) -> np.ndarray:
     return np.round(image[..., :3] * a + 255.0 * (1 - a)).astype(np.uint8)
 
 
-def _to_linear(c: np.ndarray) -> np.ndarray:
-    c = c / 255.0
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
-
-
-def _to_srgb(c: np.ndarray) -> np.ndarray:
-    c = np.clip(c, 0.0, 1.0)
-    return 255.0 * np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055)
-
-
 def _block_mean(img: np.ndarray, k: int) -> np.ndarray:
     if k == 1:
         return img
@@ -176,11 +166,11 @@ def finish(on_white: np.ndarray, on_black: np.ndarray | None = None, k: int = 1)
     Both are done in linear light, where the renderer blends: in sRGB values a see-through surface's
     coverage and an edge's mean colour would come out wrong. RGB or RGBA uint8.
     """
-    white = _block_mean(_to_linear(np.asarray(on_white, np.float64)), k)
+    white = _block_mean(srgb_to_linear(np.asarray(on_white, np.float64) / 255.0), k)
     if on_black is None:
-        return np.round(_to_srgb(white)).astype(np.uint8)
-    black = _block_mean(_to_linear(np.asarray(on_black, np.float64)), k)
+        return np.round(255.0 * linear_to_srgb(white)).astype(np.uint8)
+    black = _block_mean(srgb_to_linear(np.asarray(on_black, np.float64) / 255.0), k)
     # the renderer's colour grading leaves white and black a unit or two off: within 1 % is clear or solid
     alpha = np.clip((0.99 - (white - black).max(axis=2, keepdims=True)) / 0.98, 0.0, 1.0)
     rgb = np.where(alpha > 1e-4, black / np.maximum(alpha, 1e-4), 0.0)
-    return np.round(np.concatenate([_to_srgb(rgb), 255.0 * alpha], axis=2)).astype(np.uint8)
+    return np.round(np.concatenate([255.0 * linear_to_srgb(rgb), 255.0 * alpha], axis=2)).astype(np.uint8)

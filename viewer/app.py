@@ -39,8 +39,8 @@ from viewer import annotate
 from viewer.annotate import Bar
 from viewer.data import FIELDS, RunData, Surface
 from viewer.looks import (
-    COLOR_BY, FIELD_CMAPS, SURFACE_CMAPS, CameraPose, animation_box, animation_pose, frame_box, iteration_box,
-    iteration_caption, iteration_pose, scene_box, set_cutaway, set_frame, set_frustum, set_slice, set_surface,
+    COLOR_BY, FIELD_CMAPS, SURFACE_CMAPS, CameraPose, animation_box, capture, animation_pose, frame_box, iteration_box,
+    iteration_caption, iteration_pose, pieces_caption, scene_box, set_cutaway, set_frame, set_frustum, set_slice, set_surface,
     show_context, show_material, show_pieces, show_stage, slice_pose, slice_title,
 )
 from viewer.media import Video, check_size, frame_counts
@@ -751,8 +751,6 @@ class Viewer:
         """Panel ``i`` from its current camera, at ``width x height`` with the panel's view over the
         upper-left ``picture`` part (supersampled and matted as the export settings say). The panel's
         camera is put back exactly as it was (the window is unchanged)."""
-        from viewer.looks import BACKGROUND
-
         k = int(self.export_scale.int_value)
         transparent = self.transparent_box.checked if transparent is None else transparent
         sw = self.scenes[i]
@@ -768,19 +766,11 @@ class Viewer:
 
         def shot():
             return np.asarray(self.app.render_to_image(sw.scene, width * k, height * k))[..., :3]
-        on_black = None
         try:
-            on_white = shot()
-            if transparent:
-                sw.scene.set_background([0.0, 0.0, 0.0, 1.0])
-                try:
-                    on_black = shot()
-                finally:
-                    sw.scene.set_background(list(BACKGROUND))
+            return capture(sw.scene, shot, k, transparent)
         finally:
             cam.set_projection(current.fov, panel_aspect, near, far, rendering.Camera.FovType.Vertical)
             sw.force_redraw()
-        return annotate.finish(on_white, on_black, k)
 
     def panel_image(self, i: int, width: int, height: int, caption: str | None = None,
                     transparent: bool | None = None) -> np.ndarray:
@@ -805,9 +795,7 @@ class Viewer:
                         if scene.has_geometry(n):
                             scene.remove_geometry(n)
                 show_pieces(scene, pieces)
-                triangles = sum(len(p.F) for p in pieces)
-                figures.append(self.panel_image(2, half, height, f"{name}: {len(pieces)} pieces, "
-                                                f"{triangles:,} triangles, frame {t + 1}"))
+                figures.append(self.panel_image(2, half, height, pieces_caption(name, pieces, t)))
         finally:
             self.draw_frame()
         return annotate.side_by_side(figures)

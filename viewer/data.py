@@ -215,6 +215,13 @@ class RunData:
         """The functional the flow minimises at each snapshot, the first (the coarse surface) included."""
         return list(self.manifest.get("stats", {}).get("refine", {}).get("functional", []))
 
+    @cached_property
+    def iteration_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """The box holding the fracture surface at every iteration."""
+        lo = np.min([it["positions"].min(axis=0) for it in self.iterations], axis=0).astype(np.float64)
+        hi = np.max([it["positions"].max(axis=0) for it in self.iterations], axis=0).astype(np.float64)
+        return lo, hi
+
     def iteration(self, k: int) -> Surface:
         its = self.iterations
         if not 0 <= k < len(its):

@@ -16,10 +16,11 @@ import numpy as np
 import open3d as o3d
 from open3d.visualization import rendering
 
-from fields.colormap import colormap
+from fields.colormap import colormap, srgb_to_linear
 from fields.slices import axis_slice
 from fracture.errors import InputError
 from fracture.topology import face_frames, unique_edges
+from viewer.annotate import finish
 from viewer.data import FIELDS, RunData, Surface
 
 # White: the renderer's colour grading maps 1.0 to 248, so the background is given a little above it.
@@ -47,12 +48,13 @@ class View:
     level: int = 0
     iteration: int = -1  # -1: the last
     color_by: str = "psi"
-    frame: int = 0  # 0-based
+    frame: int = 0  # 0-based; -1: the last
     overlay_coarse: bool = False
     cutaway: bool = False
 
     def check(self, run: RunData) -> "View":
-        """This view with ``iteration`` resolved, or an error naming the bad value and what is allowed."""
+        """This view with ``iteration`` and ``frame`` resolved (-1: the last), or an error naming the bad
+        value and what is allowed."""
         if self.field not in FIELDS:
             raise InputError(f"field must be one of {', '.join(FIELDS)}, got {self.field!r}")
         if self.axis not in ("x", "y", "z"):
@@ -66,6 +68,8 @@ class View:
         v = View(**asdict(self))
         if run.has_iterations and v.iteration < 0:
             v.iteration = len(run.iterations) + v.iteration
+        if v.frame < 0 and run.has_animation:
+            v.frame = run.n_frames + v.frame
         return v
 
 
@@ -76,8 +80,7 @@ def linear(rgb) -> np.ndarray:
     """sRGB colours (as colour maps and colour bars give them) in linear light, which is what
     Filament takes for vertex and base colours: it encodes its output to sRGB, so a colour
     given as is would be encoded twice and come out pale."""
-    c = np.asarray(rgb, np.float64)
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+    return srgb_to_linear(rgb)
 
 
 def triangle_mesh(V: np.ndarray, F: np.ndarray, colors: np.ndarray | None = None,
@@ -192,6 +195,20 @@ def prepare(scene: rendering.Open3DScene, sun=(0.3, -0.5, -0.8)) -> None:
                                                         rendering.ColorGrading.ToneMapping.LINEAR))
 
 
+def capture(scene: rendering.Open3DScene, shot, k: int = 1, transparent: bool = False) -> np.ndarray:
+    """A figure's picture of ``scene`` from ``shot()`` (the scene rendered, RGB), ``k`` times smaller
+    (supersampled) and, when ``transparent``, with alpha from a second shot on black
+    (:func:`viewer.annotate.finish`); the background is put back."""
+    on_white, on_black = shot(), None
+    if transparent:
+        scene.set_background([0.0, 0.0, 0.0, 1.0])
+        try:
+            on_black = shot()
+        finally:
+            scene.set_background(list(BACKGROUND))
+    return finish(on_white, on_black, k)
+
+
 def _replace(scene: rendering.Open3DScene, name: str, geometry, material) -> None:
     if scene.has_geometry(name):
         scene.remove_geometry(name)
@@ -289,6 +306,11 @@ def show_pieces(scene: rendering.Open3DScene, pieces: list[Surface], prefix: str
             _replace(scene, f"{prefix}_{c}_fracture", inside, lit((*interior_color(c), 1.0)))
         elif scene.has_geometry(f"{prefix}_{c}_fracture"):
             scene.remove_geometry(f"{prefix}_{c}_fracture")
+
+
+def pieces_caption(name: str, pieces: list[Surface], t: int) -> str:
+    """``coarse: 8 pieces, 50,848 triangles, frame 40`` (a half of the coarse-vs-refined figure)."""
+    return f"{name}: {len(pieces)} pieces, {sum(len(p.F) for p in pieces):,} triangles, frame {t + 1}"
 
 
 def set_frame(scene: rendering.Open3DScene, run: RunData, view: View) -> None:
@@ -442,8 +464,7 @@ def iteration_points(run: RunData) -> np.ndarray:
 
 def iteration_box(run: RunData) -> tuple[np.ndarray, np.ndarray]:
     """The box holding the fracture surface at every iteration."""
-    P = np.concatenate([it["positions"] for it in run.iterations]).astype(np.float64)
-    return P.min(axis=0), P.max(axis=0)
+    return run.iteration_bounds
 
 
 def scene_box(run: RunData) -> tuple[np.ndarray, np.ndarray]:

@@ -40,8 +40,8 @@ from viewer.annotate import Bar  # noqa: E402
 from viewer.data import RunData  # noqa: E402
 from viewer.media import Video, check_size, frame_counts  # noqa: E402
 from viewer.looks import (  # noqa: E402
-    FIELD_CMAPS, SURFACE_CMAPS, CameraPose, View, animation_pose, apply_camera, iteration_caption,
-    iteration_pose, set_cutaway, set_frame, set_slice, set_surface, show_context, show_material, show_pieces,
+    FIELD_CMAPS, SURFACE_CMAPS, CameraPose, View, animation_pose, apply_camera, capture, iteration_caption,
+    iteration_pose, pieces_caption, set_cutaway, set_frame, set_slice, set_surface, show_context, show_material, show_pieces,
     show_stage, slice_pose, slice_title, spread, turntable_poses,
 )
 
@@ -97,7 +97,7 @@ class Renderer:
         return self.r.scene
 
     def _shot(self) -> np.ndarray:
-        return np.asarray(self.r.render_to_image())[..., :3].astype(np.float32)
+        return np.asarray(self.r.render_to_image())[..., :3]
 
     def image(self, pose: CameraPose, picture: tuple[int, int] | None = None) -> np.ndarray:
         """The scene from ``pose`` at the figure's size (RGBA when transparent), the pose's view
@@ -105,15 +105,7 @@ class Renderer:
         k = self.k
         pic = (picture[0] * k, picture[1] * k) if picture is not None else None
         apply_camera(self.r.scene.camera, pose, self.width * k, self.height * k, pic)
-        on_white = self._shot()
-        on_black = None
-        if self.transparent:  # the same picture on black gives the coverage
-            from viewer.looks import BACKGROUND
-
-            self.scene.set_background([0.0, 0.0, 0.0, 1.0])
-            on_black = self._shot()
-            self.scene.set_background(list(BACKGROUND))
-        return annotate.finish(on_white, on_black, k)
+        return capture(self.scene, self._shot, k, self.transparent)
 
     def figure(self, pose: CameraPose, bar: Bar | None = None, caption: str | None = None,
                width: int | None = None) -> np.ndarray:
@@ -158,7 +150,7 @@ def _write_sequence(images, out: Path, stem: str, width: int, height: int, timin
                         p.write_bytes(png_bytes(img))
                         written.append(p)
                     frame = annotate.over_white(img)
-                    for _ in range(counts[i] if i < len(counts) else 1):
+                    for _ in range(counts[i]):
                         video.add(frame)
                     bar.update()
         except BaseException:
@@ -224,9 +216,7 @@ def compare_image(run: RunData, t: int, renderer: Renderer, pose: CameraPose | N
     for name, pieces, half in (("coarse", coarse, widths[0]), ("refined", refined, widths[1])):
         show_stage(renderer.scene, run)
         show_pieces(renderer.scene, pieces)
-        triangles = sum(len(p.F) for p in pieces)
-        halves.append(renderer.figure(pose, caption=f"{name}: {len(pieces)} pieces, {triangles:,} triangles, "
-                                                    f"frame {t + 1}", width=half))
+        halves.append(renderer.figure(pose, caption=pieces_caption(name, pieces, t), width=half))
     return annotate.side_by_side(halves)
 
 
