@@ -2,7 +2,8 @@
 
 Panels: the example wall's crack and the collapsing wall's fracture network
 (their mid-planes), a curved synthetic weak sheet with a flat cut 8 voxels
-off and a tilted one 4 voxels off. Each shows
+off and a tilted one 4 voxels off, and the marble bunny's network (its
+mid-plane). Each shows
 zeta on a slice (dark: weak), where the coarse surface crosses it (white)
 and where the refined one does (red).
 
@@ -31,6 +32,7 @@ from fields.pyramid import StrengthPyramid  # noqa: E402
 from fields.synthetic import weak_sheet_case  # noqa: E402
 from fracture import runner  # noqa: E402
 from fracture.config import load_config  # noqa: E402
+from fracture.exterior import Exterior  # noqa: E402
 from fracture.plyio import read_ply  # noqa: E402
 from fracture.refine.engine import Refiner, RefineParams  # noqa: E402
 from fracture.refine.mesh import RefineMesh  # noqa: E402
@@ -53,11 +55,17 @@ def plane_crossings(V: np.ndarray, F: np.ndarray, axis: int, at: float) -> np.nd
     return np.array(segments).reshape(-1, 2, 3)
 
 
-def panel(ax, grid: Grid, zeta: np.ndarray, axis: int, surfaces, title: str) -> None:
+def panel(ax, grid: Grid, zeta: np.ndarray, axis: int, surfaces, title: str, solid: Exterior | None = None) -> None:
+    """zeta on the grid's middle slice across ``axis`` (outside ``solid``, if given, white) and where the
+    coarse (white) and refined (red) surfaces cross it."""
     k = grid.shape[axis] // 2
     at = grid.lo[axis] + k * grid.spacing[axis]
     u, v = [a for a in range(3) if a != axis]
-    ax.imshow(np.take(zeta, k, axis=axis).T, origin="lower", cmap="viridis", interpolation="bilinear",
+    image = np.take(zeta, k, axis=axis).astype(np.float64)
+    if solid is not None:
+        nodes = np.take(grid.points().reshape(*grid.shape, 3), k, axis=axis)
+        image = np.ma.masked_array(image, ~solid.inside(nodes.reshape(-1, 3)).reshape(image.shape))
+    ax.imshow(image.T, origin="lower", cmap="viridis", interpolation="bilinear",
               extent=[grid.lo[u], grid.hi[u], grid.lo[v], grid.hi[v]])
     for (V, F), colour, width in zip(surfaces, ("white", "red"), (1.6, 1.4)):
         for seg in plane_crossings(V, F, axis, at):
@@ -76,7 +84,8 @@ def sheet_panel(ax, kind: str, offset: float) -> None:
           f"{kind} weak sheet, cut {offset:g} voxels off")
 
 
-def wall_panel(ax, name: str, title: str) -> None:
+def scene_panel(ax, name: str, title: str) -> None:
+    """A config's coarse and refined surfaces on its middle z slice of zeta, masked to the object."""
     cfg = load_config(ROOT / "configs" / f"{name}.yaml", ["refine.snapshots=false"])
     with tempfile.TemporaryDirectory() as tmp:
         out = runner.run(cfg, Path(tmp) / "run", until="refine", progress=False)
@@ -84,7 +93,8 @@ def wall_panel(ax, name: str, title: str) -> None:
         zeta = np.load(out / "fields/zeta.npy")
         coarse = read_ply(out / "coarse/fracture_surface.ply")[:2]
         refined = read_ply(out / "refined/fracture_surface.ply")[:2]
-    panel(ax, grid, zeta, 2, [coarse, refined], title)
+        solid = Exterior(*read_ply(out / "coarse/exterior.ply")[:2])
+    panel(ax, grid, zeta, 2, [coarse, refined], title, solid)
 
 
 def main(argv=None) -> None:
@@ -93,10 +103,11 @@ def main(argv=None) -> None:
     args = ap.parse_args(argv)
     fig = plt.figure(figsize=(13, 6.2), facecolor="white")
     grid = fig.add_gridspec(2, 3, width_ratios=[1, 1, 3])
-    wall_panel(fig.add_subplot(grid[0, :2]), "example", "example wall (one crack), mid-plane")
-    wall_panel(fig.add_subplot(grid[0, 2]), "wall", "collapsing wall (12 pieces), mid-plane")
+    scene_panel(fig.add_subplot(grid[0, :2]), "example", "example wall (one crack), mid-plane")
+    scene_panel(fig.add_subplot(grid[0, 2]), "wall", "collapsing wall (12 pieces), mid-plane")
     sheet_panel(fig.add_subplot(grid[1, 0]), "curved", 8.0)
     sheet_panel(fig.add_subplot(grid[1, 1]), "tilted", 4.0)
+    scene_panel(fig.add_subplot(grid[1, 2]), "bunny", "marble bunny (7 pieces), mid-plane: soft veins dark")
     fig.tight_layout()
     args.out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(args.out, dpi=90)

@@ -105,12 +105,14 @@ def _axis(name: str) -> int:
 def marble(U, frame, rng, *, vein_frequency, vein_direction, turbulence, turbulence_frequency, hard_fraction,
            edge_width, hard_strength, grain_frequency, grain_octaves, grain_contrast, soft_strength,
            soft_frequency, soft_contrast):
-    """Marble: bands of fine hard grains in a smooth soft matrix (Figure 1).
+    """Marble: a hard body of fine grains crossed by smooth, soft veins (Figure 1).
 
     A turbulent sine ``t = sin(2 pi f (u . d) + a * fbm(u))`` splits space
     into a hard region (``t`` above a threshold chosen so that about
-    ``hard_fraction`` of space is hard) filled with high-frequency,
-    multi-octave noise, and a soft region filled with low-frequency noise.
+    ``hard_fraction`` of space is hard; the paper's blue region) filled with
+    high-frequency, multi-octave noise, and soft veins (the white region)
+    filled with low-frequency noise. With most of the stone hard, the veins
+    are thin bands that cracks follow.
     """
     d = np.asarray(vein_direction, np.float64)
     d = d / max(np.linalg.norm(d), tol.zero)
@@ -259,7 +261,7 @@ KINDS: dict[str, tuple[Callable, dict[str, Param]]] = {
         "vein_direction": _p([1.0, 0.35, 0.2], "vec3", doc="direction across the veins"),
         "turbulence": _p(4.0, lo=0.0, hi=50.0, doc="phase distortion of the veins"),
         "turbulence_frequency": _p(2.0, lo=0.0, hi=100.0),
-        "hard_fraction": _p(0.45, lo=0.0, hi=1.0, doc="share of space in the hard, grainy region"),
+        "hard_fraction": _p(0.75, lo=0.0, hi=1.0, doc="share of space in the hard, grainy region (the rest: soft veins)"),
         "edge_width": _p(0.15, lo=1e-3, hi=2.0, doc="softness of the region border (in sine units)"),
         "hard_strength": _p(0.85, **_STRENGTH),
         "grain_frequency": _p(24.0, lo=0.0, hi=400.0, doc="grain lattice frequency in the hard region"),
