@@ -21,8 +21,8 @@ The boolean is exact, but its new vertices are rounded to doubles, and where
 S grazes B the crossing curves of nearly coplanar triangles are so close
 that the rounding leaves sliver triangles crossing their neighbours. When a
 piece cannot be resolved, all pieces are resolved again from positions
-moved by a fixed pseudo-random jitter of :data:`JITTER` of B's diagonal
-(the whole shared array, so neighbouring pieces keep meeting exactly): the
+moved by a fixed pseudo-random jitter of :data:`JITTERS` of B's diagonal,
+the smallest first (the whole shared array, so neighbouring pieces keep meeting exactly): the
 degenerate configurations are gone and so are the slivers. This is a
 numeric perturbation in place of a symbolic one (which the boolean does not
 offer), at a scale far below the mesh's.
@@ -49,8 +49,11 @@ from fracture.refine.mesh import RefineMesh
 from fracture.topology import (barycentric_weights, diagonal, directed_edge_face, directed_edges, signed_volume,
                                weld)
 
-JITTER = 1e-9  # of B's diagonal: the positions' perturbation when a resolution needs one (see the module doc)
-JITTER_TRIES = 3  # jittered attempts (seeds 1, 2, 3) after the plain one
+# Jittered attempts after the plain one (seeds 1, 2, ...), each moving the positions by up to this much of B's
+# diagonal (see the module doc): the smallest first; a larger one clears slivers that a tiny one leaves where
+# S grazes B over many triangles (random cuts through stairs, a Cell Fracture monkey), and is still far below
+# the mesh's scale (a grid cell is about 1e-2 of the diagonal).
+JITTERS = (1e-9, 1e-8, 1e-7, 1e-6)
 
 
 @dataclass
@@ -84,7 +87,8 @@ class Pieces:
         ``None`` for pieces built without the resolution.
     jitter_seed : int
         0, or the seed of the jitter ``V`` was moved by so that every piece
-        could be resolved (see the module doc).
+        could be resolved: seed ``k`` moves by up to ``JITTERS[k - 1]`` of B's
+        diagonal (see the module doc).
     """
 
     V: np.ndarray
@@ -208,8 +212,8 @@ def _resolve_pieces(pieces: Pieces) -> Pieces:
     if not failed:
         return out
     size = diagonal(pieces.V)
-    for seed in range(1, JITTER_TRIES + 1):
-        jitter = np.random.default_rng(seed).uniform(-1.0, 1.0, pieces.V.shape) * (JITTER * size)
+    for seed, relative in enumerate(JITTERS, start=1):
+        jitter = np.random.default_rng(seed).uniform(-1.0, 1.0, pieces.V.shape) * (relative * size)
         moved, failed_moved = _resolve_all(replace(pieces, V=pieces.V + jitter, jitter_seed=seed))
         if len(failed_moved) < len(failed):
             out, failed = moved, failed_moved
