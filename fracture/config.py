@@ -44,8 +44,9 @@ SCHEMA: dict[str, Any] = {
                      "or points, as Blender and Houdini write them)"),
         "glob": Param("*.obj", "str", doc="mesh_sequence: file name pattern of the frames (ordered by the number in their names)"),
         "up_axis": Param("auto", "str", choices=("auto", "x", "y", "z"),
-                         doc="mesh_sequence, usd: the axis pointing up (auto: a USD file's own, else the one the "
-                             "pieces fall down; Blender's OBJ exporter writes y by default); the USD output records it"),
+                         doc="the axis pointing up (auto: a USD file's own, else the one the pieces fall down; "
+                             "Blender's OBJ exporter writes y by default; z for meshes, a still object); the "
+                             "viewer's cameras and the USD output use it"),
         "lattice": Param(2, "int", lo=2, hi=16,
                          doc="mesh_sequence: lattice nodes per axis fitted to a piece that deforms"),
         "separation": Param(1e-3, lo=1e-7, hi=0.5,

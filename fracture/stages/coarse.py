@@ -101,6 +101,7 @@ def coarse_stage(ctx: RunContext) -> None:
             cf = build_scene(inp["scene"], ctx.cfg["seed"], inp["frames"], inp["separation"])
         else:
             cf = coarse_from_meshes(inp)
+            cf.up_axis = "z" if inp["up_axis"] == "auto" else inp["up_axis"]  # a still object: nothing falls
         bar.update()
     if inp["kind"] in ("mesh_sequence", "usd") and inp["exterior"] is not None:
         # a user's high-resolution exterior replaces the pieces' outer faces
