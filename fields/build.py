@@ -85,6 +85,8 @@ def build_fields(
     levels: int = 5,
     sigma: float = 1.0,
     step: Callable[[str], None] | None = None,
+    zeta: np.ndarray | None = None,
+    distance: np.ndarray | None = None,
 ) -> FieldSet:
     """Sample zeta, xi and psi over the object's box and build the pyramid.
 
@@ -109,15 +111,21 @@ def build_fields(
         Pyramid, see :class:`fields.pyramid.StrengthPyramid`.
     step : callable, optional
         Called with the name of each finished step (progress reporting).
+    zeta, distance : (nx, ny, nz) float, optional
+        The strength field and the distances to the fracture surface on this
+        grid, when known already (a cache): they depend neither on the stress
+        nor on psi's weights nor on the pyramid.
     """
     step = step or (lambda name: None)
     obj_lo, obj_hi = exterior_V.min(axis=0), exterior_V.max(axis=0)
     grid = grid_for(exterior_V, resolution, padding)
     X = grid.points()
 
-    zeta = strength_field(X, (obj_lo, obj_hi), layers, seed, normalize).reshape(grid.shape)
+    if zeta is None:
+        zeta = strength_field(X, (obj_lo, obj_hi), layers, seed, normalize).reshape(grid.shape)
     step("strength")
-    distance = distance_to_surface(X, fracture_V, fracture_F).reshape(grid.shape)
+    if distance is None:
+        distance = distance_to_surface(X, fracture_V, fracture_F).reshape(grid.shape)
     diagonal = float(np.linalg.norm(obj_hi - obj_lo))
     xi = stress_from_distance(distance, stress_length * diagonal)
     step("stress")

@@ -83,7 +83,8 @@ def check_run_directory(out: Path, force: bool, marker: str = RUN_MARKER) -> Non
                                  "replaces only an earlier run: choose another --out")
 
 
-def _alive(pid: int) -> bool:
+def process_alive(pid: int) -> bool:
+    """Whether the process ``pid`` still runs (a staging directory named after it is still in use)."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
@@ -102,7 +103,7 @@ def remove_stale_staging(out: Path) -> list[Path]:
     removed = []
     for p in out.parent.glob(f".{glob.escape(out.name)}.partial-*"):
         pid = p.name[len(out.name) + len(".partial-") + 1:].split("-")[0]
-        if p.is_dir() and pid.isdigit() and not _alive(int(pid)):
+        if p.is_dir() and pid.isdigit() and not process_alive(int(pid)):
             shutil.rmtree(p, ignore_errors=True)
             removed.append(p)
     return removed

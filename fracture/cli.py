@@ -1,6 +1,6 @@
 """``fracref``: the command line.
 
-``fracref run CONFIG [--out DIR] [--set key.path=value ...] [--until STAGE] [--force]``
+``fracref run CONFIG [--out DIR] [--set key.path=value ...] [--until STAGE] [--force] [--no-cache]``
 ``fracref config CONFIG [--set ...]`` prints the resolved config.
 ``fracref stages`` lists the stages.
 ``fracref export RUN_DIR --format usd [--out FILE]`` writes a finished run's animated pieces as USD.
@@ -27,6 +27,7 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--until", metavar="STAGE", help="last stage to run")
     r.add_argument("--force", action="store_true", help="replace an existing run directory")
     r.add_argument("--quiet", action="store_true", help="no progress bars")
+    _cache_flags(r)
 
     c = sub.add_parser("config", help="print the resolved config")
     c.add_argument("config", type=Path)
@@ -80,6 +81,21 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
+def _cache_flags(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--no-cache", action="store_true",
+                   help="run every stage (default: reuse the results of stages whose inputs are unchanged)")
+    p.add_argument("--cache-dir", type=Path, metavar="DIR",
+                   help="the stage cache (default: $FRACREF_CACHE_DIR, else ~/.cache/fracref; at most "
+                        "$FRACREF_CACHE_MAX_GB, default 5 GB)")
+
+
+def cache_from_args(args):
+    """The stage cache the flags ask for, or None."""
+    from fracture.cache import StageCache
+
+    return None if args.no_cache else StageCache(args.cache_dir)
+
+
 def _terminate(signum, frame):
     raise SystemExit(128 + signum)  # unwinds like Ctrl-C: a run being staged is removed
 
@@ -121,7 +137,8 @@ def _main(argv: list[str] | None) -> int:
             return 0
         runner.stages_until(args.until)  # reject a bad --until before any work
         out = args.out if args.out is not None else Path("runs") / cfg["name"]
-        done = runner.run(cfg, out, until=args.until, force=args.force, progress=not args.quiet)
+        done = runner.run(cfg, out, until=args.until, force=args.force, progress=not args.quiet,
+                          cache=cache_from_args(args))
         if not args.quiet:
             import json
 

@@ -73,6 +73,9 @@ class RunContext:
     notes: list[str] = field(default_factory=list)
     # called as listener(event, data) by stages that report as they go (the viewer's re-run)
     listener: Any = None
+    # the stage cache (fracture.cache.StageCache) or None, and the keys of the stages run so far
+    cache: Any = None
+    keys: dict[str, str] = field(default_factory=dict)
 
     def tell(self, event: str, **data) -> None:
         if self.listener is not None:
@@ -157,8 +160,44 @@ def stages_until(until: str | None) -> list[str]:
     return stages[: stages.index(until) + 1]
 
 
+def _run_stage(ctx: RunContext, name: str, keep_products: bool, out: Path) -> dict:
+    """Run one stage, or reuse its cached result (:mod:`fracture.cache`); returns what the manifest says of it.
+
+    The stage's result is what it adds to the context: files, products (kept
+    only for stages whose products a later stage reads), counts, statistics
+    and notes.
+    """
+    cache = ctx.cache
+    if cache is None:
+        _REGISTRY[name](ctx)
+        return {}
+    from fracture.cache import stage_key
+
+    previous = next(reversed(ctx.keys.values()), "")
+    key = ctx.keys[name] = stage_key(name, ctx.cfg, previous)
+    entry = cache.load(name, key)
+    products = cache.restore(entry, ctx.dir) if entry is not None else None
+    if products is not None:
+        ctx.files.extend(rel for rel in entry.files if rel not in ctx.files)
+        ctx.products.update(products)
+        ctx.counts.update(entry.meta["counts"])
+        ctx.stats.update(entry.meta["stats"])
+        ctx.notes.extend(entry.meta["notes"])
+        ctx.say(f"{name}: reused from the cache ({entry.path}; made by {entry.meta['run']})")
+        return {"cache": "reused", "cache_entry": str(entry.path), "made_by": entry.meta["run"]}
+    n_files, n_notes = len(ctx.files), len(ctx.notes)
+    products, counts, stats = dict(ctx.products), dict(ctx.counts), dict(ctx.stats)
+    _REGISTRY[name](ctx)
+    changed = lambda new, old: {k: v for k, v in new.items() if k not in old or old[k] is not v}  # noqa: E731
+    meta = dict(counts=changed(ctx.counts, counts), stats=changed(ctx.stats, stats), notes=ctx.notes[n_notes:],
+                run=str(out))
+    stored = cache.store(name, key, ctx.dir, ctx.files[n_files:],
+                         changed(ctx.products, products) if keep_products else {}, meta)
+    return {"cache": "stored" if stored is not None else "not stored (the cache cannot be written)"}
+
+
 def run(cfg: dict, out: str | Path, until: str | None = None, force: bool = False, progress: bool = True,
-        listener=None) -> Path:
+        listener=None, cache=None) -> Path:
     """Run the configured stages into the run directory ``out``.
 
     Parameters
@@ -196,13 +235,13 @@ def run(cfg: dict, out: str | Path, until: str | None = None, force: bool = Fals
         "stages": {},
     }
     with staged_directory(out, force) as staging:
-        ctx = RunContext(cfg=cfg, dir=staging, progress=progress, listener=listener)
+        ctx = RunContext(cfg=cfg, dir=staging, progress=progress, listener=listener, cache=cache)
         ctx.path("config.yaml").write_text(dump_config(cfg), encoding="utf-8")
         for name in names:
             t0 = time.perf_counter()
             ctx.tell("stage", name=name)
-            _REGISTRY[name](ctx)
-            manifest["stages"][name] = {"seconds": round(time.perf_counter() - t0, 4)}
+            info = _run_stage(ctx, name, keep_products=name != available_stages()[-1], out=Path(out))
+            manifest["stages"][name] = {"seconds": round(time.perf_counter() - t0, 4), **info}
         manifest["stats"] = ctx.stats
         manifest["counts"] = ctx.counts
         manifest["notes"] = ctx.notes

@@ -90,3 +90,13 @@ def small_config(tmp_path, slab_meshes):
           levels: 3
         """))
     return path
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _private_stage_cache(tmp_path_factory):
+    """Command-line runs in the tests (they use the stage cache by default) keep it in a folder of the test
+    session's, not in the user's ~/.cache."""
+    import os
+
+    os.environ["FRACREF_CACHE_DIR"] = str(tmp_path_factory.mktemp("stage-cache"))
+    yield

@@ -906,8 +906,10 @@ class Viewer:
 
 
 def _run_child(cfg: dict, out: str, q) -> None:
-    """The re-run's process: the pipeline, with its stages and iterations sent to ``q``."""
+    """The re-run's process: the pipeline, with its stages and iterations sent to ``q``; stages whose inputs
+    did not change are taken from the stage cache (:mod:`fracture.cache`)."""
     from fracture import runner
+    from fracture.cache import StageCache
 
     last = [0.0]
 
@@ -919,7 +921,7 @@ def _run_child(cfg: dict, out: str, q) -> None:
         q.put((event, data))
 
     try:
-        runner.run(cfg, out, progress=False, listener=listener)
+        runner.run(cfg, out, progress=False, listener=listener, cache=StageCache())
         q.put(("done", {}))
     except Exception as exc:  # noqa: BLE001 - sent to the window
         q.put(("error", f"{type(exc).__name__}: {exc}"))
@@ -928,6 +930,7 @@ def _run_child(cfg: dict, out: str, q) -> None:
 def open_target(target: Path, out: Path | None) -> RunData:
     """A run directory as is; a config is run first (into ``out`` or ``runs/<name>``, reused when complete)."""
     from fracture import runner
+    from fracture.cache import StageCache
     from fracture.config import load_config
 
     target = Path(target)
@@ -939,7 +942,7 @@ def open_target(target: Path, out: Path | None) -> RunData:
     out = Path(out) if out is not None else Path("runs") / cfg["name"]
     if not (out / "manifest.json").is_file():
         print(f"running {target} into {out} first ...")
-        runner.run(cfg, out, progress=True)
+        runner.run(cfg, out, progress=True, cache=StageCache())
     return RunData(out)
 
 

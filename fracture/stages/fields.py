@@ -15,8 +15,10 @@ _PREVIEW_WIDTH = 400
 _PREVIEW_GAP = 8
 
 
-def fields_from_config(cfg: dict, BV: np.ndarray, SV: np.ndarray, SF: np.ndarray, step=None):
-    """:func:`fields.build.build_fields` with the parameters of a resolved config."""
+def fields_from_config(cfg: dict, BV: np.ndarray, SV: np.ndarray, SF: np.ndarray, step=None, zeta=None,
+                       distance=None):
+    """:func:`fields.build.build_fields` with the parameters of a resolved config (``zeta`` and ``distance``:
+    known already, see there)."""
     return build_fields(
         BV, SV, SF,
         resolution=cfg["grid"]["resolution"],
@@ -30,6 +32,8 @@ def fields_from_config(cfg: dict, BV: np.ndarray, SV: np.ndarray, SF: np.ndarray
         levels=cfg["pyramid"]["levels"],
         sigma=cfg["pyramid"]["sigma"],
         step=step,
+        zeta=zeta,
+        distance=distance,
     )
 
 
@@ -50,8 +54,13 @@ def fields_stage(ctx: RunContext) -> None:
     cfg = ctx.cfg
     (BV, BF), cf = ctx.products["exterior"], ctx.products["coarse"]
     check_grid_memory(cfg, BV)
+    known = cached_parts(ctx) if ctx.cache is not None else {}
     with ctx.bar(3, "fields") as bar:
-        fs = fields_from_config(cfg, BV, cf.V, cf.F, step=lambda name: (bar.set_postfix_str(name), bar.update()))
+        fs = fields_from_config(cfg, BV, cf.V, cf.F, step=lambda name: (bar.set_postfix_str(name), bar.update()),
+                                **known)
+    for name in ("zeta", "distance"):
+        if ctx.cache is not None and name not in known:
+            ctx.cache.keep(name, known_key(ctx, name), fs.field(name))
     ctx.products["fields"] = fs
 
     ctx.save_json("fields/grid.json", fs.grid.to_dict())
@@ -69,6 +78,23 @@ def fields_stage(ctx: RunContext) -> None:
         "grid_shape": list(fs.grid.shape),
         **{f"{n}_range": [float(fs.field(n).min()), float(fs.field(n).max())] for n in PREVIEW_FIELDS},
     }
+
+
+def known_key(ctx: RunContext, name: str) -> str:
+    """The cache key of the strength field (``zeta``) or the distances (``distance``) of this run: what each
+    depends on of the config, and the coarse stage (its exterior and fracture surface)."""
+    from fracture.cache import code_version, digest
+
+    cfg = ctx.cfg
+    grid = (cfg["grid"]["resolution"], cfg["grid"]["padding"])
+    what = (cfg["strength"], cfg["seed"]) if name == "zeta" else ()
+    return digest(name, ctx.keys["coarse"], grid, what, code_version())
+
+
+def cached_parts(ctx: RunContext) -> dict:
+    """The strength field and the distances from the cache, where a run with the same inputs made them."""
+    values = {name: ctx.cache.value(name, known_key(ctx, name)) for name in ("zeta", "distance")}
+    return {name: v for name, v in values.items() if v is not None}
 
 
 def preview_image(fs, preview: dict) -> np.ndarray:

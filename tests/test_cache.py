@@ -1,0 +1,120 @@
+"""The stage cache: reused stages give byte-identical runs; a changed input reruns what depends on it."""
+
+import json
+import os
+import pickle
+
+import numpy as np
+import pytest
+
+from fracture import runner
+from fracture.cache import StageCache
+from fracture.config import load_config
+from fracture.primitives import sheet, write_obj
+
+
+def run(cfg, out, cache):
+    done = runner.run(cfg, out, progress=False, cache=cache)
+    return json.loads((done / "manifest.json").read_text())
+
+
+def untimed(stats):
+    """A run's statistics without the refinement's seconds per phase (a clock's, not the run's, figures)."""
+    return {**stats, "refine": {k: v for k, v in stats["refine"].items() if k != "phase_seconds"}}
+
+
+def reuse(manifest):
+    return {name: info.get("cache") for name, info in manifest["stages"].items()}
+
+
+def test_an_identical_run_reuses_every_stage_and_is_byte_identical(tmp_path, small_config):
+    cache = StageCache(tmp_path / "cache")
+    cfg = load_config(small_config)
+    first = run(cfg, tmp_path / "a", cache)
+    assert set(reuse(first).values()) == {"stored"}
+    second = run(cfg, tmp_path / "b", cache)
+    assert set(reuse(second).values()) == {"reused"}
+    assert second["stages"]["refine"]["made_by"] == str(tmp_path / "a")
+    plain = run(cfg, tmp_path / "c", None)
+    assert reuse(plain) == {name: None for name in plain["stages"]}
+    for m in (second, plain):
+        assert m["files"] == first["files"]  # every file: same bytes (sha256)
+        assert m["counts"] == first["counts"] and m["notes"] == first["notes"]
+    assert second["stats"] == first["stats"] and untimed(plain["stats"]) == untimed(first["stats"])
+
+
+def test_a_psi_change_reuses_the_coarse_stage_and_the_strength(tmp_path, small_config):
+    cache = StageCache(tmp_path / "cache")
+    first = run(load_config(small_config), tmp_path / "a", cache)
+    changed = run(load_config(small_config, ["psi.stress_weight=1.5"]), tmp_path / "b", cache)
+    assert reuse(changed) == {"coarse": "reused", "fields": "stored", "refine": "stored", "animate": "stored"}
+    assert changed["files"]["fields/zeta.npy"] == first["files"]["fields/zeta.npy"]
+    assert changed["files"]["fields/psi.npy"] != first["files"]["fields/psi.npy"]
+    # the same change without the cache: the same run
+    plain = run(load_config(small_config, ["psi.stress_weight=1.5"]), tmp_path / "c", None)
+    assert plain["files"] == changed["files"]
+    # only the refinement's settings changed: the fields are reused too
+    refine_only = run(load_config(small_config, ["refine.iterations=3"]), tmp_path / "d", cache)
+    assert reuse(refine_only) == {"coarse": "reused", "fields": "reused", "refine": "stored", "animate": "stored"}
+
+
+def test_a_changed_input_file_invalidates_the_stages_after_it(tmp_path, small_config):
+    cache = StageCache(tmp_path / "cache")
+    run(load_config(small_config), tmp_path / "a", cache)
+    SV, SF = sheet(lambda u, v: np.stack([1.1 + 0.1 * u, u, v], 1), (0, 1), (0, 0.5), 5, 3)
+    write_obj(small_config.parent / "cut.obj", SV, SF)  # the same path, other content
+    again = run(load_config(small_config), tmp_path / "b", cache)
+    assert set(reuse(again).values()) == {"stored"}
+
+
+def test_an_interrupted_store_leaves_no_entry_and_stale_ones_go(tmp_path, small_config, monkeypatch):
+    cache = StageCache(tmp_path / "cache")
+    real = pickle.dump
+
+    def killed(obj, f, *args, **kwargs):
+        real(obj, f, *args, **kwargs)
+        raise KeyboardInterrupt  # as if the run were stopped while it stored the stage
+
+    monkeypatch.setattr(pickle, "dump", killed)
+    with pytest.raises(KeyboardInterrupt):
+        run(load_config(small_config), tmp_path / "a", cache)
+    monkeypatch.setattr(pickle, "dump", real)
+    assert not (tmp_path / "a").exists()
+    assert [p for p in (tmp_path / "cache").rglob("*") if p.is_dir() and p.parent.parent == tmp_path / "cache"] == []
+    assert list((tmp_path / "cache").glob("*/.*")) == []  # nothing half-written
+    # what a run killed outright leaves (its process gone) is removed by the next run
+    stale = tmp_path / "cache" / "coarse" / f".0123456789ab.partial-{2 ** 22 + 7}-x"
+    stale.mkdir(parents=True)
+    (stale / "meta.json").write_text("{")
+    manifest = run(load_config(small_config), tmp_path / "b", cache)
+    assert set(reuse(manifest).values()) == {"stored"} and not stale.exists()
+
+
+def test_the_cache_keeps_to_its_size_by_dropping_what_was_read_longest_ago(tmp_path, small_config):
+    cache = StageCache(tmp_path / "cache")
+    run(load_config(small_config), tmp_path / "a", cache)
+    entries = cache.entries()
+    assert len(entries) >= 4 and cache.size() > 0
+    oldest = min(entries, key=lambda p: (p / "meta.json").stat().st_mtime)
+    os.utime(oldest / "meta.json", (1, 1))
+    cache.max_bytes = cache.size() - 1
+    assert cache.trim() == [oldest] and not oldest.exists()
+    assert all((p / "meta.json").is_file() for p in cache.entries())
+
+
+def test_the_command_line_uses_the_cache_unless_told_not_to(tmp_path, small_config):
+    from fracture.cli import main
+
+    env = {"FRACREF_CACHE_DIR": str(tmp_path / "cache")}
+    old = {k: os.environ.get(k) for k in env}
+    os.environ.update(env)
+    try:
+        assert main(["run", str(small_config), "--out", str(tmp_path / "a"), "--quiet"]) == 0
+        assert main(["run", str(small_config), "--out", str(tmp_path / "b"), "--quiet"]) == 0
+        assert main(["run", str(small_config), "--out", str(tmp_path / "c"), "--quiet", "--no-cache"]) == 0
+    finally:
+        for k, v in old.items():
+            os.environ[k] = v if v is not None else ""
+    stages = lambda d: json.loads((tmp_path / d / "manifest.json").read_text())["stages"]  # noqa: E731
+    assert {s["cache"] for s in stages("b").values()} == {"reused"}
+    assert all("cache" not in s for s in stages("c").values())
