@@ -29,6 +29,24 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--quiet", action="store_true", help="no progress bars")
     _cache_flags(r)
 
+    w = sub.add_parser("sweep", help="run a config over every combination of values into one sweep directory")
+    w.add_argument("config", type=Path, help="experiment YAML file (its sweep.grid block, if any, is swept)")
+    w.add_argument("--grid", action="append", default=[], metavar="KEY.PATH=V1,V2,...",
+                   help="values of a config key to sweep (YAML values, comma-separated); repeatable; replaces the "
+                        "config's sweep.grid")
+    w.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY.PATH=VALUE",
+                   help="override a config value at every point; repeatable")
+    w.add_argument("--out", type=Path, help="sweep directory (default: runs/<name>-sweep)")
+    w.add_argument("--jobs", type=int, default=1, metavar="N", help="points run at once (default 1)")
+    w.add_argument("--backend", default="local", choices=["local", "ray"],
+                   help="local processes, or Ray (pip install 'fracref[ray]')")
+    w.add_argument("--address", help="ray: the cluster to join (e.g. auto, or ray://HOST:10001); default: a "
+                   "local Ray with --jobs CPUs")
+    w.add_argument("--until", metavar="STAGE", help="last stage of every point's run")
+    w.add_argument("--no-sheet", action="store_true", help="no contact sheet of the refined surfaces")
+    w.add_argument("--quiet", action="store_true", help="no progress bar")
+    _cache_flags(w)
+
     c = sub.add_parser("config", help="print the resolved config")
     c.add_argument("config", type=Path)
     c.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY.PATH=VALUE")
@@ -131,6 +149,8 @@ def _main(argv: list[str] | None) -> int:
             return 0
         if args.command == "view":
             return _view(args)
+        if args.command == "sweep":
+            return _sweep(args)
         cfg = load_config(args.config, args.overrides)
         if args.command == "config":
             sys.stdout.write(dump_config(cfg))
@@ -192,6 +212,33 @@ def _render(args) -> int:
         print(f"{what}: " + ", ".join(([f"{len(pngs)} images"] if pngs else []) + [str(v) for v in videos]
                                      + ([str(pngs[0])] if len(pngs) == 1 else [])))
     return 0
+
+
+def _sweep(args) -> int:
+    from fracture import runner
+    from fracture.config import load_config
+    from fracture.sweep import finished, parse_grid, run_sweep
+
+    if not 1 <= args.jobs <= 1024:
+        raise ConfigError("--jobs", "", f"got {args.jobs}, expected a number of points at once in 1..1024")
+    cfg = load_config(args.config, args.overrides)
+    grid = parse_grid(args.grid) if args.grid else cfg["sweep"]["grid"]
+    runner.stages_until(args.until)
+    out = args.out if args.out is not None else Path("runs") / f"{cfg['name']}-sweep"
+    state = run_sweep(args.config, grid, out, args.overrides, args.jobs, args.backend, args.address, args.until,
+                      args.cache_dir, not args.no_cache, progress=not args.quiet)
+    names = finished(state)
+    failed = {n: p for n, p in state["points"].items() if p["status"] == "failed"}
+    if names and not args.no_sheet and (args.until is None or args.until not in ("coarse", "fields")):
+        from viewer.render import contact_sheet
+
+        labels = [", ".join(f"{k} = {v}" for k, v in state["points"][n]["values"].items()) for n in names]
+        print(f"contact sheet: {contact_sheet([Path(out) / n for n in names], labels, Path(out) / 'sheet.png')}")
+    print(f"sweep: {len(names)} of {len(state['points'])} points done, tables: {Path(out) / 'table.md'}, "
+          f"{Path(out) / 'table.csv'}")
+    for name, p in failed.items():
+        print(f"fracref: error: sweep point {name}: {p['error']}", file=sys.stderr)
+    return 2 if failed else 0
 
 
 def _view(args) -> int:

@@ -138,6 +138,10 @@ SCHEMA: dict[str, Any] = {
             "fov": Param(35.0, lo=1.0, hi=150.0, doc=f"{panel} panel: vertical field of view in degrees"),
         } for panel in ("material", "iterations", "animation")},
     },
+    "sweep": {  # what `fracref sweep` runs; nothing a single run reads
+        "grid": Param({}, "grid", doc="config keys and the values a sweep runs (every combination), e.g. "
+                      "{psi.stress_weight: [0.2, 0.6, 2], seed: [0, 1, 2]}"),
+    },
     "preview": {
         "axis": Param(None, "str", choices=("x", "y", "z"), nullable=True,
                       doc="normal of the preview slices; null: the axis with the fewest nodes"),

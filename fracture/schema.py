@@ -23,6 +23,7 @@ _TYPE_WORDS = {
     "vec3": "a list of 3 numbers",
     "int3": "an integer or a list of 3 integers",
     "bounds": "a list of two points [[x0, y0, z0], [x1, y1, z1]] with x0 < x1, y0 < y1, z0 < z1",
+    "grid": "a mapping of config keys (e.g. psi.stress_weight) to non-empty lists of values",
 }
 
 
@@ -164,6 +165,15 @@ def _bounds(value: Any) -> list[list[float]]:
     return [lo, hi]
 
 
+def _grid(value: Any) -> dict[str, list]:
+    if not isinstance(value, Mapping):
+        raise TypeError
+    for key, values in value.items():
+        if not isinstance(key, str) or not key or not isinstance(values, list) or not values:
+            raise TypeError
+    return {k: list(v) for k, v in value.items()}
+
+
 _CONVERT: dict[str, Callable[[Any], Any]] = {
     "float": _number,
     "int": _integer,
@@ -174,6 +184,7 @@ _CONVERT: dict[str, Callable[[Any], Any]] = {
     "vec3": _vec3,
     "int3": _int3,
     "bounds": _bounds,
+    "grid": _grid,
 }
 
 

@@ -60,20 +60,31 @@ def colliding_vertices(X0, X1, F, eta):
     return hit
 
 
-@pytest.fixture
-def slab_meshes(tmp_path):
+def write_slab_meshes(folder: Path):
     """A 2 x 1 x 0.5 box and a wavy cut through it, written as OBJ files."""
     V, F = box([0, 0, 0], [2, 1, 0.5], (8, 4, 2))
     SV, SF = sheet(lambda u, v: np.stack([0.9 + 0.2 * u + 0.05 * np.sin(4 * u), u, v], 1), (0, 1), (0, 0.5), 5, 3)
-    write_obj(tmp_path / "slab.obj", V, F)
-    write_obj(tmp_path / "cut.obj", SV, SF)
-    return tmp_path / "slab.obj", tmp_path / "cut.obj"
+    write_obj(folder / "slab.obj", V, F)
+    write_obj(folder / "cut.obj", SV, SF)
+    return folder / "slab.obj", folder / "cut.obj"
+
+
+@pytest.fixture
+def slab_meshes(tmp_path):
+    """:func:`write_slab_meshes` in the test's folder."""
+    return write_slab_meshes(tmp_path)
 
 
 @pytest.fixture
 def small_config(tmp_path, slab_meshes):
     """A config file for a quick end-to-end run (relative mesh paths)."""
-    path = tmp_path / "small.yaml"
+    return small_config_file(tmp_path)
+
+
+def small_config_file(folder: Path) -> Path:
+    """:func:`small_config`'s file, and its meshes, in ``folder`` (for fixtures of a wider scope)."""
+    write_slab_meshes(folder)
+    path = folder / "small.yaml"
     path.write_text(textwrap.dedent("""\
         name: small
         seed: 7

@@ -40,7 +40,7 @@ from viewer.annotate import Bar  # noqa: E402
 from viewer.data import RunData  # noqa: E402
 from viewer.media import Video, check_size, frame_counts  # noqa: E402
 from viewer.looks import (  # noqa: E402
-    FIELD_CMAPS, SURFACE_CMAPS, CameraPose, View, animation_pose, apply_camera, capture, iteration_caption,
+    FIELD_CMAPS, SURFACE_CMAPS, CameraPose, View, animation_pose, apply_camera, capture, frame_points, iteration_caption,
     iteration_pose, pieces_caption, set_cutaway, set_frame, set_slice, set_surface, show_context, show_material, show_pieces,
     show_stage, slice_pose, slice_title, spread, turntable_poses,
 )
@@ -218,6 +218,39 @@ def compare_image(run: RunData, t: int, renderer: Renderer, pose: CameraPose | N
         show_pieces(renderer.scene, pieces)
         halves.append(renderer.figure(pose, caption=pieces_caption(name, pieces, t), width=half))
     return annotate.side_by_side(halves)
+
+
+def contact_sheet(run_dirs: list[Path], captions: list[str], out: str | Path, tile: tuple[int, int] = (480, 360),
+                  columns: int | None = None, color_by: str = "psi") -> Path:
+    """One PNG of the runs' refined fracture surfaces (their last iterations) in a grid of tiles, each with
+    its caption, one camera and one colour range for all (the first run's view direction, fitted to every
+    surface), and the colour bar beside the last tile of each row. Written atomically to ``out``."""
+    runs = [RunData(d) for d in run_dirs]
+    if not runs:
+        raise InputError("contact sheet: no finished runs to show")
+    for r in runs:
+        if not r.has_iterations:
+            raise InputError(f"{r.dir}: the contact sheet needs the refinement's iterations (refine.snapshots on)")
+    columns = columns or int(np.ceil(np.sqrt(len(runs))))
+    width, height = tile
+    bar_tile = Renderer(width, height)
+    last = [r.iteration(len(r.iterations) - 1) for r in runs]
+    ranges = [r.surface_range(color_by) for r in runs]
+    lo, hi = min(a for a, _ in ranges), max(b for _, b in ranges)
+    points = np.concatenate([spread(s.V, 3000) for s in last])
+    base = iteration_pose(runs[0], bar_tile.picture_aspect(True, True))
+    pose = frame_points(points, bar_tile.picture_aspect(True, True), base.center - base.eye, base.up)
+    tiles = []
+    for r, surface, caption in zip(runs, last, captions):
+        show_context(bar_tile.scene, r)
+        set_surface(bar_tile.scene, surface, color_by, (lo, hi))
+        tiles.append(bar_tile.figure(pose, Bar(SURFACE_CMAPS[color_by], lo, hi, color_by), caption))
+    blank = np.full_like(tiles[0], 255)
+    rows = [np.concatenate((tiles[i:i + columns] + [blank] * columns)[:columns], axis=1)
+            for i in range(0, len(tiles), columns)]
+    out = Path(out)
+    atomic_write_bytes(out, png_bytes(np.concatenate(rows, axis=0)))
+    return out
 
 
 def render(run_dir: str | Path, what: str | tuple[str, ...] = DEFAULT_WHAT, out: str | Path | None = None,

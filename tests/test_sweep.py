@@ -1,0 +1,110 @@
+"""Sweeps: every combination of values as its own run, tables and a contact sheet, resumable, on local
+processes or Ray."""
+
+import json
+
+import pytest
+
+from fracture.cli import main
+from fracture.schema import ConfigError
+from fracture.sweep import parse_grid, points, run_sweep
+
+GRID = {"psi.stress_weight": [0.2, 1.5], "seed": [7, 8]}
+
+
+def statuses(out):
+    return {name: p["status"] for name, p in json.loads((out / "sweep.json").read_text())["points"].items()}
+
+
+def files(run_dir):
+    return json.loads((run_dir / "manifest.json").read_text())["files"]
+
+
+@pytest.fixture(scope="module")
+def local_sweep(tmp_path_factory):
+    """The 2 x 2 sweep of a small config with two local processes, through the command line."""
+    from conftest import small_config_file
+
+    base = tmp_path_factory.mktemp("sweep")
+    config = small_config_file(base)
+    out = base / "local"
+    rc = main(["sweep", str(config), "--grid", "psi.stress_weight=0.2,1.5", "--grid", "seed=7,8", "--out", str(out),
+               "--jobs", "2", "--quiet"])
+    return config, out, rc
+
+
+def test_a_sweep_runs_every_point_into_its_directory_with_tables_and_a_sheet(local_sweep):
+    config, out, rc = local_sweep
+    assert rc == 0
+    names = [p.name for p in points(GRID)]
+    assert names == ["psi.stress_weight=0.2,seed=7", "psi.stress_weight=0.2,seed=8",
+                     "psi.stress_weight=1.5,seed=7", "psi.stress_weight=1.5,seed=8"]
+    assert statuses(out) == {n: "ok" for n in names}
+    for n in names:
+        assert (out / n / "manifest.json").is_file()
+    saved = json.loads((out / names[3] / "manifest.json").read_text())
+    assert saved["seed"] == 8
+    rows = (out / "table.csv").read_text().splitlines()
+    assert len(rows) == 5 and rows[0].startswith("point,psi.stress_weight,seed,status,seconds")
+    assert "weak_20" in rows[0] and "distance_mean" in rows[0] and "triangles" in rows[0]
+    md = (out / "table.md").read_text().splitlines()
+    assert len(md) == 6 and md[2].startswith(f"| {names[0]} | 0.2 | 7 | ok |")
+    import imageio.v3 as iio
+
+    sheet = iio.imread(out / "sheet.png")
+    assert sheet.shape[0] > 500 and sheet.shape[1] > 700
+    assert (sheet[..., :3] < 200).any(axis=2).mean() > 0.02  # surfaces, bars and captions drawn on white
+
+
+def test_a_sweep_on_ray_gives_the_same_runs(local_sweep, tmp_path):
+    ray = pytest.importorskip("ray")
+    config, out, _ = local_sweep
+    state = run_sweep(config, GRID, tmp_path / "ray", jobs=2, backend="ray", progress=False)
+    assert not ray.is_initialized()  # the sweep's own local cluster is shut down again
+    assert set(s["status"] for s in state["points"].values()) == {"ok"}
+    for p in points(GRID):
+        assert files(tmp_path / "ray" / p.name) == files(out / p.name), p.name  # the same bytes
+    assert (tmp_path / "ray" / "table.csv").read_text().count("\n") == 5
+
+
+def test_a_resumed_sweep_runs_only_the_missing_points_and_a_failure_stops_no_other(local_sweep, tmp_path):
+    import shutil
+
+    config, out, _ = local_sweep
+    copy = tmp_path / "copy"
+    shutil.copytree(out, copy)
+    missing = points(GRID)[2].name
+    shutil.rmtree(copy / missing)
+    state = run_sweep(config, GRID, copy, progress=False)
+    assert statuses(copy) == {p.name: ("ok" if p.name == missing else "done before") for p in points(GRID)}
+    assert files(copy / missing) == files(out / missing)
+    assert state["points"][missing]["status"] == "ok"
+    # a point that fails at run time (its grid needs more memory than allowed: the fields stage refuses it)
+    # is listed with its error, and the others run
+    grid = {"grid.resolution": [1000, 20]}
+    rc = main(["sweep", str(config), "--grid", "grid.resolution=1000,20", "--out", str(tmp_path / "f"), "--quiet",
+               "--no-sheet"])
+    assert rc == 2
+    s = json.loads((tmp_path / "f" / "sweep.json").read_text())["points"]
+    names = [p.name for p in points(grid)]
+    assert s[names[0]]["status"] == "failed" and "grid.max_memory_gb" in s[names[0]]["error"], s
+    assert s[names[1]]["status"] == "ok" and not (tmp_path / "f" / names[0]).exists()
+    assert "failed" in (tmp_path / "f" / "table.md").read_text()
+
+
+def test_sweep_grids_are_read_from_the_command_line_or_the_config_and_checked_first(local_sweep, tmp_path, capsys):
+    config, _, _ = local_sweep
+    assert parse_grid(["grid.resolution=[8,8,8],12", "seed=1"]) == {"grid.resolution": [[8, 8, 8], 12], "seed": [1]}
+    for bad in (["seed="], ["seed=1", "seed=2"], ["=1,2"]):
+        with pytest.raises(ConfigError, match="--grid"):
+            parse_grid(bad)
+    # a value that no run accepts stops the sweep before anything runs, naming the point
+    rc = main(["sweep", str(config), "--grid", "pyramid.levels=3,99", "--out", str(tmp_path / "bad"), "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "pyramid.levels = 99" in err and "pyramid.levels" in err and "Traceback" not in err
+    assert not (tmp_path / "bad").exists()
+    # the config's own sweep.grid block
+    text = config.read_text() + "sweep:\n  grid:\n    seed: [7]\n    psi.stress_weight: [0.5]\n"
+    (config.parent / "with_grid.yaml").write_text(text)
+    rc = main(["sweep", str(config.parent / "with_grid.yaml"), "--out", str(tmp_path / "g"), "--quiet", "--no-sheet"])
+    assert rc == 0 and statuses(tmp_path / "g") == {"seed=7,psi.stress_weight=0.5": "ok"}
