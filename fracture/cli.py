@@ -60,7 +60,8 @@ def _parser() -> argparse.ArgumentParser:
 
     v = sub.add_parser("view", help="open the research viewer on a run directory or a config")
     v.add_argument("target", type=Path, metavar="CONFIG_OR_RUN_DIR",
-                   help="a run directory, or a config (run first into --out, default runs/<name>)")
+                   help="a run directory, a sweep directory (fracref sweep: choose a point, flip between two), or "
+                        "a config (run first into --out, default runs/<name>)")
     v.add_argument("--out", type=Path, help="run directory for a config (default: runs/<name>)")
     v.add_argument("--width", type=int, default=1800)
     v.add_argument("--height", type=int, default=900)

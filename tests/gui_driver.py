@@ -183,6 +183,36 @@ def _fresh(app, v) -> list:
     return _cameras(v)
 
 
+def sweep_points(app, v, out, shot) -> dict:
+    """A sweep: the point chosen in the list, then F over a panel (a real key press) flips back and forth."""
+    import numpy as np
+
+    r = {"points": [str(p.dir) for p in v.sweep], "shown": [str(v.run.dir)], "title": [v.window.title]}
+    r["shots"] = [shot(1, "point0")]
+    cameras = [v.current_pose(i) for i in range(3)]
+    v.point_box.selected_index = 1
+    v.show_point(1)  # what choosing the second item does (setting the index does not call the handler)
+    for _ in range(5):
+        app.run_one_tick()
+    r["shown"].append(str(v.run.dir))
+    r["title"].append(v.window.title)
+    r["shots"].append(shot(1, "point1"))
+    r["stress_weight_edit"] = v.edits["psi.stress_weight"].double_value
+    r["cameras_kept"] = all(np.allclose(a.eye, b.eye, atol=1e-5) and np.allclose(a.center, b.center, atol=1e-5)
+                            for a, b in zip(cameras, [v.current_pose(i) for i in range(3)]))
+    origin = _origin(app, v)
+    f = v.scenes[1].frame
+    _xdotool(app, "mousemove", origin[0] + f.x + f.width // 2, origin[1] + f.y + f.height // 2)
+    _xdotool(app, "click", 1)  # the panel takes the keys
+    for _ in range(2):
+        _xdotool(app, "key", "f")
+        for _ in range(5):
+            app.run_one_tick()
+        r["shown"].append(str(v.run.dir))
+    r["selected"] = v.point_box.selected_index
+    return r
+
+
 def main() -> None:
     scenario, run_dir, out = sys.argv[1], Path(sys.argv[2]), Path(sys.argv[3])
     threading.Thread(target=_watchdog, daemon=True).start()
@@ -190,11 +220,13 @@ def main() -> None:
     from open3d.visualization import gui
 
     from viewer.app import Viewer
-    from viewer.data import RunData
+    from viewer.data import RunData, read_sweep
 
     app = gui.Application.instance
     app.initialize()
-    v = Viewer(RunData(run_dir), *((1800, 900) if scenario == "views" else (1500, 800)))  # views: the default size
+    sweep = read_sweep(run_dir) if (run_dir / "sweep.json").is_file() else None
+    size = (1800, 900) if scenario == "views" else (1500, 800)  # views: the default size
+    v = Viewer(RunData(sweep[0].dir) if sweep else RunData(run_dir), *size, sweep=sweep)
     for _ in range(10):
         app.run_one_tick()
     out.mkdir(parents=True, exist_ok=True)
@@ -235,6 +267,8 @@ def main() -> None:
         result.update(navigate(app, v, out))
     elif scenario == "views":
         result.update(views(app, v, out))
+    elif scenario == "sweep":
+        result.update(sweep_points(app, v, out, shot))
     elif scenario == "rerun":
         before = v.run.iteration(len(v.run.iterations) - 1)
         v.edits["psi.stress_weight"].double_value = 0.0

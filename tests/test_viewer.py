@@ -164,6 +164,31 @@ def test_rerun_in_the_window_gives_a_new_result_without_freezing_it(run_dir, tmp
     assert any("refine.step" in e for e in res["errors"])
 
 
+@pytest.fixture(scope="module")
+def sweep_dir(tmp_path_factory):
+    """A two-point sweep of a small config (stress weights 0.2 and 2)."""
+    from conftest import small_config_file
+    from fracture.sweep import run_sweep
+
+    base = tmp_path_factory.mktemp("viewer-sweep")
+    run_sweep(small_config_file(base), {"psi.stress_weight": [0.2, 2.0]}, base / "sweep", progress=False)
+    return base / "sweep"
+
+
+def test_a_sweep_opens_with_its_points_to_choose_and_flip(sweep_dir, tmp_path):
+    res = _window("sweep", sweep_dir, tmp_path)
+    a, b = res["points"]
+    assert res["errors"] == []
+    # the first point, then the chosen second, then F over a panel flips back and forth
+    assert res["shown"] == [a, b, a, b] and res["selected"] == 1
+    assert res["title"][1].endswith("psi.stress_weight=2.0")
+    assert res["stress_weight_edit"] == 2.0  # the side panel holds the shown point's parameters
+    assert res["cameras_kept"]  # compared from the same cameras
+    one, two = (read(p) for p in res["shots"])
+    assert content_share(one) > 0.03 and content_share(two) > 0.03
+    assert np.abs(one.astype(int) - two.astype(int)).mean() > 0.5  # another surface, other colours
+
+
 def test_camera_fits_every_point_in_the_picture():
     from viewer.looks import frame_points
 

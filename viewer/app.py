@@ -37,7 +37,7 @@ from fracture.atomic import atomic_write_bytes, atomic_write_text, png_bytes
 from fracture.errors import ConfigError, InputError, ResultError, StageError
 from viewer import annotate
 from viewer.annotate import Bar
-from viewer.data import FIELDS, RunData, Surface
+from viewer.data import FIELDS, RunData, Surface, SweepPoint, read_sweep
 from viewer.looks import (
     COLOR_BY, FIELD_CMAPS, SURFACE_CMAPS, CameraPose, animation_box, capture, animation_pose, frame_box, iteration_box,
     iteration_caption, iteration_pose, pieces_caption, scene_box, set_cutaway, set_frame, set_frustum, set_slice, set_surface,
@@ -117,9 +117,13 @@ def _bar_row(em: float) -> tuple[gui.Widget, gui.Label, gui.ImageWidget, gui.Lab
 class Viewer:
     """The window and its state; the handlers are methods, so scripts and tests drive it like a user."""
 
-    def __init__(self, run: RunData, width: int = 1800, height: int = 900, start: ViewState | None = None):
+    def __init__(self, run: RunData, width: int = 1800, height: int = 900, start: ViewState | None = None,
+                 sweep: list[SweepPoint] | None = None):
         self.app = gui.Application.instance
         self.run = run
+        # a sweep's finished points (fracref sweep), the one shown and the one shown before it
+        self.sweep = list(sweep or [])
+        self.point, self.previous_point = 0, 0
         # the view to start with: ``start`` (a view file), else the run's config ``view:`` section
         start = start or from_section(run.config.get("view"), str(run.dir / "config.yaml"))
         self.view = start.view  # checked against the run by load()
@@ -259,6 +263,14 @@ class Viewer:
     def _side_panel(self) -> gui.Widget:
         em = self.em
         side = gui.ScrollableVert(0.25 * em, gui.Margins(0.5 * em, 0.5 * em, 0.5 * em, 0.5 * em))
+        if self.sweep:
+            side.add_child(gui.Label("Sweep point"))
+            labels = [p.label for p in self.sweep]
+            self.point_box = _combobox(labels, lambda text: self.show_point(labels.index(text)))
+            side.add_child(self.point_box)
+            b = gui.Button("flip to the point before (F)")
+            b.set_on_clicked(self.flip_points)
+            side.add_child(b)
         side.add_child(gui.Label("Parameters"))
         self.edits: dict[str, gui.NumberEdit] = {}
         self._integer: set[str] = set()  # keys edited as integers
@@ -337,6 +349,39 @@ class Viewer:
         self.status_text = text
         lines = textwrap.wrap(text, width=int(1.9 * SIDE_WIDTH_EM), break_long_words=True) or [""]
         self.status.text = "\n".join(lines[:4])
+
+    # -- sweeps -------------------------------------------------------------------------------
+
+    def show_point(self, k: int) -> None:
+        """Show the sweep's point ``k`` in all panels with the same view and cameras (to compare), its
+        parameters in the side panel."""
+        if not 0 <= k < len(self.sweep) or (k == self.point and self.run.dir == self.sweep[k].dir):
+            return
+        try:
+            run = RunData(self.sweep[k].dir)
+        except InputError as exc:
+            self.report_error("cannot show the sweep point", exc)
+            return
+        cameras = [self.current_pose(i) for i in range(len(self.scenes))]
+        self.previous_point, self.point = self.point, k
+        self.load(run, keep_view=True)
+        for i, pose in enumerate(cameras):
+            self.poses[i] = pose
+            self._place(i, pose)
+        for key, value in tunables(self.cfg):
+            if key in self.edits:
+                if key in self._integer:
+                    self.edits[key].int_value = int(value)
+                else:
+                    self.edits[key].double_value = float(value)
+        self.point_box.selected_index = k
+        self.window.title = f"fracref: {self.sweep[k].name}"
+        self.say(f"sweep point {k + 1} / {len(self.sweep)}: {self.sweep[k].label}")
+
+    def flip_points(self) -> None:
+        """Back to the point shown before (again: forth), to compare two points."""
+        if self.sweep:
+            self.show_point(self.previous_point)
 
     # -- loading and drawing -------------------------------------------------------------------
 
@@ -555,7 +600,8 @@ class Viewer:
         return handler
 
     def _on_key(self, i: int):
-        """Hotkeys over a panel: space play/pause, arrows step, R reset the view, S screenshot."""
+        """Hotkeys over a panel: space play/pause, arrows step, R reset the view, S screenshot, F flip between
+        two sweep points."""
         def handler(event):
             if event.type != gui.KeyEvent.Type.DOWN:
                 return gui.Widget.EventCallbackResult.IGNORED
@@ -572,6 +618,8 @@ class Viewer:
                 self.reset_view(None if self.link_box.checked else i)
             elif event.key == gui.KeyName.S:
                 self.screenshot(self.shot_box.selected_text)
+            elif event.key == gui.KeyName.F and self.sweep:
+                self.flip_points()
             else:
                 return gui.Widget.EventCallbackResult.IGNORED
             return gui.Widget.EventCallbackResult.CONSUMED
@@ -951,10 +999,11 @@ def main(target: Path, out: Path | None = None, width: int = 1800, height: int =
     from viewer.state import read_view_file
 
     start = read_view_file(camera) if camera is not None else None  # a bad file is reported before any work
-    run = open_target(target, out)
+    sweep = read_sweep(target) if Path(target, "sweep.json").is_file() else None
+    run = RunData(sweep[0].dir) if sweep else open_target(target, out)
     app = gui.Application.instance
     app.initialize()
-    Viewer(run, width, height, start)
+    Viewer(run, width, height, start, sweep)
     app.run()
     return 0
 

@@ -30,6 +30,32 @@ class Surface:
     scalars: dict = field(default_factory=dict)
 
 
+@dataclass(frozen=True)
+class SweepPoint:
+    """A finished point of a sweep (``fracref sweep``): its directory's name, its values and its run."""
+
+    name: str
+    label: str
+    dir: Path
+
+
+def read_sweep(sweep_dir: str | Path) -> list[SweepPoint]:
+    """The finished points of a sweep directory, in the sweep's order."""
+    sweep_dir = Path(sweep_dir)
+    try:
+        state = json.loads((sweep_dir / "sweep.json").read_text(encoding="utf-8"))
+        listed = state["points"]
+    except (OSError, json.JSONDecodeError, KeyError, TypeError) as exc:
+        raise InputError(f"{sweep_dir / 'sweep.json'}: not a sweep's record ({exc}); expected the file "
+                         "`fracref sweep` writes") from None
+    points = [SweepPoint(name, ", ".join(f"{k} = {v}" for k, v in p.get("values", {}).items()), sweep_dir / name)
+              for name, p in listed.items() if (sweep_dir / name / "manifest.json").is_file()]
+    if not points:
+        raise InputError(f"{sweep_dir}: no point of this sweep has finished yet (expected run directories with "
+                         "manifest.json)")
+    return points
+
+
 class RunData:
     """Lazy access to one run directory's outputs (material space unless said otherwise)."""
 
