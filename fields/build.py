@@ -87,6 +87,7 @@ def build_fields(
     step: Callable[[str], None] | None = None,
     zeta: np.ndarray | None = None,
     distance: np.ndarray | None = None,
+    pyramids: Callable[[str, Grid, np.ndarray], StrengthPyramid] | None = None,
 ) -> FieldSet:
     """Sample zeta, xi and psi over the object's box and build the pyramid.
 
@@ -115,6 +116,15 @@ def build_fields(
         The strength field and the distances to the fracture surface on this
         grid, when known already (a cache): they depend neither on the stress
         nor on psi's weights nor on the pyramid.
+    pyramids : callable, optional
+        ``pyramids(name, grid, field)`` gives the pyramid of ``zeta`` or ``xi``
+        (a cache may know it); by default it is built.
+
+    Notes
+    -----
+    The pyramid of psi is combined from the pyramids of zeta and xi
+    (:meth:`StrengthPyramid.combine`; the pyramid is linear), so that a new
+    weighting of psi costs no smoothing.
     """
     step = step or (lambda name: None)
     obj_lo, obj_hi = exterior_V.min(axis=0), exterior_V.max(axis=0)
@@ -130,6 +140,7 @@ def build_fields(
     xi = stress_from_distance(distance, stress_length * diagonal)
     step("stress")
     psi = modified_strength(zeta, xi, strength_weight, stress_weight)
-    pyramid = StrengthPyramid(grid, psi, levels=levels, sigma=sigma)
+    make = pyramids or (lambda name, g, values: StrengthPyramid(g, values, levels=levels, sigma=sigma))
+    pyramid = StrengthPyramid.combine([(strength_weight, make("zeta", grid, zeta)), (-stress_weight, make("xi", grid, xi))])
     step("pyramid")
     return FieldSet(grid, zeta, distance, xi, psi, pyramid)

@@ -89,6 +89,31 @@ class StrengthPyramid:
         self._table = np.ascontiguousarray(np.concatenate([psi[..., None], mean_gradient], axis=3))
         self._coarse = ((-1, -1), None)  # the last table of a window of levels asked for (see coarse_table)
 
+    @classmethod
+    def combine(cls, terms: list[tuple[float, "StrengthPyramid"]]) -> "StrengthPyramid":
+        """The pyramid of ``sum w_i psi_i`` from the pyramids of the ``psi_i`` (one grid, levels and widths).
+
+        Smoothing, finite differences and the level average are linear, so
+        this is the pyramid of the sum, built with a few array sums instead of
+        the Gaussian filters: psi = a zeta - b xi gets its pyramid from those of
+        zeta and xi, which a change of the weights a and b leaves as they are.
+        """
+        (w0, first), rest = terms[0], terms[1:]
+        for _, p in rest:
+            same_grid = (p.grid.shape == first.grid.shape and np.array_equal(p.grid.origin, first.grid.origin)
+                         and np.array_equal(p.grid.spacing, first.grid.spacing))
+            if not same_grid or p.levels.shape != first.levels.shape or not np.array_equal(p.sigmas, first.sigmas):
+                raise ValueError("pyramids of different grids or levels cannot be combined")
+        out = cls.__new__(cls)
+        out.grid, out.sigmas = first.grid, first.sigmas
+        out.levels = w0 * first.levels
+        out._table = w0 * first._table
+        for w, p in rest:
+            out.levels += w * p.levels
+            out._table += w * p._table
+        out._coarse = ((-1, -1), None)
+        return out
+
     @property
     def n_levels(self) -> int:
         return self.levels.shape[0]

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from fields.build import build_fields, fields_memory, grid_for
+from fields.pyramid import StrengthPyramid
 from fields.slices import axis_slice, slice_image
 from fracture.errors import ConfigError
 from fracture.runner import RunContext, stage
@@ -16,9 +17,9 @@ _PREVIEW_GAP = 8
 
 
 def fields_from_config(cfg: dict, BV: np.ndarray, SV: np.ndarray, SF: np.ndarray, step=None, zeta=None,
-                       distance=None):
-    """:func:`fields.build.build_fields` with the parameters of a resolved config (``zeta`` and ``distance``:
-    known already, see there)."""
+                       distance=None, pyramids=None):
+    """:func:`fields.build.build_fields` with the parameters of a resolved config (``zeta``, ``distance`` and
+    ``pyramids``: parts known already, see there)."""
     return build_fields(
         BV, SV, SF,
         resolution=cfg["grid"]["resolution"],
@@ -34,6 +35,7 @@ def fields_from_config(cfg: dict, BV: np.ndarray, SV: np.ndarray, SF: np.ndarray
         step=step,
         zeta=zeta,
         distance=distance,
+        pyramids=pyramids,
     )
 
 
@@ -81,20 +83,35 @@ def fields_stage(ctx: RunContext) -> None:
 
 
 def known_key(ctx: RunContext, name: str) -> str:
-    """The cache key of the strength field (``zeta``) or the distances (``distance``) of this run: what each
-    depends on of the config, and the coarse stage (its exterior and fracture surface)."""
+    """The cache key of a part of the fields of this run: the strength field ``zeta``, the distances
+    ``distance`` to the coarse fracture surface, or the pyramids of zeta (``zeta pyramid``) and of the stress
+    (``xi pyramid``): what each depends on of the config, and the coarse stage (its exterior and surface)."""
     from fracture.cache import code_version, digest
 
     cfg = ctx.cfg
+    depends = {"zeta": (cfg["strength"], cfg["seed"]), "distance": (),
+               "zeta pyramid": (cfg["strength"], cfg["seed"], cfg["pyramid"]),
+               "xi pyramid": (cfg["stress"], cfg["pyramid"])}[name]
     grid = (cfg["grid"]["resolution"], cfg["grid"]["padding"])
-    what = (cfg["strength"], cfg["seed"]) if name == "zeta" else ()
-    return digest(name, ctx.keys["coarse"], grid, what, code_version())
+    return digest(name, ctx.keys["coarse"], grid, depends, code_version())
 
 
 def cached_parts(ctx: RunContext) -> dict:
-    """The strength field and the distances from the cache, where a run with the same inputs made them."""
+    """The strength field, the distances and the pyramids from the cache (where a run with the same inputs
+    made them; a pyramid the cache does not have is built and kept)."""
     values = {name: ctx.cache.value(name, known_key(ctx, name)) for name in ("zeta", "distance")}
-    return {name: v for name, v in values.items() if v is not None}
+    known = {name: v for name, v in values.items() if v is not None}
+    cfg = ctx.cfg
+
+    def pyramid(name: str, grid, field: np.ndarray) -> StrengthPyramid:
+        key = known_key(ctx, f"{name} pyramid")
+        made = ctx.cache.value("pyramid", key)
+        if made is None:
+            made = StrengthPyramid(grid, field, levels=cfg["pyramid"]["levels"], sigma=cfg["pyramid"]["sigma"])
+            ctx.cache.keep("pyramid", key, made)
+        return made
+
+    return {**known, "pyramids": pyramid}
 
 
 def preview_image(fs, preview: dict) -> np.ndarray:
