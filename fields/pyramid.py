@@ -89,6 +89,10 @@ class StrengthPyramid:
         self._table = np.ascontiguousarray(np.concatenate([psi[..., None], mean_gradient], axis=3))
         self._coarse = ((-1, -1), None)  # the last table of a window of levels asked for (see coarse_table)
 
+    def __getstate__(self) -> dict:
+        """Pickled without the last window's table (:meth:`coarse_table` makes it again when asked)."""
+        return {**self.__dict__, "_coarse": ((-1, -1), None)}
+
     @classmethod
     def combine(cls, terms: list[tuple[float, "StrengthPyramid"]]) -> "StrengthPyramid":
         """The pyramid of ``sum w_i psi_i`` from the pyramids of the ``psi_i`` (one grid, levels and widths).
