@@ -30,3 +30,26 @@ def test_a_split_whose_midpoint_lands_across_a_curve_is_flagged():
     assert splits_would_cross(X, E, np.array([0]), np.array([[1.2, 1.0, 0.0]]), UP).tolist() == [True]
     # projected to (1, -0.2): clear of it
     assert splits_would_cross(X, E, np.array([0]), np.array([[1.0, -0.2, 0.0]]), UP).tolist() == [False]
+
+
+def test_every_crossing_is_found_among_short_and_long_edges():
+    """Many short edges and a few long ones (a refined boundary keeps long chords along flat faces of B):
+    the pairs found are exactly those whose segments properly cross, by a test of every pair."""
+    rng = np.random.default_rng(5)
+    n = 600
+    A = rng.uniform(0, 10, (n, 2))
+    length = np.where(rng.random(n) < 0.05, rng.uniform(2, 6, n), rng.uniform(0.05, 0.4, n))
+    angle = rng.uniform(0, np.pi, n)
+    B = A + length[:, None] * np.column_stack([np.cos(angle), np.sin(angle)])
+    X = np.column_stack([np.concatenate([A, B]), rng.uniform(-0.1, 0.1, 2 * n)])  # depths differ
+    E = np.column_stack([np.arange(n), n + np.arange(n)])
+
+    def turn(p, q, r):
+        return np.sign((q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1]) - (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0]))
+
+    i, j = np.triu_indices(n, 1)
+    a, b, c, d = A[i], B[i], A[j], B[j]
+    cross = (turn(a, b, c) * turn(a, b, d) < 0) & (turn(c, d, a) * turn(c, d, b) < 0)
+    want = {(int(p), int(q)) for p, q in zip(i[cross], j[cross])}
+    got = {tuple(sorted(map(int, p))) for p in crossing_pairs(X, E, UP)}
+    assert len(want) > 20 and got == want

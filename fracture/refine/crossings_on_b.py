@@ -38,7 +38,7 @@ def close_pairs(X: np.ndarray, E: np.ndarray, normal_at, gap: float = 0.0) -> tu
         return none
     A, B = X[E[:, 0]], X[E[:, 1]]
     M, L = 0.5 * (A + B), np.linalg.norm(B - A, axis=1)
-    pairs = cKDTree(M).query_pairs(float(L.max()) + gap, output_type="ndarray")
+    pairs = _candidates(M, L, gap)
     if not len(pairs):
         return none
     i, j = pairs[:, 0], pairs[:, 1]
@@ -69,6 +69,34 @@ def close_pairs(X: np.ndarray, E: np.ndarray, normal_at, gap: float = 0.0) -> tu
         near |= np.minimum.reduce([_point_segment(a, c, d), _point_segment(b, c, d), _point_segment(c, a, b),
                                    _point_segment(d, a, b)]) < gap
     return np.stack([i[near], j[near]], 1), cross[near]
+
+
+def _candidates(M: np.ndarray, L: np.ndarray, gap: float) -> np.ndarray:
+    """Pairs ``i < j`` (sorted, unique) of edges with midpoints ``M`` and lengths ``L`` whose midpoints are
+    within ``(L_i + L_j) / 2 + gap`` of each other, and possibly a few more.
+
+    One search radius for all (the longest edge's) would pair every short
+    edge with hundreds of others once a few long edges remain on a refined
+    boundary (a chord along a flat face of B). So the edges up to the 90th
+    percentile ``r0`` of the lengths are paired within ``r0``, each longer
+    edge with the shorter ones within its reach of them, and the longer
+    edges among themselves within the longest one's.
+    """
+    tree = cKDTree(M)
+    r0 = float(np.percentile(L, 90))
+    found = [tree.query_pairs(r0 + gap, output_type="ndarray")]
+    long_ = np.flatnonzero(L > r0)
+    if len(long_):
+        reach = tree.query_ball_point(M[long_], 0.5 * (L[long_] + r0) + gap, return_sorted=False)
+        counts = np.fromiter((len(r) for r in reach), np.int64, len(reach))
+        if counts.sum():
+            others = np.concatenate([np.asarray(r, np.int64) for r in reach if len(r)])
+            mine = np.repeat(long_, counts)
+            found.append(np.stack([np.minimum(mine, others), np.maximum(mine, others)], 1)[mine != others])
+        among = cKDTree(M[long_]).query_pairs(float(L.max()) + gap, output_type="ndarray")
+        found.append(np.sort(long_[among], axis=1))
+    pairs = np.concatenate(found).astype(np.int64).reshape(-1, 2)
+    return np.unique(pairs, axis=0)
 
 
 def _point_segment(p, a, b):
