@@ -169,16 +169,30 @@ def _local(tasks: list[tuple[Point, tuple]], jobs: int) -> Iterator[tuple[Point,
             yield futures[f], f.result()
 
 
-def _ray(tasks: list[tuple[Point, tuple]], jobs: int, address: str | None, root: Path) -> Iterator[tuple[Point, dict]]:
+def _ray_start(jobs: int, address: str | None) -> bool:
+    """Join the Ray cluster at ``address`` (None: start a local one with ``jobs`` CPUs), or refuse in one
+    line; returns whether this call started Ray (and so must shut it down)."""
     try:
         import ray
     except ImportError:
         raise ConfigError("--backend", "ray", "Ray is not installed; expected `pip install fracref[ray]` "
                           "(or `pip install ray`)") from None
-    started = not ray.is_initialized()
-    if started:
+    if ray.is_initialized():
+        return False
+    _check_reachable(address)
+    try:
         ray.init(address=address, num_cpus=None if address else max(jobs, 1), include_dashboard=False,
                  log_to_driver=False, configure_logging=False)
+    except (ConnectionError, RuntimeError, ValueError) as exc:
+        raise ConfigError("--address", str(address), f"cannot join a Ray cluster there ({exc}); expected the "
+                          "head's address (ray start --head prints it), ray://HOST:10001 or auto") from None
+    return True
+
+
+def _ray(tasks: list[tuple[Point, tuple]], started: bool, root: Path) -> Iterator[tuple[Point, dict]]:
+    """Run the points as Ray tasks (Ray joined by :func:`_ray_start`), writing each finished run into ``root``."""
+    import ray
+
     try:
         remote = ray.remote(num_cpus=1, max_retries=0)(run_point_archived)
         refs = {}
@@ -199,6 +213,23 @@ def _ray(tasks: list[tuple[Point, tuple]], jobs: int, address: str | None, root:
             ray.shutdown()
 
 
+def _check_reachable(address: str | None, seconds: float = 5.0) -> None:
+    """Refuse at once an address ``HOST:PORT`` (or ``ray://HOST:PORT``) where nothing answers (Ray itself
+    keeps retrying for minutes)."""
+    import socket
+
+    if not address or address == "auto":
+        return
+    host, _, port = address.split("://")[-1].rpartition(":")
+    if not host or not port.isdigit():
+        raise ConfigError("--address", address, "expected HOST:PORT, ray://HOST:PORT or auto")
+    try:
+        socket.create_connection((host, int(port)), timeout=seconds).close()
+    except OSError as exc:
+        raise ConfigError("--address", address, f"no Ray cluster answers there ({exc.strerror or exc}); expected "
+                          "the address of a running head (ray start --head prints it), or auto") from None
+
+
 # -- the sweep -------------------------------------------------------------------------------------
 
 def run_sweep(config: str | Path, grid: dict[str, list], out: str | Path, overrides: Iterable[str] = (),
@@ -216,6 +247,7 @@ def run_sweep(config: str | Path, grid: dict[str, list], out: str | Path, overri
     check_points(config, base, pts)
     if out.exists() and not out.is_dir():
         raise ConfigError("--out", str(out), "is a file; expected a sweep directory")
+    started = _ray_start(jobs, address) if backend == "ray" else False
     out.mkdir(parents=True, exist_ok=True)
     state = {"config": str(config), "overrides": base, "grid": grid, "backend": backend, "points": {}}
     todo = []
@@ -229,7 +261,7 @@ def run_sweep(config: str | Path, grid: dict[str, list], out: str | Path, overri
     save = lambda: atomic_write_text(out / "sweep.json", json.dumps(state, indent=1, default=str) + "\n")  # noqa: E731
     save()
     bar = tqdm(total=len(todo), desc="sweep", disable=not progress, leave=True)
-    runs = _ray(todo, jobs, address, out) if backend == "ray" else _local(todo, jobs)
+    runs = _ray(todo, started, out) if backend == "ray" else _local(todo, jobs)
     for p, status in runs:
         state["points"][p.name].update(status)
         save()

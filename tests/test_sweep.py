@@ -65,6 +65,11 @@ def test_a_sweep_on_ray_gives_the_same_runs(local_sweep, tmp_path):
     for p in points(GRID):
         assert files(tmp_path / "ray" / p.name) == files(out / p.name), p.name  # the same bytes
     assert (tmp_path / "ray" / "table.csv").read_text().count("\n") == 5
+    # a cluster address where nothing answers is refused at once, in one line
+    for address in ("127.0.0.1:1", "ray://127.0.0.1:1", "nonsense", "auto"):
+        with pytest.raises(ConfigError, match="--address"):
+            run_sweep(config, GRID, tmp_path / "nowhere", backend="ray", address=address, progress=False)
+    assert not (tmp_path / "nowhere").exists()
 
 
 def test_a_resumed_sweep_runs_only_the_missing_points_and_a_failure_stops_no_other(local_sweep, tmp_path):
