@@ -245,9 +245,11 @@ def show_context(scene: rendering.Open3DScene, run: RunData) -> None:
     scene.add_geometry("exterior", exterior_mesh(run), glass(0.12))
 
 
-def set_surface(scene: rendering.Open3DScene, surface: Surface, color_by: str, rng: tuple[float, float]) -> None:
-    """Panel 2's fracture surface coloured by its ``psi`` or ``speed`` scalars (replacing the previous one)."""
-    colors = colormap(surface.scalars[color_by], SURFACE_CMAPS[color_by], *rng)
+def set_surface(scene: rendering.Open3DScene, surface: Surface, color_by: str, rng: tuple[float, float],
+                cmap: str | None = None) -> None:
+    """Panel 2's fracture surface coloured by its ``psi`` or ``speed`` scalars (or another, with its ``cmap``),
+    replacing the previous one."""
+    colors = colormap(surface.scalars[color_by], cmap or SURFACE_CMAPS[color_by], *rng)
     _replace(scene, "surface", triangle_mesh(surface.V, surface.F, colors), lit((1, 1, 1, 1)))
 
 

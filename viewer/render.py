@@ -37,10 +37,11 @@ from fracture.atomic import atomic_write_bytes, png_bytes  # noqa: E402
 from fracture.errors import InputError  # noqa: E402
 from viewer import annotate  # noqa: E402
 from viewer.annotate import Bar  # noqa: E402
-from viewer.data import RunData  # noqa: E402
+from viewer.data import RunData, Surface  # noqa: E402
 from viewer.media import Video, check_size, frame_counts  # noqa: E402
 from viewer.looks import (  # noqa: E402
-    FIELD_CMAPS, SURFACE_CMAPS, CameraPose, View, animation_pose, apply_camera, capture, frame_points, iteration_caption,
+    FIELD_CMAPS, SURFACE_CMAPS, CameraPose, View, animation_pose, apply_camera, capture, dominant_normal, frame_points,
+    iteration_caption, scene_box,
     iteration_pose, pieces_caption, set_cutaway, set_frame, set_slice, set_surface, show_context, show_material, show_pieces,
     show_stage, slice_pose, slice_title, spread, turntable_poses,
 )
@@ -221,30 +222,37 @@ def compare_image(run: RunData, t: int, renderer: Renderer, pose: CameraPose | N
 
 
 def contact_sheet(run_dirs: list[Path], captions: list[str], out: str | Path, tile: tuple[int, int] = (480, 360),
-                  columns: int | None = None, color_by: str = "psi") -> Path:
-    """One PNG of the runs' refined fracture surfaces (their last iterations) in a grid of tiles, each with
-    its caption, one camera and one colour range for all (the first run's view direction, fitted to every
-    surface), and the colour bar beside the last tile of each row. Written atomically to ``out``."""
+                  columns: int | None = None) -> Path:
+    """One PNG of the runs' refined fracture surfaces in a grid of tiles, each with its caption and a colour
+    bar, coloured by the material strength zeta under them (what the runs share, whatever their psi) on one
+    range, all from one camera (facing the first surface, fitted to every one). Written atomically."""
+    from fields.interpolate import trilinear
+
     runs = [RunData(d) for d in run_dirs]
     if not runs:
         raise InputError("contact sheet: no finished runs to show")
+    surfaces = []
     for r in runs:
-        if not r.has_iterations:
-            raise InputError(f"{r.dir}: the contact sheet needs the refinement's iterations (refine.snapshots on)")
+        s = r.refined_fracture
+        if s is None:
+            raise InputError(f"{r.dir}: the contact sheet needs the refined fracture surface (the refine stage)")
+        zeta = trilinear(r.grid, r.field("zeta"), np.asarray(s.V, np.float64))
+        surfaces.append(Surface(s.V, s.F, {"zeta": zeta}))
     columns = columns or int(np.ceil(np.sqrt(len(runs))))
-    width, height = tile
-    bar_tile = Renderer(width, height)
-    last = [r.iteration(len(r.iterations) - 1) for r in runs]
-    ranges = [r.surface_range(color_by) for r in runs]
-    lo, hi = min(a for a, _ in ranges), max(b for _, b in ranges)
-    points = np.concatenate([spread(s.V, 3000) for s in last])
-    base = iteration_pose(runs[0], bar_tile.picture_aspect(True, True))
-    pose = frame_points(points, bar_tile.picture_aspect(True, True), base.center - base.eye, base.up)
+    renderer = Renderer(*tile)
+    values = np.concatenate([s.scalars["zeta"] for s in surfaces])
+    lo, hi = (float(v) for v in np.percentile(values, [1, 99]))
+    hi = hi if hi > lo else lo + 1.0
+    aspect = renderer.picture_aspect(True, True)
+    blo, bhi = scene_box(runs[0])
+    look = dominant_normal(np.asarray(surfaces[0].V, np.float64), surfaces[0].F)
+    pose = frame_points(np.concatenate([spread(s.V, 3000) for s in surfaces]), aspect, look,
+                        np.eye(3)[int(np.argsort(bhi - blo)[1])])
     tiles = []
-    for r, surface, caption in zip(runs, last, captions):
-        show_context(bar_tile.scene, r)
-        set_surface(bar_tile.scene, surface, color_by, (lo, hi))
-        tiles.append(bar_tile.figure(pose, Bar(SURFACE_CMAPS[color_by], lo, hi, color_by), caption))
+    for r, surface, caption in zip(runs, surfaces, captions):
+        show_context(renderer.scene, r)
+        set_surface(renderer.scene, surface, "zeta", (lo, hi), FIELD_CMAPS["zeta"])
+        tiles.append(renderer.figure(pose, Bar(FIELD_CMAPS["zeta"], lo, hi, "zeta"), caption))
     blank = np.full_like(tiles[0], 255)
     rows = [np.concatenate((tiles[i:i + columns] + [blank] * columns)[:columns], axis=1)
             for i in range(0, len(tiles), columns)]
