@@ -228,8 +228,11 @@ def _half_disk(radius: float, h: float) -> tuple[np.ndarray, np.ndarray]:
     return V, F
 
 
+_BRANCH_CUT_TILT = 35.0  # degrees between the branch's cut and its cross-section
+
+
 def branch(rng: np.random.Generator, frames: int, separation: float) -> CoarseFracture:
-    """A tree branch with a cut through half its section: it bends, the cut opens, the rest holds.
+    """A tree branch with an oblique cut through half its section: it bends, the cut opens, the rest holds.
 
     The cut is incomplete; virtual fracture extends it across the section so
     the branch has two components, and the extension never opens.
@@ -241,6 +244,9 @@ def branch(rng: np.random.Generator, frames: int, separation: float) -> CoarseFr
     BV, BF = cylinder(radius, length, segments=96, rings=129)
     BV[:, 2] -= length / 2
     V, F = _half_disk(radius, 0.16)
+    # the cut runs obliquely across the grain, as a bent branch breaks: z = y tan(35 degrees) (its rim stays
+    # on the bark); a cut square to the axis would feel only the grain's slow change along the axis
+    V[:, 2] = V[:, 1] * np.tan(np.radians(_BRANCH_CUT_TILT))
     arc = np.isclose(np.linalg.norm(V[:, :2], axis=1), radius)
     _, _, C = igl.point_mesh_squared_distance(V[arc], BV, BF)
     V[arc] = C
