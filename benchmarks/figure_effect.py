@@ -2,8 +2,8 @@
 
 Panels: the example wall's crack and the collapsing wall's fracture network
 (their mid-planes), a curved synthetic weak sheet with a flat cut 8 voxels
-off and a tilted one 4 voxels off, and the marble bunny's network (its
-mid-plane). Each shows
+off and a tilted one 4 voxels off, the marble bunny's network (its
+mid-plane) and the branch's oblique cut (the plane through its axis). Each shows
 zeta on a slice (dark: weak), where the coarse surface crosses it (white)
 and where the refined one does (red).
 
@@ -84,8 +84,8 @@ def sheet_panel(ax, kind: str, offset: float) -> None:
           f"{kind} weak sheet, cut {offset:g} voxels off")
 
 
-def scene_panel(ax, name: str, title: str) -> None:
-    """A config's coarse and refined surfaces on its middle z slice of zeta, masked to the object."""
+def scene_panel(ax, name: str, title: str, axis: int = 2) -> None:
+    """A config's coarse and refined surfaces on its middle slice of zeta across ``axis``, masked to the object."""
     cfg = load_config(ROOT / "configs" / f"{name}.yaml", ["refine.snapshots=false"])
     with tempfile.TemporaryDirectory() as tmp:
         out = runner.run(cfg, Path(tmp) / "run", until="refine", progress=False)
@@ -94,20 +94,21 @@ def scene_panel(ax, name: str, title: str) -> None:
         coarse = read_ply(out / "coarse/fracture_surface.ply")[:2]
         refined = read_ply(out / "refined/fracture_surface.ply")[:2]
         solid = Exterior(*read_ply(out / "coarse/exterior.ply")[:2])
-    panel(ax, grid, zeta, 2, [coarse, refined], title, solid)
+    panel(ax, grid, zeta, axis, [coarse, refined], title, solid)
 
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=ROOT / "docs" / "effect.png")
     args = ap.parse_args(argv)
-    fig = plt.figure(figsize=(13, 6.2), facecolor="white")
-    grid = fig.add_gridspec(2, 3, width_ratios=[1, 1, 3])
+    fig = plt.figure(figsize=(14, 6.6), facecolor="white")
+    grid = fig.add_gridspec(2, 4, width_ratios=[1, 1, 1.6, 1.4])
     scene_panel(fig.add_subplot(grid[0, :2]), "example", "example wall (one crack), mid-plane")
-    scene_panel(fig.add_subplot(grid[0, 2]), "wall", "collapsing wall (12 pieces), mid-plane")
+    scene_panel(fig.add_subplot(grid[0, 2:]), "wall", "collapsing wall (12 pieces), mid-plane")
     sheet_panel(fig.add_subplot(grid[1, 0]), "curved", 8.0)
     sheet_panel(fig.add_subplot(grid[1, 1]), "tilted", 4.0)
-    scene_panel(fig.add_subplot(grid[1, 2]), "bunny", "marble bunny (7 pieces), mid-plane: soft veins dark")
+    scene_panel(fig.add_subplot(grid[1, 2]), "bunny", "marble bunny (7 pieces): soft veins dark")
+    scene_panel(fig.add_subplot(grid[1, 3]), "branch", "branch, along its axis: soft core dark", axis=0)
     fig.tight_layout()
     args.out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(args.out, dpi=90)
