@@ -134,3 +134,27 @@ def test_the_marble_bunny_cracks_follow_the_soft_veins(tmp_path):
     coarse, refined = figures["coarse"], figures["refined"]
     assert refined["weak_share_20"] >= 0.35 and refined["weak_share_20"] >= 2.0 * coarse["weak_share_20"]
     assert refined["mean_zeta"] <= 0.75 * coarse["mean_zeta"]
+
+
+def test_the_branch_cut_turns_toward_the_axis_in_the_soft_core(tmp_path):
+    """Fig. 9: the branch is soft inside and hard outside, its grain along the axis. Its oblique coarse cut
+    (35 degrees from the cross-section) turns toward the axis in the core and across it at the bark, and
+    moves into weaker wood (a preview budget of 20K triangles)."""
+    cfg = load_config(CONFIGS / "branch.yaml", ["refine.max_triangles=20000", "refine.snapshots=false"])
+    out = runner.run(cfg, tmp_path / "run", until="refine", progress=False)
+
+    def axial_cosine(which: str, lo: float, hi: float) -> float:
+        """Area-weighted |n . axis| of the triangles whose centres lie between radii lo and hi."""
+        V, F = read_ply(out / which / "fracture_surface.ply")[:2]
+        T = V.astype(np.float64)[F]
+        n = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
+        area = np.linalg.norm(n, axis=1)
+        r = np.linalg.norm(T.mean(axis=1)[:, :2], axis=1)
+        m = (r >= lo) & (r < hi)
+        return float(np.abs(n[m, 2]).sum() / area[m].sum())
+
+    coarse, core, bark = axial_cosine("coarse", 0, 0.2), axial_cosine("refined", 0, 0.2), axial_cosine("refined", 0.35, 0.5)
+    assert coarse == pytest.approx(np.cos(np.radians(35.0)), abs=0.01)
+    assert core < coarse - 0.04 and bark > core + 0.06
+    figures = run_figures(out)
+    assert figures["refined"]["mean_zeta"] < figures["coarse"]["mean_zeta"] - 0.003
