@@ -201,6 +201,34 @@ def _fill_around_junctions(V: np.ndarray, F: np.ndarray, labels: np.ndarray) -> 
     return labels
 
 
+def _near_surface(ids: np.ndarray, shape, origin: np.ndarray, h: float, V: np.ndarray, F: np.ndarray,
+                  reach: float, stride: int = 4) -> np.ndarray:
+    """The grid nodes ``ids`` (flat indices of a grid of spacing ``h``) closer than ``reach`` to the surface
+    ``(V, F)``, exactly.
+
+    Asking libigl's AABB tree about every node costs most of the labelling on
+    fine grids (8M nodes at 240 voxels, 40 s); the surface is near few of
+    them. So the distances are first taken on the nodes of every ``stride``-th
+    grid line: a node is within ``stride sqrt(3) / 2`` voxels of one of them,
+    and by the triangle inequality only nodes whose coarse neighbour is within
+    ``reach`` plus that (and a voxel to spare) can be within ``reach``. Those
+    are asked exactly.
+    """
+    ijk = np.stack(np.unravel_index(ids, tuple(shape)), 1)
+    coarse_shape = np.asarray(shape) // stride + 1
+    c = np.minimum(np.rint(ijk / stride).astype(np.int64), coarse_shape - 1)
+    axes = [origin[k] + h * stride * np.arange(coarse_shape[k]) for k in range(3)]
+    Q = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+    dq = np.sqrt(igl.point_mesh_squared_distance(Q, V, F)[0]).reshape(tuple(coarse_shape))
+    bound = reach + h * (0.5 * stride * np.sqrt(3.0) + 1.0)
+    maybe = ids[dq[c[:, 0], c[:, 1], c[:, 2]] < bound]
+    if not len(maybe):
+        return maybe
+    P = origin + h * np.stack(np.unravel_index(maybe, tuple(shape)), 1)
+    d2 = igl.point_mesh_squared_distance(P, V, F)[0]
+    return maybe[d2 < reach ** 2]
+
+
 def label_components(BV: np.ndarray, BF: np.ndarray, V: np.ndarray, F: np.ndarray, resolution: int = 96,
                      what: str = "fracture surface", strict: bool = True) -> tuple[np.ndarray, np.ndarray, int]:
     """Components of the inside of B separated by the fracture surface ``(V, F)``.
@@ -244,8 +272,8 @@ def label_components(BV: np.ndarray, BF: np.ndarray, V: np.ndarray, F: np.ndarra
     inside = igl.fast_winding_number(BV, BF, P) > 0.5
     free = inside.copy()
     WV, WF = _with_skirt(BV, BF, V, F, h)
-    d2, _, _ = igl.point_mesh_squared_distance(P[inside], WV, WF)
-    free[np.flatnonzero(inside)[d2 < (0.6 * h) ** 2]] = False
+    near = _near_surface(np.flatnonzero(inside), shape, origin, h, WV, WF, 0.6 * h)
+    free[near] = False
     labels, count = ndimage.label(free.reshape(shape))
     sizes = np.bincount(labels.ravel(), minlength=count + 1)
     keep = np.flatnonzero(sizes >= _MIN_VOXELS)
