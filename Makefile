@@ -22,8 +22,10 @@ demo: install
 	$(BIN)/fracref render runs/example --what slices --what iterations --out runs/example/renders --quiet
 	@echo "results: runs/example (manifest.json), figures and videos: runs/example/renders (open the viewer: xvfb-run -a $(BIN)/fracref view runs/example, or without xvfb-run on a desktop)"
 
+# Test files run on every core (one worker per file: a file's fixtures are made once, and the
+# viewer's windows under Xvfb open one at a time).
 test: install
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n auto --dist loadfile
 
 bench: install
 	$(BIN)/python benchmarks/bench_fields.py
