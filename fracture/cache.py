@@ -194,7 +194,6 @@ class StageCache:
         finally:
             if tmp is not None:
                 shutil.rmtree(tmp, ignore_errors=True)
-        self.trim()
         return final
 
     def value(self, name: str, key: str) -> Any:
@@ -218,7 +217,8 @@ class StageCache:
 
     def trim(self) -> list[Path]:
         """Remove the entries read longest ago until the cache holds at most ``max_bytes``; returns them.
-        Temporary directories of killed runs (their process gone) go too."""
+        Temporary directories of killed runs (their process gone) go too. A run calls this once, at its end
+        (it walks every entry)."""
         removed = []
         for tmp in [*self.root.glob("*/.*.partial-*"), *self.root.glob("*/.*.gone-*")]:
             pid = tmp.name.split(".partial-" if ".partial-" in tmp.name else ".gone-")[1].split("-")[0]

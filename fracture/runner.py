@@ -242,6 +242,8 @@ def run(cfg: dict, out: str | Path, until: str | None = None, force: bool = Fals
             ctx.tell("stage", name=name)
             info = _run_stage(ctx, name, keep_products=name != available_stages()[-1], out=Path(out))
             manifest["stages"][name] = {"seconds": round(time.perf_counter() - t0, 4), **info}
+        if cache is not None:
+            cache.trim()  # once per run: it walks every entry
         manifest["stats"] = ctx.stats
         manifest["counts"] = ctx.counts
         manifest["notes"] = ctx.notes
