@@ -231,10 +231,11 @@ def _sweep(args) -> int:
     names = finished(state)
     failed = {n: p for n, p in state["points"].items() if p["status"] == "failed"}
     if names and not args.no_sheet and (args.until is None or args.until not in ("coarse", "fields")):
+        from viewer.data import read_sweep
         from viewer.render import contact_sheet
 
-        labels = [", ".join(f"{k} = {v}" for k, v in state["points"][n]["values"].items()) for n in names]
-        print(f"contact sheet: {contact_sheet([Path(out) / n for n in names], labels, Path(out) / 'sheet.png')}")
+        done = read_sweep(out)
+        print(f"contact sheet: {contact_sheet([p.dir for p in done], [p.label for p in done], Path(out) / 'sheet.png')}")
     print(f"sweep: {len(names)} of {len(state['points'])} points done, tables: {Path(out) / 'table.md'}, "
           f"{Path(out) / 'table.csv'}")
     for name, p in failed.items():

@@ -17,6 +17,7 @@ import numpy as np
 
 from fields.grid import Grid
 from fracture.errors import InputError
+from fracture.sweep import Point
 
 FIELDS = ("psi", "zeta", "xi")
 
@@ -48,7 +49,7 @@ def read_sweep(sweep_dir: str | Path) -> list[SweepPoint]:
     except (OSError, json.JSONDecodeError, KeyError, TypeError) as exc:
         raise InputError(f"{sweep_dir / 'sweep.json'}: not a sweep's record ({exc}); expected the file "
                          "`fracref sweep` writes") from None
-    points = [SweepPoint(name, ", ".join(f"{k} = {v}" for k, v in p.get("values", {}).items()), sweep_dir / name)
+    points = [SweepPoint(name, Point(tuple(p.get("values", {}).items())).label, sweep_dir / name)
               for name, p in listed.items() if (sweep_dir / name / "manifest.json").is_file()]
     if not points:
         raise InputError(f"{sweep_dir}: no point of this sweep has finished yet (expected run directories with "
