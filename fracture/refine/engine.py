@@ -81,7 +81,7 @@ from fracture.refine.kernels import EdgeTable, edge_table, row_edges, spatial_or
 from fracture.refine.mesh import RefineMesh
 from fracture.refine.remesh import plan_chord_splits, plan_splits
 from fracture.refine.state import VertexState
-from fracture.refine.step import (BOUNDARY_MOVE, StepSize, implicit_step, limit_by_shortest_edge, limit_moves,
+from fracture.refine.step import (BOUNDARY_MOVE, ImplicitStep, StepSize, limit_by_shortest_edge, limit_moves,
                                   weighted_cotangent_laplacian)
 from fracture.tolerances import tol
 from fracture.topology import boundary_conormals
@@ -165,6 +165,7 @@ class Refiner:
         self.log = IterationLog()
         self.B = Exterior(BV, BF)  # its AABB tree, built on the first query, serves every iteration
         self.step = StepSize(params.step, self.h)
+        self.solve = ImplicitStep()  # keeps its factorisation for a retried step
         self.state = VertexState.empty(len(mesh.V))
         self.begin_stage(self.stage_levels()[0])  # sets first, near, offset and the step size
         self.boundary = np.zeros(0, np.int64)  # boundary vertices of the last iteration
@@ -452,7 +453,7 @@ class Refiner:
         L = weighted_cotangent_laplacian(m.V, m.F, wf)
         for attempt in range(_ATTEMPTS):
             tau = self.step.tau
-            d = implicit_step(L, area, v, tau)
+            d = self.solve(L, area, v, tau)
             _drop(d, boundary, *frames)
             d[held] = 0.0
             limit_moves(m.V, m.F, d, p.fold, p.max_move * self.h)
@@ -464,16 +465,24 @@ class Refiner:
             out = self.leaving_b(trial, inner, p.max_move * self.h)
             trial[out] = m.V[out]  # stopped, as a collision stops a vertex
             self.stop_crossings_on_b(trial, table)
-            clock = log.tick("step", clock)
-            hit, _, grid = stop_collisions(m.V, trial, m.F, p.thickness * self.h, table, return_grid=True,
-                                           closed=closed)
-            clock = log.tick("collisions", clock)
+            # the functional before the collisions are looked for: a step that raises it is
+            # rejected without them (stopping colliding vertices where they are seldom lowers it)
             went = np.flatnonzero((trial != m.V).any(axis=1))  # the field is known where nothing moved
             fresh = self.pyramid.coarse_field(self.first, trial[went], self.window)
             psibar1 = s.psibar.copy()
             psibar1[went] = fresh[1]
             value = energy(trial, m.F, psibar1 + self.offset)
             clock = log.tick("step", clock)
+            if value <= before + 1e-12 * abs(before):
+                hit, _, grid = stop_collisions(m.V, trial, m.F, p.thickness * self.h, table, return_grid=True,
+                                               moving=went, closed=closed)
+                clock = log.tick("collisions", clock)
+                if hit.any():  # stopped vertices stay where they were, with their field
+                    moved = (trial[went] != m.V[went]).any(axis=1)
+                    went, fresh = went[moved], tuple(f[moved] for f in fresh)
+                    psibar1[hit] = s.psibar[hit]
+                    value = energy(trial, m.F, psibar1 + self.offset)
+                    clock = log.tick("step", clock)
             if value <= before + 1e-12 * abs(before):
                 X1, after, stopped = trial, value, hit
                 s.psi[went], s.psibar[went], s.grad[went] = fresh  # the next iteration's field
