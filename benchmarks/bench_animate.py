@@ -59,4 +59,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
+    from fracture.process import prepare_process
+
+    prepare_process()
     main()

@@ -51,4 +51,7 @@ def main(argv=None) -> None:
 
 
 if __name__ == "__main__":
+    from fracture.process import prepare_process
+
+    prepare_process()
     main()

@@ -70,4 +70,7 @@ def main() -> int:
 
 
 if __name__ == "__main__":
+    from fracture.process import prepare_process
+
+    prepare_process()
     sys.exit(main())

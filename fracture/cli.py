@@ -133,10 +133,12 @@ def main(argv: list[str] | None = None) -> int:
 def _main(argv: list[str] | None) -> int:
     args = _parser().parse_args(argv)
     from fracture import runner
+    from fracture.process import prepare_process
     from fracture.atomic import OutputError, RunDirectoryExists
     from fracture.config import dump_config, load_config
     from fracture.errors import InputError, ResultError, StageError
 
+    prepare_process()
     try:
         if args.command == "stages":
             print("\n".join(runner.available_stages()))

@@ -19,6 +19,15 @@ SCENE_CASES = ["bunny", "branch", "wall", "clay", "jello", "blender_cube8"]
 BUDGETS = {"blender_cube8": 15000}
 
 
+
+def pytest_configure(config):
+    """Stale compiled kernels are cleared once, by the main process (not by each xdist worker)."""
+    if not hasattr(config, "workerinput"):
+        from fracture.refine import clear_stale_numba_cache
+
+        clear_stale_numba_cache()
+
+
 def scene_config(name: str, overrides: list[str]) -> dict:
     """The config of a scene case with ``overrides``; built-in scenes get 8 frames, the sample keeps its own."""
     from fracture.config import load_config

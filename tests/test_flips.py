@@ -85,24 +85,6 @@ def test_a_safe_flip_that_would_cut_another_sheet_is_refused():
     assert flip_edges(far, F.copy(), sides, safe=True) == 1
 
 
-def test_numba_caches_of_changed_sources_are_cleared(tmp_path):
-    from fracture.refine import clear_stale_numba_cache
-
-    (tmp_path / "a.py").write_text("import numba\nx = 1\n")
-    (tmp_path / "b.py").write_text("y = 1\n")  # no numba: its changes leave the cache alone
-    (tmp_path / "__pycache__").mkdir()
-    old = tmp_path / "__pycache__" / "a.f-1.py311.nbi"
-    old.write_bytes(b"stale")
-    assert clear_stale_numba_cache(tmp_path) and not old.exists()  # no record of the sources: cleared
-    fresh = tmp_path / "__pycache__" / "a.f-1.py311.1.nbc"
-    fresh.write_bytes(b"compiled from x = 1")
-    assert not clear_stale_numba_cache(tmp_path) and fresh.exists()  # same sources: kept
-    (tmp_path / "b.py").write_text("y = 2\n")
-    assert not clear_stale_numba_cache(tmp_path) and fresh.exists()
-    (tmp_path / "a.py").write_text("import numba\nx = 2\n")
-    assert clear_stale_numba_cache(tmp_path) and not fresh.exists()
-
-
 def _sheet(rng, n, stretch):
     """A Delaunay triangulation of ``n`` random points of the unit square, made poor by a stretch."""
     P = rng.random((n, 2))

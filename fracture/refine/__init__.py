@@ -3,8 +3,10 @@
 numba caches each compiled function beside its source and checks only that
 file's time stamp, but the kernels here call each other across modules
 (flips and collisions use the hash grid): a change in one module would leave
-stale machine code in the others' caches. On import, the cache is cleared
-when the package's sources differ from those it was compiled from.
+stale machine code in the others' caches. :func:`clear_stale_numba_cache`
+clears the cache when the package's sources differ from those it was compiled
+from; programs call it once (:func:`fracture.process.prepare_process`), importing
+the package does not.
 """
 
 from __future__ import annotations
@@ -14,9 +16,11 @@ import re
 from pathlib import Path
 
 
-def clear_stale_numba_cache(package: Path) -> bool:
-    """Delete numba's cache files in ``package/__pycache__`` unless they were made from the
-    current sources of the ``package/*.py`` modules that use numba; returns whether anything was deleted."""
+def clear_stale_numba_cache(package: Path | None = None) -> bool:
+    """Delete numba's cache files in ``package/__pycache__`` (default: this package's) unless they were
+    made from the current sources of the ``package/*.py`` modules that use numba; returns whether
+    anything was deleted."""
+    package = package or Path(__file__).parent
     sources = (p.read_bytes() for p in sorted(package.glob("*.py")))
     digest = hashlib.sha1(b"".join(s for s in sources if b"import numba" in s)).hexdigest()
     cache = package / "__pycache__"
@@ -51,6 +55,3 @@ def kernels_cached(package: Path | None = None) -> bool:
                 want.add(f"{p.stem}.{m.group(2)}")
     have = {f.name.split("-")[0] for f in (package / "__pycache__").glob("*.nbi")}
     return len(want & have) >= 0.5 * len(want)
-
-
-clear_stale_numba_cache(Path(__file__).parent)

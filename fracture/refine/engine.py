@@ -70,7 +70,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from fracture.allocator import keep_freed_memory
 from fracture.exterior import Exterior
 from fracture.refine.collide import stop_collisions
 from fracture.refine.crossings_on_b import close_pairs
@@ -159,7 +158,6 @@ class Refiner:
     def __init__(self, mesh: RefineMesh, pyramid, BV: np.ndarray, BF: np.ndarray, params: RefineParams,
                  rng: np.random.Generator):
         self.mesh, self.pyramid, self.params, self.rng = mesh, pyramid, params, rng
-        keep_freed_memory()  # every iteration frees and allocates the same large arrays again
         self.h = float(np.min(pyramid.grid.spacing))
         self.on_b = tol.on_b * self.h  # a boundary vertex this close to B is on it
         self.log = IterationLog()

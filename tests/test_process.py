@@ -1,0 +1,48 @@
+"""Process set-up: explicit, and importing the package changes nothing."""
+
+import subprocess
+import sys
+
+
+def test_numba_caches_of_changed_sources_are_cleared(tmp_path):
+    from fracture.refine import clear_stale_numba_cache
+
+    (tmp_path / "a.py").write_text("import numba\nx = 1\n")
+    (tmp_path / "b.py").write_text("y = 1\n")  # no numba: its changes leave the cache alone
+    (tmp_path / "__pycache__").mkdir()
+    old = tmp_path / "__pycache__" / "a.f-1.py311.nbi"
+    old.write_bytes(b"stale")
+    assert clear_stale_numba_cache(tmp_path) and not old.exists()  # no record of the sources: cleared
+    fresh = tmp_path / "__pycache__" / "a.f-1.py311.1.nbc"
+    fresh.write_bytes(b"compiled from x = 1")
+    assert not clear_stale_numba_cache(tmp_path) and fresh.exists()  # same sources: kept
+    (tmp_path / "b.py").write_text("y = 2\n")
+    assert not clear_stale_numba_cache(tmp_path) and fresh.exists()
+    (tmp_path / "a.py").write_text("import numba\nx = 2\n")
+    assert clear_stale_numba_cache(tmp_path) and not fresh.exists()
+
+
+def test_importing_the_package_changes_nothing(tmp_path):
+    """Importing every module leaves the numba cache and the allocator alone (only
+    :func:`fracture.process.prepare_process` touches them)."""
+    code = """
+import importlib, pkgutil, sys, os, pathlib
+import fracture, fields, viewer
+import fracture.refine as r
+cache = pathlib.Path(r.__file__).parent / "__pycache__"
+before = sorted(p.name for p in cache.glob("*.nb[ic]")) if cache.exists() else []
+stamp = (cache / "numba-sources.sha1")
+stamp_before = stamp.read_bytes() if stamp.exists() else None
+for pkg in (fracture, fields, viewer):
+    for m in pkgutil.walk_packages(pkg.__path__, pkg.__name__ + "."):
+        if not m.name.endswith("__main__"):
+            importlib.import_module(m.name)
+import fracture.allocator as a
+after = sorted(p.name for p in cache.glob("*.nb[ic]")) if cache.exists() else []
+assert before == after, "import changed the numba cache"
+assert (stamp.read_bytes() if stamp.exists() else None) == stamp_before
+assert not a._done, "import changed the allocator"
+print("ok")
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr[-2000:]
