@@ -29,7 +29,7 @@ sys.path.insert(0, str(ROOT))
 
 from fields.grid import Grid  # noqa: E402
 from fields.pyramid import StrengthPyramid  # noqa: E402
-from fields.synthetic import weak_sheet_case  # noqa: E402
+from fracture.scenes.weak_sheets import weak_sheet_case  # noqa: E402
 from fracture import runner  # noqa: E402
 from fracture.config import load_config  # noqa: E402
 from fracture.exterior import Exterior  # noqa: E402

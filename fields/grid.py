@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fracture.tolerances import tol
+from fields.tolerances import tol
 
 
 @dataclass(frozen=True)

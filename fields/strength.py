@@ -17,16 +17,15 @@ from __future__ import annotations
 
 from pathlib import Path
 from dataclasses import dataclass
-from typing import Callable
+from typing import Any, Callable, NamedTuple
 
 import noise
 import numpy as np
 
 from fields.grid import Grid
 from fields.interpolate import trilinear
-from fracture.errors import InputError
-from fracture.schema import Param
-from fracture.tolerances import tol
+from fields.errors import InputError
+from fields.tolerances import tol
 
 _AXES = ("x", "y", "z")
 # Offsets into the Perlin lattice are drawn below this (the noise package
@@ -249,13 +248,27 @@ def volume(U, frame, rng, *, path, bounds):
     return trilinear(Grid.from_bounds(lo, hi, values.shape), values, frame.to_material(U))
 
 
-def _p(default, type="float", **kw) -> Param:
-    return Param(default, type, **kw)
+class Spec(NamedTuple):
+    """A layer parameter as the config declares it (:class:`fracture.schema.Param` takes these fields
+    in this order): its default, type word, inclusive range, allowed strings, whether null is
+    allowed, and one line of description."""
+
+    default: Any
+    type: str = "float"
+    lo: float | None = None
+    hi: float | None = None
+    choices: tuple[str, ...] | None = None
+    nullable: bool = False
+    doc: str = ""
+
+
+def _p(default, type="float", **kw) -> Spec:
+    return Spec(default, type, **kw)
 
 
 _STRENGTH = dict(lo=-10.0, hi=10.0)
 
-KINDS: dict[str, tuple[Callable, dict[str, Param]]] = {
+KINDS: dict[str, tuple[Callable, dict[str, Spec]]] = {
     "marble": (marble, {
         "vein_frequency": _p(2.5, lo=0.0, hi=100.0, doc="veins per unit length"),
         "vein_direction": _p([1.0, 0.35, 0.2], "vec3", doc="direction across the veins"),

@@ -61,8 +61,8 @@ SCHEMA: dict[str, Any] = {
     },
     "strength": {
         "layers": Layers(
-            kinds={name: spec for name, (_, spec) in KINDS.items()},
-            common=LAYER_COMMON,
+            kinds={name: {k: Param(*p) for k, p in spec.items()} for name, (_, spec) in KINDS.items()},
+            common={k: Param(*p) for k, p in LAYER_COMMON.items()},
             default=({"kind": "marble"},),
         ),
         "normalize": Param(True, "bool", doc="rescale the summed layers to [0, 1]"),

@@ -1,10 +1,7 @@
 """Errors that reach the user as one clear line (the CLI prints them without a traceback)."""
 
+from fields.errors import InputError  # raised by the fields too, which import nothing from here
 from fracture.schema import ConfigError
-
-
-class InputError(ValueError):
-    """An input file or array is unusable; the message says where and why."""
 
 
 class StageError(ValueError):

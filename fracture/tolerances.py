@@ -6,15 +6,10 @@ choices can be read, reviewed and tuned together.
 
 from types import SimpleNamespace
 
+from fields.tolerances import tol as _fields
+
 tol = SimpleNamespace(
-    # Relative to a bounding-box extent: two bounds closer than this are a
-    # degenerate (flat) box along that axis.
-    extent=1e-9,
-    # Denominator guard when normalising a field to [0, 1]; a field whose
-    # range is below this is constant and maps to 0.
-    field_range=1e-12,
-    # Absolute zero for lengths and areas in material units (object size ~1).
-    zero=1e-12,
+    **vars(_fields),  # extent, field_range, zero: the fields' own (fields/tolerances.py)
     # --- Importing piece meshes ---
     # |sum of area vectors| / total area above this: the piece is not closed.
     closure=1e-5,
