@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from pathlib import Path
 from dataclasses import dataclass
-from typing import Any, Callable, NamedTuple
+from typing import Callable
 
 import noise
 import numpy as np
@@ -25,6 +25,7 @@ import numpy as np
 from fields.grid import Grid
 from fields.interpolate import trilinear
 from fields.errors import InputError
+from fields.spec import Spec
 from fields.tolerances import tol
 
 _AXES = ("x", "y", "z")
@@ -246,20 +247,6 @@ def volume(U, frame, rng, *, path, bounds):
     values = load_volume(path)
     lo, hi = (frame.lo, frame.hi) if bounds is None else bounds
     return trilinear(Grid.from_bounds(lo, hi, values.shape), values, frame.to_material(U))
-
-
-class Spec(NamedTuple):
-    """A layer parameter as the config declares it (:class:`fracture.schema.Param` takes these fields
-    in this order): its default, type word, inclusive range, allowed strings, whether null is
-    allowed, and one line of description."""
-
-    default: Any
-    type: str = "float"
-    lo: float | None = None
-    hi: float | None = None
-    choices: tuple[str, ...] | None = None
-    nullable: bool = False
-    doc: str = ""
 
 
 def _p(default, type="float", **kw) -> Spec:

@@ -13,6 +13,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping
 
+from fields.spec import Spec
+
 _TYPE_WORDS = {
     "float": "a number",
     "int": "an integer",
@@ -52,9 +54,8 @@ def _describe(value: Any) -> str:
     return f"{text} ({type(value).__name__})"
 
 
-@dataclass(frozen=True)
-class Param:
-    """One configurable value.
+class Param(Spec):
+    """One configurable value (the fields of :class:`fields.spec.Spec`, with its checks).
 
     Parameters
     ----------
@@ -72,13 +73,7 @@ class Param:
         One line for ``fracref config --explain`` and the viewer's tooltips.
     """
 
-    default: Any
-    type: str = "float"
-    lo: float | None = None
-    hi: float | None = None
-    choices: tuple[str, ...] | None = None
-    nullable: bool = False
-    doc: str = ""
+    __slots__ = ()
 
     def expected(self) -> str:
         text = _TYPE_WORDS[self.type]
