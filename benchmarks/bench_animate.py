@@ -20,9 +20,9 @@ SCENES = ("bunny", "branch", "wall", "clay", "jello")
 
 
 def run_scene(name: str, triangles: int, frames: int, out) -> None:
-    from fracture.imprint import imprint_boundary
-    from fracture.pieces import build_pieces
-    from fracture.transfer import build_transfer
+    from fracture.pieces.imprint import imprint_boundary
+    from fracture.pieces.assembly import build_pieces
+    from fracture.pieces.transfer import build_transfer
 
     cfg, cf, fs = scene_with_fields(name, [f"input.frames={frames}", f"refine.max_triangles={triangles}"])
     mesh, _ = refine(cfg, cf, fs)

@@ -9,8 +9,8 @@ import argparse
 import time
 from pathlib import Path
 
-from fracture.mesh_sequence import load_coarse_sequence
-from fracture.scenes import PAPER_TRIANGLES, SCENES, build_scene
+from fracture.coarse.mesh_sequence import load_coarse_sequence
+from fracture.coarse.scenes import PAPER_TRIANGLES, SCENES, build_scene
 
 SAMPLE = Path(__file__).resolve().parents[2] / "shared" / "data" / "blender_cellfracture_cube8"
 

@@ -15,7 +15,7 @@ from fields.grid import Grid
 from fields.pyramid import StrengthPyramid
 from fields.strength import KINDS, strength_field
 from fields.stress import distance_to_surface
-from fracture.primitives import box, sheet
+from fracture.mesh.primitives import box, sheet
 
 # The paper's grids (Section 6) with the strength kind of each scene.
 CASES = [

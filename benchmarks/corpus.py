@@ -22,8 +22,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from fracture import runner  # noqa: E402
-from fracture.config import load_config  # noqa: E402
+from fracture.pipeline import runner  # noqa: E402
+from fracture.pipeline.config import load_config  # noqa: E402
 from fracture.errors import InputError, ResultError, StageError  # noqa: E402
 
 

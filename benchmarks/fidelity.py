@@ -5,7 +5,7 @@ then measure the coarse and the refined surface with
 :mod:`fracture.fidelity`: the share of their area in the weakest 10/20/30 % of
 zeta inside the object, mean zeta and psi, the distance of the refined
 surface to the coarse one (grid cells: mean and 90th percentile), iterations
-and seconds. For the synthetic weak sheets (:mod:`fracture.scenes.weak_sheets`): the mean
+and seconds. For the synthetic weak sheets (:mod:`fracture.coarse.scenes.weak_sheets`): the mean
 distance of the refined surface to the sheet and the share of its area within
 one voxel of it.
 
@@ -28,9 +28,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from fields.pyramid import StrengthPyramid  # noqa: E402
-from fracture.scenes.weak_sheets import SHEETS, weak_sheet_case  # noqa: E402
-from fracture import runner  # noqa: E402
-from fracture.config import load_config  # noqa: E402
+from fracture.coarse.scenes.weak_sheets import SHEETS, weak_sheet_case  # noqa: E402
+from fracture.pipeline import runner  # noqa: E402
+from fracture.pipeline.config import load_config  # noqa: E402
 from fracture.fidelity import area_samples, run_figures  # noqa: E402
 from fracture.refine.engine import Refiner, RefineParams  # noqa: E402
 from fracture.refine.mesh import RefineMesh  # noqa: E402

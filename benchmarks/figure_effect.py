@@ -29,11 +29,11 @@ sys.path.insert(0, str(ROOT))
 
 from fields.grid import Grid  # noqa: E402
 from fields.pyramid import StrengthPyramid  # noqa: E402
-from fracture.scenes.weak_sheets import weak_sheet_case  # noqa: E402
-from fracture import runner  # noqa: E402
-from fracture.config import load_config  # noqa: E402
-from fracture.exterior import Exterior  # noqa: E402
-from fracture.plyio import read_ply  # noqa: E402
+from fracture.coarse.scenes.weak_sheets import weak_sheet_case  # noqa: E402
+from fracture.pipeline import runner  # noqa: E402
+from fracture.pipeline.config import load_config  # noqa: E402
+from fracture.mesh.exterior import Exterior  # noqa: E402
+from fracture.io.ply import read_ply  # noqa: E402
 from fracture.refine.engine import Refiner, RefineParams  # noqa: E402
 from fracture.refine.mesh import RefineMesh  # noqa: E402
 

@@ -14,9 +14,9 @@ CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 
 def scene_with_fields(name: str, overrides: list[str]):
     """The resolved config, the coarse input and the fields of built-in scene ``name``."""
-    from fracture.config import load_config
-    from fracture.scenes import build_scene
-    from fracture.stages.fields import fields_from_config
+    from fracture.pipeline.config import load_config
+    from fracture.coarse.scenes import build_scene
+    from fracture.pipeline.stages.fields import fields_from_config
 
     cfg = load_config(CONFIGS / f"{name}.yaml", overrides)
     cf = build_scene(name, cfg["seed"], cfg["input"]["frames"], cfg["input"]["separation"])
@@ -29,7 +29,7 @@ def refine(cfg, cf, fs):
 
     from fracture.refine.engine import Refiner
     from fracture.refine.mesh import RefineMesh
-    from fracture.stages.refine import refine_params
+    from fracture.pipeline.stages.refine import refine_params
 
     mesh = RefineMesh.from_coarse(cf.V, cf.F, cf.sides)
     log = Refiner(mesh, fs.pyramid, cf.exterior_V, cf.exterior_F, refine_params(cfg),

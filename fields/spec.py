@@ -1,5 +1,5 @@
 """How a configurable value is declared: by the strength kinds here, and by the config
-(:class:`fracture.schema.Param` adds the checks)."""
+(:class:`fracture.pipeline.schema.Param` adds the checks)."""
 
 from __future__ import annotations
 

@@ -1,7 +1,14 @@
-"""Physics-inspired adaptive fracture refinement: the pipeline around the fields.
+"""Physics-inspired adaptive fracture refinement (Chen, Yao, Feng, Wang, SIGGRAPH 2014): the
+pipeline, on top of the material fields (:mod:`fields`).
 
-Kept free of imports so that leaf modules (``fracture.tolerances``,
-``fracture.schema``) can be used by :mod:`fields` without import cycles.
+Laid out by the paper:
+
+- :mod:`fracture.coarse`: Section 4.1, the coarse fracture animation;
+- :mod:`fracture.refine`: Sections 4.3 and 4.4, the refinement of the fracture surface;
+- :mod:`fracture.pieces`: Section 5, watertight pieces and motion transfer;
+- :mod:`fracture.mesh`, :mod:`fracture.io`: mesh queries and files;
+- :mod:`fracture.pipeline`: configs, the runner and its stages, the cache, sweeps.
+
+Importing a module changes nothing in the process (:mod:`fracture.process` holds the explicit
+set-up calls).
 """
-
-__version__ = "0.1.0"

@@ -1,7 +1,7 @@
 """Errors that reach the user as one clear line (the CLI prints them without a traceback)."""
 
 from fields.errors import InputError  # raised by the fields too, which import nothing from here
-from fracture.schema import ConfigError
+from fracture.pipeline.schema import ConfigError
 
 
 class StageError(ValueError):

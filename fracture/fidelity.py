@@ -25,8 +25,8 @@ import numpy as np
 from fields.grid import Grid
 from fields.interpolate import trilinear
 from fields.stress import distance_to_surface
-from fracture.exterior import Exterior
-from fracture.plyio import read_ply
+from fracture.mesh.exterior import Exterior
+from fracture.io.ply import read_ply
 
 PERCENTILES = (10, 20, 30)
 

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fracture.primitives import box, sheet, write_obj
+from fracture.mesh.primitives import box, sheet, write_obj
 
 REPO = Path(__file__).resolve().parents[1]
 CONFIGS = REPO / "configs"
@@ -30,7 +30,7 @@ def pytest_configure(config):
 
 def scene_config(name: str, overrides: list[str]) -> dict:
     """The config of a scene case with ``overrides``; built-in scenes get 8 frames, the sample keeps its own."""
-    from fracture.config import load_config
+    from fracture.pipeline.config import load_config
 
     return load_config(CONFIGS / f"{name}.yaml", overrides + ([] if name == "blender_cube8" else ["input.frames=8"]))
 

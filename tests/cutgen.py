@@ -12,8 +12,8 @@ from __future__ import annotations
 import igl.copyleft.cgal
 import numpy as np
 
-from fracture.primitives import box, cylinder, grid_faces
-from fracture.topology import weld
+from fracture.mesh.primitives import box, cylinder, grid_faces
+from fracture.mesh.topology import weld
 from test_flow import icosphere
 
 EXTERIORS = ("box", "sphere", "torus", "lshape", "stairs", "prism")

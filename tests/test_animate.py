@@ -8,17 +8,17 @@ import numpy as np
 import pytest
 from conftest import BUDGETS, CONFIGS, SAMPLE, SCENE_CASES, scene_config
 
-from fracture import runner
-from fracture.config import load_config
-from fracture.exterior import Exterior
-from fracture.imprint import BRIDGE_DEPTH, imprint_boundary, split_bridge_edges
-from fracture.meshio import read_obj_objects
-from fracture.objio import ObjFrames
-from fracture.pieces import Pieces, build_pieces, mesh_checks, overlap_and_gap
-from fracture.plyio import read_ply
-from fracture.primitives import box, grid_faces
+from fracture.pipeline import runner
+from fracture.pipeline.config import load_config
+from fracture.mesh.exterior import Exterior
+from fracture.pieces.imprint import BRIDGE_DEPTH, imprint_boundary, split_bridge_edges
+from fracture.io.meshes import read_obj_objects
+from fracture.io.obj import ObjFrames
+from fracture.pieces.assembly import Pieces, build_pieces, mesh_checks, overlap_and_gap
+from fracture.io.ply import read_ply
+from fracture.mesh.primitives import box, grid_faces
 from fracture.refine.mesh import RefineMesh
-from fracture.topology import signed_volume
+from fracture.mesh.topology import signed_volume
 
 
 def slanted_cut(n: int = 7):
@@ -68,7 +68,7 @@ def test_imprinting_keeps_the_tree_and_puts_the_boundary_on_b():
     on_cut = im.to_fracture >= 0
     assert np.array_equal(mesh.V[im.to_fracture[on_cut]], im.V[on_cut])
     # B's cut edges are exactly S's boundary edges
-    from fracture.topology import boundary_edges
+    from fracture.mesh.topology import boundary_edges
     s_edges = {tuple(sorted(e)) for e in boundary_edges(mesh.F).tolist()}
     b_edges = {tuple(sorted(e)) for e in im.to_fracture[im.cut_edges].tolist()}
     assert s_edges == b_edges
@@ -128,7 +128,7 @@ def test_a_surface_leaving_b_makes_pieces_without_crossings():
 
 
 def test_a_pinch_vertex_is_split_into_one_copy_per_fan():
-    from fracture.pieces import split_pinches
+    from fracture.pieces.assembly import split_pinches
     # two tetrahedra touching at vertex 0: closed, oriented, but not vertex-manifold there
     V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [-1, 0, 0], [0, -1, 0], [0, 0, -1]], float)
     tet = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
@@ -228,7 +228,7 @@ def test_every_scene_animates_into_closed_pieces(name, tmp_path):
 
 def test_pieces_are_verified_before_a_run_succeeds():
     from fracture.errors import ResultError
-    from fracture.stages.animate import verify_pieces
+    from fracture.pipeline.stages.animate import verify_pieces
 
     V, F = box((0, 0, 0), (1, 1, 1), (2, 2, 2))
     good = mesh_checks(V, F)
@@ -253,7 +253,7 @@ def test_pieces_are_verified_before_a_run_succeeds():
 
 
 def test_welding_removes_the_slivers_a_boolean_rounds_into_crossings():
-    from fracture.pieces import weld_rounded
+    from fracture.pieces.assembly import weld_rounded
 
     V, F = box((0, 0, 0), (1, 1, 1), (3, 3, 3))
     # a copy of vertex 0 within rounding of it, and a sliver triangle on the pair
@@ -284,7 +284,7 @@ def _fan_and_flap(y_height: float):
 def test_only_ears_along_b_are_clipped_so_s_keeps_its_fans():
     import igl
 
-    from fracture.imprint import clip_tangent_triangles
+    from fracture.pieces.imprint import clip_tangent_triangles
     BV, BF = box((0, 0, 0), (1, 1, 1), (4, 4, 4))
     # T lies on B but is not an ear: removing it would split c's fan (a pinch
     # cutting the fan around w off S); its bridges are split instead
@@ -299,7 +299,7 @@ def test_only_ears_along_b_are_clipped_so_s_keeps_its_fans():
 
 def test_a_refused_resolution_is_retried_from_jittered_positions(monkeypatch):
     # the bump cut, with the first resolution refused (as the boolean's rounding can refuse one)
-    import fracture.pieces as fp
+    import fracture.pieces.assembly as fp
     BV, BF, mesh = bump_cut()
     im = imprint_boundary(BV, BF, mesh)
     raw = build_pieces(im, mesh, 2, lambda faces: np.zeros(len(faces), np.int64), resolve=False)
@@ -331,7 +331,7 @@ def test_a_refused_resolution_is_retried_from_jittered_positions(monkeypatch):
 def test_vertices_made_on_s_follow_their_corners_or_else_their_own_piece():
     import scipy.sparse as sp
 
-    from fracture.transfer import shared_components
+    from fracture.pieces.transfer import shared_components
 
     # S: vertices 0-3; made on S triangles: 4 (corners 0, 1, 2) and 5 (corners 2, 3, 0)
     # piece 0 holds 0, 1 and 4; piece 1 holds 1 and 5; 2 and 3 (outside B) belong to no piece

@@ -7,10 +7,10 @@ import pickle
 import numpy as np
 import pytest
 
-from fracture import runner
-from fracture.cache import StageCache
-from fracture.config import load_config
-from fracture.primitives import sheet, write_obj
+from fracture.pipeline import runner
+from fracture.pipeline.cache import StageCache
+from fracture.pipeline.config import load_config
+from fracture.mesh.primitives import sheet, write_obj
 
 
 def run(cfg, out, cache):
@@ -103,7 +103,7 @@ def test_the_cache_keeps_to_its_size_by_dropping_what_was_read_longest_ago(tmp_p
 
 
 def test_the_command_line_uses_the_cache_unless_told_not_to(tmp_path, small_config):
-    from fracture.cli import main
+    from fracref.cli import main
 
     env = {"FRACREF_CACHE_DIR": str(tmp_path / "cache")}
     old = {k: os.environ.get(k) for k in env}

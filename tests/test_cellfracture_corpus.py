@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 from conftest import REPO
-from fracture import runner
-from fracture.config import load_config
-from fracture.mesh_sequence import load_coarse_sequence
-from fracture.topology import signed_volume, unique_edges
+from fracture.pipeline import runner
+from fracture.pipeline.config import load_config
+from fracture.coarse.mesh_sequence import load_coarse_sequence
+from fracture.mesh.topology import signed_volume, unique_edges
 
 CORPUS = REPO / "examples" / "cellfracture"
 CASES = sorted(p.name[:-len(".tar.xz")] for p in CORPUS.glob("*.tar.xz"))

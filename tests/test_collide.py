@@ -104,7 +104,7 @@ def test_self_intersection_count_finds_every_crossing_pair():
     # the hashed grid misses no pair and counts none twice
     assert count > 0 and {tuple(sorted(p)) for p in pairs.tolist()} == _brute_force_pairs(V, F)
     assert self_intersections(V1, F1) == 0
-    from fracture.primitives import box
+    from fracture.mesh.primitives import box
     BV, BF = box([0, 0, 0], [1, 2, 3], (4, 5, 6))
     assert self_intersections(BV, BF) == 0
 

@@ -5,7 +5,7 @@ import pytest
 import yaml
 
 from conftest import CONFIGS
-from fracture.config import dump_config, load_config, parse_override
+from fracture.pipeline.config import dump_config, load_config, parse_override
 from fracture.errors import ConfigError
 
 EXPERIMENTS = sorted(CONFIGS.glob("*.yaml"))

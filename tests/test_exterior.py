@@ -1,9 +1,9 @@
-"""Queries against the exterior surface B (fracture.exterior)."""
+"""Queries against the exterior surface B (fracture.mesh.exterior)."""
 
 import numpy as np
 
-from fracture.exterior import Exterior
-from fracture.primitives import box
+from fracture.mesh.exterior import Exterior
+from fracture.mesh.primitives import box
 
 
 def test_closest_points_distances_and_inside_on_a_box():

@@ -8,7 +8,7 @@ from scipy.spatial import Delaunay
 
 from fracture.refine.collide import self_intersections
 from fracture.refine.flips import flip_edges
-from fracture.topology import unique_edges
+from fracture.mesh.topology import unique_edges
 
 
 def _min_angle(V, F):

@@ -6,7 +6,7 @@ import igl
 import numpy as np
 import pytest
 
-from fracture.primitives import sheet
+from fracture.mesh.primitives import sheet
 from fracture.refine.flow import energy, energy_gradient, sample_displacement, velocity
 
 

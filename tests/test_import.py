@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 from conftest import SAMPLE, mesh_area as area
-from fracture import runner
-from fracture.coarse import special_edges
-from fracture.topology import fan, signed_volume, unique_edges
-from fracture.config import load_config
+from fracture.pipeline import runner
+from fracture.coarse.surface import special_edges
+from fracture.mesh.topology import fan, signed_volume, unique_edges
+from fracture.pipeline.config import load_config
 from fracture.errors import InputError
-from fracture.mesh_sequence import load_coarse_sequence, read_sequence
+from fracture.coarse.mesh_sequence import load_coarse_sequence, read_sequence
 
 
 
@@ -110,7 +110,7 @@ def test_runner_coarse_stage(tmp_path):
                                   "frames": 40}
     assert manifest["counts"]["coarse_fracture_triangles"] > 8
     assert any("slits and dents" in n for n in manifest["notes"])
-    from fracture.plyio import read_ply
+    from fracture.io.ply import read_ply
 
     V, F, vdata, fdata = read_ply(out / "coarse/fracture_surface.ply")
     assert len(F) == manifest["counts"]["coarse_fracture_triangles"]
@@ -288,7 +288,7 @@ def test_frames_exported_every_other_frame_are_accepted(tmp_path):
 def _shells(lo, hi, cut_axis, cut_side):
     """Two open shells of a box, each with vertices of its own: its face on
     ``cut_axis``/``cut_side`` (the cut face, split into two triangles) and the other five."""
-    from fracture.primitives import box
+    from fracture.mesh.primitives import box
 
     V, F = box(lo, hi)
     n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
@@ -310,8 +310,8 @@ def _polys(parts):
 
 
 def test_open_shells_of_one_piece_are_joined_and_neighbours_stay_apart():
-    from fracture.mesh_sequence import join_open_shells
-    from fracture.primitives import box
+    from fracture.coarse.mesh_sequence import join_open_shells
+    from fracture.mesh.primitives import box
 
     # a box cut in two: four shells on one loop pair up by file order (A's outer faces and
     # its cut face, then B's), not A's outer faces with B's
@@ -331,8 +331,8 @@ def test_open_shells_of_one_piece_are_joined_and_neighbours_stay_apart():
 
 
 def test_a_ply_of_split_shells_reads_as_its_pieces(tmp_path):
-    from fracture.mesh_sequence import read_frame
-    from fracture.plyio import write_ply
+    from fracture.coarse.mesh_sequence import read_frame
+    from fracture.io.ply import write_ply
 
     V, polys = _polys(_shells([0, 0, 0], [1, 1, 1], 0, 1) + _shells([1, 0, 0], [2, 1, 1], 0, 0))
     write_ply(tmp_path / "f.ply", V, np.array(polys))

@@ -1,9 +1,16 @@
 """The packages' layers: ``fields`` stands on its own, ``fracture`` on ``fields``, ``viewer`` on both."""
 
+import ast
 import subprocess
 import sys
+from pathlib import Path
 
+import numpy as np
 import pytest
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+REPO = Path(__file__).resolve().parents[1]
 
 
 def _modules_loaded_by(package: str) -> set[str]:
@@ -21,6 +28,37 @@ print(" ".join(sorted({{n.split(".")[0] for n in sys.modules}} & {{"fields", "fr
     return set(out.stdout.split())
 
 
-@pytest.mark.parametrize("package, below", [("fields", {"fields"})])
+@pytest.mark.parametrize("package, below", [("fields", {"fields"}), ("fracture", {"fields", "fracture"}),
+                                            ("viewer", {"fields", "fracture", "viewer"})])
 def test_a_package_imports_only_the_layers_below_it(package, below):
     assert _modules_loaded_by(package) == below
+
+
+def _import_graph() -> tuple[list[str], set[tuple[str, str]]]:
+    """The project's modules and the pairs (importer, imported), module-level and local imports alike."""
+    paths = {}
+    for root in ("fields", "fracture", "viewer", "fracref"):
+        for p in (REPO / root).rglob("*.py"):
+            name = ".".join(p.relative_to(REPO).with_suffix("").parts)
+            paths[name.removesuffix(".__init__")] = p
+    edges = set()
+    for name, p in paths.items():
+        for node in ast.walk(ast.parse(p.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom) and node.module:
+                targets = [node.module] + [f"{node.module}.{a.name}" for a in node.names]
+            elif isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            else:
+                continue
+            edges.update((name, t) for t in targets if t in paths and t != name)
+    return sorted(paths), edges
+
+
+def test_no_module_imports_itself_through_others():
+    names, edges = _import_graph()
+    index = {n: i for i, n in enumerate(names)}
+    rows, cols = zip(*((index[a], index[b]) for a, b in edges))
+    graph = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(len(names), len(names)))
+    _, label = connected_components(graph, directed=True, connection="strong")
+    circles = [[n for n, k in zip(names, label) if k == c] for c in np.unique(label) if (label == c).sum() > 1]
+    assert circles == []

@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 
 from fracture.errors import InputError
-from fracture.primitives import box, grid_faces, write_obj
-from fracture.stages.coarse import coarse_from_meshes
-from fracture.topology import orient_outward, signed_volume
-from fracture.trim import trim_to_object
+from fracture.mesh.primitives import box, grid_faces, write_obj
+from fracture.pipeline.stages.coarse import coarse_from_meshes
+from fracture.mesh.topology import orient_outward, signed_volume
+from fracture.coarse.trim import trim_to_object
 
 
 def _plane(z, lo=-0.3, hi=1.3, n=8):

@@ -2,9 +2,9 @@ import numpy as np
 import pytest
 
 from fracture.errors import InputError
-from fracture.meshio import check_triangle_mesh, read_mesh
-from fracture.primitives import box, cylinder, write_obj
-from fracture.topology import signed_volume
+from fracture.io.meshes import check_triangle_mesh, read_mesh
+from fracture.mesh.primitives import box, cylinder, write_obj
+from fracture.mesh.topology import signed_volume
 
 
 def test_box_is_closed_and_has_the_right_volume():

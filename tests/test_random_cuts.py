@@ -16,11 +16,11 @@ import pytest
 
 import cutgen
 from conftest import CONFIGS
-from fracture import runner
-from fracture.config import load_config
+from fracture.pipeline import runner
+from fracture.pipeline.config import load_config
 from fracture.errors import InputError, ResultError
-from fracture.primitives import write_obj
-from fracture.topology import signed_volume
+from fracture.mesh.primitives import write_obj
+from fracture.mesh.topology import signed_volume
 
 SYSTEMATIC = len(cutgen.EXTERIORS) * len(cutgen.CUTS)
 EXTRA = int(os.environ.get("FRACREF_RANDOM_CUTS", "0"))

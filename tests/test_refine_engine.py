@@ -6,7 +6,7 @@ import numpy as np
 
 from fields.grid import Grid
 from fields.pyramid import StrengthPyramid
-from fracture.primitives import box, sheet
+from fracture.mesh.primitives import box, sheet
 from fracture.refine.engine import RefineParams, Refiner
 from fracture.refine.remesh import plan_splits, split_folds
 from fracture.refine.mesh import RefineMesh

@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fracture.topology import face_frames
-from fracture.primitives import sheet
+from fracture.mesh.topology import face_frames
+from fracture.mesh.primitives import sheet
 from fracture.refine.kernels import spatial_order
 from fracture.refine.mesh import RefineMesh
-from fracture.topology import unique_edges
+from fracture.mesh.topology import unique_edges
 
 
 def junction():

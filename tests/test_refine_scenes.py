@@ -8,21 +8,21 @@ import numpy as np
 import pytest
 from conftest import BUDGETS, CONFIGS, SCENE_CASES, scene_config
 
-from fracture import runner
-from fracture.components import label_components
-from fracture.config import load_config
-from fracture.exterior import Exterior
+from fracture.pipeline import runner
+from fracture.coarse.components import label_components
+from fracture.pipeline.config import load_config
+from fracture.mesh.exterior import Exterior
 from fracture.fidelity import run_figures
-from fracture.plyio import read_ply
+from fracture.io.ply import read_ply
 from fracture.refine.collide import self_intersections
 from fracture.refine.crossings_on_b import crossing_pairs
 from fracture.refine.engine import RefineParams, Refiner
 from fracture.refine.kernels import edge_table, row_edges
 from fracture.refine.mesh import RefineMesh
 from fracture.refine.remesh import plan_splits
-from fracture.scenes import build_scene
-from fracture.stages.fields import fields_from_config
-from fracture.stages.refine import load_snapshots
+from fracture.coarse.scenes import build_scene
+from fracture.pipeline.stages.fields import fields_from_config
+from fracture.pipeline.stages.refine import load_snapshots
 
 @pytest.mark.parametrize("name", SCENE_CASES)
 def test_refined_surface_is_clean_on_b_and_separates_the_components(name, tmp_path):

@@ -9,17 +9,18 @@ import yaml
 
 from conftest import CONFIGS, REPO
 from fields.grid import Grid
-from fracture import runner
+from fracture.pipeline import runner
 import errno
 import os
 
-from fracture.atomic import OutputError, RunDirectoryExists, atomic_write_text, staged_directory
-from fracture.config import load_config
+from fracture.io.atomic import OutputError, RunDirectoryExists, atomic_write_text, staged_directory
+from fracture.pipeline.config import load_config
+from fracture.pipeline.stages import STAGES, Stage
 from fracture.errors import ConfigError, InputError, StageError
 
 
 def fracref(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "fracture", *map(str, args)], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "fracref", *map(str, args)], capture_output=True, text=True,
                           cwd=cwd, timeout=300)
 
 
@@ -77,7 +78,7 @@ def test_existing_run_is_kept_without_force_and_replaced_with_it(tmp_path, small
     assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
 
 
-def test_failed_run_writes_nothing_and_keeps_the_previous_run(tmp_path, small_config, monkeypatch):
+def test_failed_run_writes_nothing_and_keeps_the_previous_run(tmp_path, small_config):
     out = tmp_path / "run"
     runner.run(load_config(small_config), out, progress=False)
     before = {p.name: sha256(p) for p in out.rglob("*") if p.is_file()}
@@ -86,9 +87,9 @@ def test_failed_run_writes_nothing_and_keeps_the_previous_run(tmp_path, small_co
         ctx.save_array("fields/psi.npy", np.zeros(3))  # a partial write ...
         raise KeyboardInterrupt  # ... then an interruption
 
-    monkeypatch.setitem(runner._REGISTRY, "fields", explode)
+    stages = tuple(Stage(s.name, explode) if s.name == "fields" else s for s in STAGES)
     with pytest.raises(KeyboardInterrupt):
-        runner.run(load_config(small_config), out, force=True, progress=False)
+        runner.run(load_config(small_config), out, force=True, progress=False, stages=stages)
     after = {p.name: sha256(p) for p in out.rglob("*") if p.is_file()}
     assert after == before
     assert [p.name for p in tmp_path.iterdir() if p.name != "run" and p.name.startswith(".")] == []
@@ -190,7 +191,7 @@ def test_a_killed_cli_run_removes_its_staging(tmp_path, small_config):
     import signal
     import time
 
-    proc = subprocess.Popen([sys.executable, "-m", "fracture", "run", str(small_config), "--out", str(tmp_path / "run"),
+    proc = subprocess.Popen([sys.executable, "-m", "fracref", "run", str(small_config), "--out", str(tmp_path / "run"),
                              "--quiet"], cwd=REPO, stderr=subprocess.PIPE, text=True)
     while not list(tmp_path.glob(".run.partial-*")) and proc.poll() is None:
         time.sleep(0.05)

@@ -6,11 +6,11 @@ import igl
 import numpy as np
 import pytest
 
-from fracture.components import label_components
+from fracture.coarse.components import label_components
 from fracture.errors import InputError
-from fracture.scenes import PAPER_TRIANGLES, SCENES, _half_disk, build_scene
-from fracture.primitives import cylinder
-from fracture.topology import unique_edges
+from fracture.coarse.scenes import PAPER_TRIANGLES, SCENES, _half_disk, build_scene
+from fracture.mesh.primitives import cylinder
+from fracture.mesh.topology import unique_edges
 
 FRAMES = 30
 
@@ -122,9 +122,9 @@ def test_until_coarse_writes_the_coarse_stage_of_a_scene(tmp_path):
     import json
 
     from conftest import CONFIGS
-    from fracture import runner
-    from fracture.config import load_config
-    from fracture.plyio import read_ply
+    from fracture.pipeline import runner
+    from fracture.pipeline.config import load_config
+    from fracture.io.ply import read_ply
 
     cfg = load_config(CONFIGS / "branch.yaml", ["input.frames=12"])
     out = runner.run(cfg, tmp_path / "run", until="coarse", progress=False)
@@ -137,8 +137,8 @@ def test_until_coarse_writes_the_coarse_stage_of_a_scene(tmp_path):
 
 
 def test_meshes_input_extends_an_incomplete_cut(tmp_path):
-    from fracture.primitives import box, sheet, write_obj
-    from fracture.stages.coarse import coarse_from_meshes
+    from fracture.mesh.primitives import box, sheet, write_obj
+    from fracture.pipeline.stages.coarse import coarse_from_meshes
 
     V, F = box([0, 0, 0], [2, 1, 0.5], (8, 4, 2))
     # a cut at x = 1 through the lower 60 % of the slab only

@@ -69,7 +69,7 @@ def test_implicit_step_is_stable_where_the_explicit_one_explodes():
 
 def test_implicit_step_has_the_fixed_points_of_the_flow():
     """A plane under a linear psi with an in-plane gradient: Eq. 3 vanishes, so does the step."""
-    from fracture.primitives import sheet
+    from fracture.mesh.primitives import sheet
     V, F = sheet(lambda u, v: np.stack([u, v, np.zeros_like(u)], 1), (0, 1), (0, 1), 7, 7)
     g = np.array([0.7, -1.3, 0.0])
     psi = 2.0 + V @ g

@@ -3,7 +3,7 @@ import pytest
 
 from fields.build import build_fields
 from fields.stress import distance_to_surface, modified_strength, stress_from_distance
-from fracture.primitives import box, sheet
+from fracture.mesh.primitives import box, sheet
 
 
 def _segment_distance(P, A, B):

@@ -5,9 +5,9 @@ import json
 
 import pytest
 
-from fracture.cli import main
-from fracture.schema import ConfigError
-from fracture.sweep import parse_grid, points, run_sweep
+from fracref.cli import main
+from fracture.pipeline.schema import ConfigError
+from fracture.pipeline.sweep import parse_grid, points, run_sweep
 
 GRID = {"psi.stress_weight": [0.2, 1.5], "seed": [7, 8]}
 

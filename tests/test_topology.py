@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 
-from fracture.primitives import box
-from fracture.topology import directed_edge_face, directed_edges, fan, orient_sheets, signed_volume, unique_edges
+from fracture.mesh.primitives import box
+from fracture.mesh.topology import directed_edge_face, directed_edges, fan, orient_sheets, signed_volume, unique_edges
 
 
 def test_directed_edge_face_finds_the_owner_or_minus_one():
@@ -31,7 +31,7 @@ def test_fan_triangulates_polygons():
 def test_orient_sheets_makes_each_sheet_agree_and_leaves_junctions_alone():
     rng = np.random.default_rng(3)
     # three sheets meeting at the line x = y = 0 (a Y junction), each a 4 x 4 grid
-    from fracture.primitives import grid_faces
+    from fracture.mesh.primitives import grid_faces
 
     sheets = []
     for k, angle in enumerate((0.0, 2.1, 4.2)):

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from conftest import REPO, scene_config
-from fracture.usd import prim_name, write_pieces_usd
+from fracture.io.usd import prim_name, write_pieces_usd
 
 BLENDER_PYTHON = REPO / ".venv-blender" / "bin" / "python"
 CHECK = REPO / "tools" / "blender_check_usd.py"
@@ -97,7 +97,7 @@ def _blender(path: Path) -> dict:
 @pytest.fixture(scope="module")
 def cube8_run(tmp_path_factory):
     """The shipped Blender Cell Fracture sample, run end to end at a small budget."""
-    from fracture import runner
+    from fracture.pipeline import runner
 
     out = tmp_path_factory.mktemp("usd") / "run"
     cfg = scene_config("blender_cube8", ["refine.max_triangles=15000", "animate.check_samples=1000",
@@ -107,8 +107,8 @@ def cube8_run(tmp_path_factory):
 
 @pytest.mark.slow
 def test_blender_imports_the_run_usd_with_names_closed_pieces_materials_and_motion(cube8_run):
-    from fracture.plyio import read_ply
-    from fracture.transfer import load_transfer
+    from fracture.io.ply import read_ply
+    from fracture.pieces.transfer import load_transfer
 
     names = json.loads((cube8_run / "coarse/components.json").read_text())["names"]
     got = _blender(cube8_run / "animation/pieces.usdc")
@@ -132,7 +132,7 @@ def test_blender_imports_the_run_usd_with_names_closed_pieces_materials_and_moti
 
 @pytest.mark.slow
 def test_blender_imports_an_obj_frame_with_the_z_up_axes_the_readme_gives(cube8_run):
-    from fracture.transfer import load_transfer
+    from fracture.pieces.transfer import load_transfer
 
     names = json.loads((cube8_run / "coarse/components.json").read_text())["names"]
     tr = load_transfer(cube8_run / "animation/transfer.npz")
@@ -150,7 +150,7 @@ def test_blender_imports_an_obj_frame_with_the_z_up_axes_the_readme_gives(cube8_
 def test_fracref_export_rewrites_the_same_usd_elsewhere(cube8_run, tmp_path):
     from pxr import Usd, UsdGeom
 
-    from fracture.cli import main
+    from fracref.cli import main
 
     assert main(["export", str(cube8_run), "--format", "usd", "--out", str(tmp_path / "again.usda")]) == 0
     a = Usd.Stage.Open(str(cube8_run / "animation/pieces.usdc"))
@@ -165,7 +165,7 @@ def test_fracref_export_rewrites_the_same_usd_elsewhere(cube8_run, tmp_path):
 
 
 def test_fracref_export_refuses_what_is_not_a_finished_run(tmp_path, capsys):
-    from fracture.cli import main
+    from fracref.cli import main
 
     assert main(["export", str(tmp_path / "nowhere")]) == 2
     assert "not a run directory" in capsys.readouterr().err
@@ -198,8 +198,8 @@ def _write_points_usd(path, frames, names, up="Z"):
 
 def test_a_usd_of_time_sampled_points_imports_as_its_obj_frames_do(tmp_path):
     from conftest import SAMPLE
-    from fracture.mesh_sequence import coarse_from_frames, read_sequence
-    from fracture.usd_input import read_usd_frames
+    from fracture.coarse.mesh_sequence import coarse_from_frames, read_sequence
+    from fracture.coarse.usd_input import read_usd_frames
 
     frames = read_sequence(SAMPLE)
     _write_points_usd(tmp_path / "anim.usda", frames, frames[0].names)
@@ -220,8 +220,8 @@ def test_a_usd_written_by_blender_runs_end_to_end(tmp_path):
     """Blender 4.2 (bpy) simulates Cell Fracture pieces and writes them to USD with time-sampled transforms."""
     import tarfile
 
-    from fracture import runner
-    from fracture.config import load_config
+    from fracture.pipeline import runner
+    from fracture.pipeline.config import load_config
 
     with tarfile.open(REPO / "examples" / "cellfracture" / "cube_rotated_8.tar.xz") as tar:
         tar.extractall(tmp_path, filter="data")
@@ -257,7 +257,7 @@ def test_a_usd_written_by_blender_runs_end_to_end(tmp_path):
 ])
 def test_bad_usd_input_is_refused_clearly(tmp_path, content, words):
     from fracture.errors import InputError
-    from fracture.usd_input import read_usd_frames
+    from fracture.coarse.usd_input import read_usd_frames
 
     path = tmp_path / "x.usda"
     if content is not None:

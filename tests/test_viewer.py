@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from conftest import CONFIGS
 
-from fracture import runner
-from fracture.config import load_config
+from fracture.pipeline import runner
+from fracture.pipeline.config import load_config
 from fracture.errors import InputError
 
 HERE = Path(__file__).resolve().parent
@@ -53,7 +53,7 @@ def video_frames(path) -> tuple[int, tuple[int, int]]:
 def _cli(args, timeout=300):
     env = dict(os.environ)
     env.pop("DISPLAY", None)
-    return subprocess.run([sys.executable, "-m", "fracture", *args], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "fracref", *args], capture_output=True, text=True,
                           timeout=timeout, env=env)
 
 
@@ -168,7 +168,7 @@ def test_rerun_in_the_window_gives_a_new_result_without_freezing_it(run_dir, tmp
 def sweep_dir(tmp_path_factory):
     """A two-point sweep of a small config (stress weights 0.2 and 2)."""
     from conftest import small_config_file
-    from fracture.sweep import run_sweep
+    from fracture.pipeline.sweep import run_sweep
 
     base = tmp_path_factory.mktemp("viewer-sweep")
     run_sweep(small_config_file(base), {"psi.stress_weight": [0.2, 2.0]}, base / "sweep", progress=False)

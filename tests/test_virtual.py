@@ -5,10 +5,10 @@ import triangle
 
 from conftest import mesh_area as area
 
-from fracture import primitives
-from fracture.coarse import special_edges
+from fracture.mesh import primitives
+from fracture.coarse.surface import special_edges
 from fracture.errors import InputError
-from fracture.virtual import crack_front, extend_cuts
+from fracture.coarse.virtual import crack_front, extend_cuts
 
 
 def cylinder(r=0.5, h=3.0, n=64, m=12):

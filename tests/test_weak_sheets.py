@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from fields.pyramid import StrengthPyramid
-from fracture.scenes.weak_sheets import SHEETS, weak_sheet_case
+from fracture.coarse.scenes.weak_sheets import SHEETS, weak_sheet_case
 from fracture.fidelity import area_samples
 from fracture.refine.collide import self_intersections
 from fracture.refine.engine import RefineParams, Refiner

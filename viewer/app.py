@@ -33,7 +33,7 @@ import open3d as o3d
 from open3d.visualization import gui, rendering
 
 from fields.colormap import colorbar
-from fracture.atomic import atomic_write_bytes, atomic_write_text, png_bytes
+from fracture.io.atomic import atomic_write_bytes, atomic_write_text, png_bytes
 from fracture.errors import ConfigError, InputError, ResultError, StageError
 from viewer import annotate
 from viewer.annotate import Bar
@@ -684,7 +684,7 @@ class Viewer:
 
     def checked_config(self) -> tuple[dict, str]:
         """The side panel's config, validated as ``fracref run`` would read it, and its YAML."""
-        from fracture.config import check_config, dump_config
+        from fracture.pipeline.config import check_config, dump_config
 
         cfg = self.edited_config()
         cfg["view"] = self.view_state().to_section()  # the slice, iteration, frame and cameras on screen
@@ -955,9 +955,9 @@ class Viewer:
 
 def _run_child(cfg: dict, out: str, q) -> None:
     """The re-run's process: the pipeline, with its stages and iterations sent to ``q``; stages whose inputs
-    did not change are taken from the stage cache (:mod:`fracture.cache`)."""
-    from fracture import runner
-    from fracture.cache import StageCache
+    did not change are taken from the stage cache (:mod:`fracture.pipeline.cache`)."""
+    from fracture.pipeline import runner
+    from fracture.pipeline.cache import StageCache
 
     last = [0.0]
 
@@ -977,9 +977,9 @@ def _run_child(cfg: dict, out: str, q) -> None:
 
 def open_target(target: Path, out: Path | None) -> RunData:
     """A run directory as is; a config is run first (into ``out`` or ``runs/<name>``, reused when complete)."""
-    from fracture import runner
-    from fracture.cache import StageCache
-    from fracture.config import load_config
+    from fracture.pipeline import runner
+    from fracture.pipeline.cache import StageCache
+    from fracture.pipeline.config import load_config
 
     target = Path(target)
     if target.is_dir():

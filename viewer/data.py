@@ -17,7 +17,7 @@ import numpy as np
 
 from fields.grid import Grid
 from fracture.errors import InputError
-from fracture.sweep import Point
+from fracture.pipeline.sweep import Point
 
 FIELDS = ("psi", "zeta", "xi")
 
@@ -156,7 +156,7 @@ class RunData:
 
     @cached_property
     def exterior(self) -> Surface:
-        from fracture.plyio import read_ply
+        from fracture.io.ply import read_ply
 
         V, F, _, fd = read_ply(self._require("coarse/exterior.ply", "the exterior"))
         return Surface(V, F, {"component": fd.get("component", np.zeros(len(F), np.int64))})
@@ -164,20 +164,20 @@ class RunData:
     @cached_property
     def solid(self):
         """B with its winding-number hierarchy, built on the first inside test (the slice's mask)."""
-        from fracture.exterior import Exterior
+        from fracture.mesh.exterior import Exterior
 
         return Exterior(self.exterior.V, self.exterior.F)
 
     @cached_property
     def coarse_fracture(self) -> Surface:
-        from fracture.plyio import read_ply
+        from fracture.io.ply import read_ply
 
         V, F, _, _ = read_ply(self._require("coarse/fracture_surface.ply", "the coarse fracture surface"))
         return Surface(V, F)
 
     @cached_property
     def refined_fracture(self) -> Surface | None:
-        from fracture.plyio import read_ply
+        from fracture.io.ply import read_ply
 
         if not self.has("refined/fracture_surface.ply"):
             return None
@@ -186,7 +186,7 @@ class RunData:
 
     @cached_property
     def coarse_animation(self):
-        from fracture.animation import CoarseAnimation
+        from fracture.coarse.animation import CoarseAnimation
 
         return CoarseAnimation(lo=np.load(self._require("coarse/animation_lo.npy", "the coarse animation")),
                                hi=np.load(self._require("coarse/animation_hi.npy", "the coarse animation")),
@@ -232,7 +232,7 @@ class RunData:
 
     @cached_property
     def iterations(self) -> list[dict]:
-        from fracture.stages.refine import load_snapshots
+        from fracture.pipeline.stages.refine import load_snapshots
 
         self._require("refined/iterations.json", "the iteration view")
         return load_snapshots(self.dir)
@@ -264,14 +264,14 @@ class RunData:
 
     @cached_property
     def transfer(self):
-        from fracture.transfer import load_transfer
+        from fracture.pieces.transfer import load_transfer
 
         return load_transfer(self._require("animation/transfer.npz", "the animation view"))
 
     @cached_property
     def _piece_files(self) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
         """Each piece's (material-space vertices, triangles, exterior flag per triangle)."""
-        from fracture.plyio import read_ply
+        from fracture.io.ply import read_ply
 
         out = []
         for c in range(len(self.transfer.offsets) - 1):

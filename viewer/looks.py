@@ -19,7 +19,7 @@ from open3d.visualization import rendering
 from fields.colormap import colormap, srgb_to_linear
 from fields.slices import axis_slice
 from fracture.errors import InputError
-from fracture.topology import face_frames, unique_edges
+from fracture.mesh.topology import face_frames, unique_edges
 from viewer.annotate import finish
 from viewer.data import FIELDS, RunData, Surface
 

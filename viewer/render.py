@@ -33,7 +33,7 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from fracture.atomic import atomic_write_bytes, png_bytes  # noqa: E402
+from fracture.io.atomic import atomic_write_bytes, png_bytes  # noqa: E402
 from fracture.errors import InputError  # noqa: E402
 from viewer import annotate  # noqa: E402
 from viewer.annotate import Bar  # noqa: E402

@@ -15,10 +15,10 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from fracture.atomic import atomic_write_text
-from fracture.config import SCHEMA, read_yaml
+from fracture.io.atomic import atomic_write_text
+from fracture.pipeline.config import SCHEMA, read_yaml
 from fracture.errors import ConfigError
-from fracture.schema import validate
+from fracture.pipeline.schema import validate
 from viewer.looks import CameraPose, View
 
 PANELS = ("material", "iterations", "animation")

@@ -70,7 +70,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from fracture.exterior import Exterior
+from fracture.mesh.exterior import Exterior
 from fracture.refine.collide import stop_collisions
 from fracture.refine.crossings_on_b import close_pairs
 from fracture.refine.fans import closed_vertices
@@ -83,7 +83,7 @@ from fracture.refine.state import VertexState
 from fracture.refine.step import (BOUNDARY_MOVE, ImplicitStep, StepSize, limit_by_shortest_edge, limit_moves,
                                   weighted_cotangent_laplacian)
 from fracture.tolerances import tol
-from fracture.topology import boundary_conormals
+from fracture.mesh.topology import boundary_conormals
 
 # Boundary curves keep this far apart on B (grid cells): imprinting them moves their vertices a little.
 _CURVE_GAP = 0.05

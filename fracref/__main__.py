@@ -1,0 +1,7 @@
+"""``python -m fracref``: the command line."""
+
+import sys
+
+from fracref.cli import main
+
+sys.exit(main())

@@ -1,0 +1,260 @@
+"""``fracref``: the command line.
+
+``fracref run CONFIG [--out DIR] [--set key.path=value ...] [--until STAGE] [--force] [--no-cache]``
+``fracref config CONFIG [--set ...]`` prints the resolved config.
+``fracref stages`` lists the stages.
+``fracref export RUN_DIR --format usd [--out FILE]`` writes a finished run's animated pieces as USD.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from fracture.errors import ConfigError
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="fracref", description="Physics-inspired adaptive fracture refinement.")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    r = sub.add_parser("run", help="run an experiment config into a run directory")
+    r.add_argument("config", type=Path, help="experiment YAML file")
+    r.add_argument("--out", type=Path, help="run directory (default: runs/<name>)")
+    r.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY.PATH=VALUE",
+                   help="override a config value (YAML syntax); repeatable")
+    r.add_argument("--until", metavar="STAGE", help="last stage to run")
+    r.add_argument("--force", action="store_true", help="replace an existing run directory")
+    r.add_argument("--quiet", action="store_true", help="no progress bars")
+    _cache_flags(r)
+
+    w = sub.add_parser("sweep", help="run a config over every combination of values into one sweep directory")
+    w.add_argument("config", type=Path, help="experiment YAML file (its sweep.grid block, if any, is swept)")
+    w.add_argument("--grid", action="append", default=[], metavar="KEY.PATH=V1,V2,...",
+                   help="values of a config key to sweep (YAML values, comma-separated); repeatable; replaces the "
+                        "config's sweep.grid")
+    w.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY.PATH=VALUE",
+                   help="override a config value at every point; repeatable")
+    w.add_argument("--out", type=Path, help="sweep directory (default: runs/<name>-sweep)")
+    w.add_argument("--jobs", type=int, default=1, metavar="N", help="points run at once (default 1)")
+    w.add_argument("--backend", default="local", choices=["local", "ray"],
+                   help="local processes, or Ray (pip install 'fracref[ray]')")
+    w.add_argument("--address", help="ray: the cluster to join (e.g. auto, or ray://HOST:10001); default: a "
+                   "local Ray with --jobs CPUs")
+    w.add_argument("--until", metavar="STAGE", help="last stage of every point's run")
+    w.add_argument("--no-sheet", action="store_true", help="no contact sheet of the refined surfaces")
+    w.add_argument("--quiet", action="store_true", help="no progress bar")
+    _cache_flags(w)
+
+    c = sub.add_parser("config", help="print the resolved config")
+    c.add_argument("config", type=Path)
+    c.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY.PATH=VALUE")
+
+    sub.add_parser("stages", help="list the pipeline stages")
+
+    e = sub.add_parser("export", help="write a finished run's animated pieces as one USD file")
+    e.add_argument("run_dir", type=Path, metavar="RUN_DIR")
+    e.add_argument("--format", default="usd", choices=["usd"], help="output format (default: usd)")
+    e.add_argument("--out", type=Path, help="output file (default: RUN_DIR/animation/pieces.usdc)")
+
+    v = sub.add_parser("view", help="open the research viewer on a run directory or a config")
+    v.add_argument("target", type=Path, metavar="CONFIG_OR_RUN_DIR",
+                   help="a run directory, a sweep directory (fracref sweep: choose a point, flip between two), or "
+                        "a config (run first into --out, default runs/<name>)")
+    v.add_argument("--out", type=Path, help="run directory for a config (default: runs/<name>)")
+    v.add_argument("--width", type=int, default=1800)
+    v.add_argument("--height", type=int, default=900)
+    v.add_argument("--camera", type=Path, metavar="FILE",
+                   help="start with the panels and cameras of a view file (Save view) or a saved config")
+
+    d = sub.add_parser("render", help="render figures (PNG) and videos (MP4) of a run with no window")
+    d.add_argument("run_dir", type=Path, metavar="RUN_DIR")
+    d.add_argument("--what", action="append", choices=["slices", "iterations", "animation", "compare", "turntable"],
+                   help="what to render (repeatable; default: slices, iterations, animation)")
+    d.add_argument("--out", type=Path, help="output directory (default: RUN_DIR/renders)")
+    d.add_argument("--width", type=int, default=1280, help="figure width in pixels (compare: both halves)")
+    d.add_argument("--height", type=int, default=720)
+    d.add_argument("--supersample", type=int, default=1, metavar="K",
+                   help="render K times larger and average down (1..4; smoother edges)")
+    d.add_argument("--transparent", action="store_true", help="PNGs with a transparent background")
+    d.add_argument("--camera", type=Path, metavar="FILE",
+                   help="the panels' settings and cameras of a view file (Save view) or a saved config "
+                        "(default: the run's config)")
+    d.add_argument("--fps", type=int, default=24, help="video frames per second")
+    d.add_argument("--image-seconds", type=float, metavar="S",
+                   help="how long each image is shown in a video (default: slices 0.4, iterations 0.25, "
+                        "animation its own frame rate)")
+    d.add_argument("--hold", type=float, default=1.0, metavar="S", help="the last image held S seconds more")
+    d.add_argument("--turntable-seconds", type=float, default=6.0, metavar="S", help="length of one turn")
+    d.add_argument("--field", help="slices: psi, zeta or xi")
+    d.add_argument("--axis", help="slices: normal axis x, y or z")
+    d.add_argument("--level", type=int, help="slices: psi's pyramid level (0 = finest)")
+    d.add_argument("--cutaway", action=argparse.BooleanOptionalAction, help="slices: the pieces below the slice")
+    d.add_argument("--color-by", help="iterations: psi or speed")
+    d.add_argument("--frame", type=int, help="compare, turntable: the frame (1 = the first; default: the view "
+                   "file's, else the run config's view.frame, and the last when that is 1)")
+    d.add_argument("--overlay-coarse", action=argparse.BooleanOptionalAction,
+                   help="animation: draw the coarse pieces too")
+    d.add_argument("--quiet", action="store_true", help="no progress bars")
+    return p
+
+
+def _cache_flags(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--no-cache", action="store_true",
+                   help="run every stage (default: reuse the results of stages whose inputs are unchanged)")
+    p.add_argument("--cache-dir", type=Path, metavar="DIR",
+                   help="the stage cache (default: $FRACREF_CACHE_DIR, else ~/.cache/fracref; at most "
+                        "$FRACREF_CACHE_MAX_GB, default 5 GB)")
+
+
+def cache_from_args(args):
+    """The stage cache the flags ask for, or None."""
+    from fracture.pipeline.cache import StageCache
+
+    return None if args.no_cache else StageCache(args.cache_dir)
+
+
+def _terminate(signum, frame):
+    raise SystemExit(128 + signum)  # unwinds like Ctrl-C: a run being staged is removed
+
+
+def main(argv: list[str] | None = None) -> int:
+    """The command line; SIGTERM is taken like Ctrl-C while it runs (the previous handler is restored)."""
+    import signal
+
+    previous = signal.signal(signal.SIGTERM, _terminate)
+    try:
+        return _main(argv)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _main(argv: list[str] | None) -> int:
+    args = _parser().parse_args(argv)
+    from fracture.pipeline import runner
+    from fracture.process import prepare_process
+    from fracture.io.atomic import OutputError, RunDirectoryExists
+    from fracture.pipeline.config import dump_config, load_config
+    from fracture.errors import InputError, ResultError, StageError
+
+    prepare_process()
+    try:
+        if args.command == "stages":
+            print("\n".join(runner.available_stages()))
+            return 0
+        if args.command == "render":
+            return _render(args)
+        if args.command == "export":
+            from fracture.io.export import export_run
+
+            print(f"wrote {export_run(args.run_dir, args.format, args.out)}")
+            return 0
+        if args.command == "view":
+            return _view(args)
+        if args.command == "sweep":
+            return _sweep(args)
+        cfg = load_config(args.config, args.overrides)
+        if args.command == "config":
+            sys.stdout.write(dump_config(cfg))
+            return 0
+        runner.stages_until(args.until)  # reject a bad --until before any work
+        out = args.out if args.out is not None else Path("runs") / cfg["name"]
+        done = runner.run(cfg, out, until=args.until, force=args.force, progress=not args.quiet,
+                          cache=cache_from_args(args))
+        if not args.quiet:
+            import json
+
+            print(runner.timing_table(json.loads((done / "manifest.json").read_text(encoding="utf-8"))))
+        print(f"run complete: {done}  (manifest: {done / 'manifest.json'})")
+        return 0
+    except (ConfigError, InputError, ResultError, StageError, RunDirectoryExists, OutputError) as exc:
+        print(f"fracref: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # a file the command reads or writes outside a run directory
+        if exc.filename is None:
+            raise
+        print(f"fracref: error: {exc.filename}: {exc.strerror}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("fracref: interrupted; nothing was written", file=sys.stderr)
+        return 130
+
+
+def _start_view(run_dir: Path, camera: Path | None):
+    """The view a render or the window starts from: the run's config ``view:`` section, or ``camera``'s."""
+    from viewer.data import RunData
+    from viewer.state import from_section, read_view_file
+
+    if camera is not None:
+        return read_view_file(camera)
+    run = RunData(run_dir)
+    return from_section(run.config.get("view"), str(run.dir / "config.yaml"))
+
+
+def _render(args) -> int:
+    from dataclasses import replace
+
+    from viewer.render import DEFAULT_WHAT, Timing, render
+
+    state = _start_view(args.run_dir, args.camera)
+    flags = {"field": args.field, "axis": args.axis, "level": args.level, "cutaway": args.cutaway,
+             "color_by": args.color_by, "overlay_coarse": args.overlay_coarse}
+    view = replace(state.view, **{k: v for k, v in flags.items() if v is not None})
+    whats = tuple(args.what or DEFAULT_WHAT)
+    if args.frame is not None:
+        view = replace(view, frame=args.frame - 1)
+    elif {"compare", "turntable"} & set(whats) and args.camera is None and view.frame == 0:
+        view = replace(view, frame=-1)  # the last: the pieces apart
+    timing = Timing(args.fps, args.image_seconds, args.hold)
+    done = render(args.run_dir, whats, args.out, args.width, args.height, timing, view, args.quiet,
+                  args.supersample, args.transparent, args.turntable_seconds, state.cameras)
+    for what, files in done.items():
+        pngs = [f for f in files if f.suffix == ".png"]
+        videos = [f for f in files if f.suffix == ".mp4"]
+        print(f"{what}: " + ", ".join(([f"{len(pngs)} images"] if pngs else []) + [str(v) for v in videos]
+                                     + ([str(pngs[0])] if len(pngs) == 1 else [])))
+    return 0
+
+
+def _sweep(args) -> int:
+    from fracture.pipeline import runner
+    from fracture.pipeline.config import load_config
+    from fracture.pipeline.sweep import finished, parse_grid, run_sweep
+
+    if not 1 <= args.jobs <= 1024:
+        raise ConfigError("--jobs", "", f"got {args.jobs}, expected a number of points at once in 1..1024")
+    cfg = load_config(args.config, args.overrides)
+    grid = parse_grid(args.grid) if args.grid else cfg["sweep"]["grid"]
+    runner.stages_until(args.until)
+    out = args.out if args.out is not None else Path("runs") / f"{cfg['name']}-sweep"
+    state = run_sweep(args.config, grid, out, args.overrides, args.jobs, args.backend, args.address, args.until,
+                      args.cache_dir, not args.no_cache, progress=not args.quiet)
+    names = finished(state)
+    failed = {n: p for n, p in state["points"].items() if p["status"] == "failed"}
+    if names and not args.no_sheet and (args.until is None or args.until not in ("coarse", "fields")):
+        from viewer.data import read_sweep
+        from viewer.render import contact_sheet
+
+        done = read_sweep(out)
+        print(f"contact sheet: {contact_sheet([p.dir for p in done], [p.label for p in done], Path(out) / 'sheet.png')}")
+    print(f"sweep: {len(names)} of {len(state['points'])} points done, tables: {Path(out) / 'table.md'}, "
+          f"{Path(out) / 'table.csv'}")
+    for name, p in failed.items():
+        print(f"fracref: error: sweep point {name}: {p['error']}", file=sys.stderr)
+    return 2 if failed else 0
+
+
+def _view(args) -> int:
+    from fracture.errors import InputError
+    from viewer.app import main as view_main
+
+    for name, value in (("width", args.width), ("height", args.height)):
+        if not 480 <= value <= 16384:
+            raise InputError(f"view: --{name} must be a window size in pixels in 480..16384, got {value}")
+
+    return view_main(args.target, args.out, args.width, args.height, args.camera)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,5 +1,0 @@
-import sys
-
-from fracture.cli import main
-
-sys.exit(main())

@@ -1,0 +1,97 @@
+"""A coarse fracture animation from one USD file (Blender 4/5, Houdini), read with usd-core.
+
+Every ``Mesh`` prim is a piece; its points in world space at each frame are its points there
+(time-sampled or not) under its transforms there (time-sampled or not): Blender writes rest
+points and time-sampled transforms, Houdini often time-sampled points. The frames are the stage's
+integer time codes from its start to its end. The result is the list of
+:class:`~fracture.coarse.mesh_sequence.MeshFrame` that a folder of OBJ frames gives, so the same import
+follows (:func:`fracture.coarse.mesh_sequence.coarse_from_frames`); the stage's up axis is returned with it.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from fracture.errors import InputError
+from fracture.coarse.mesh_sequence import MeshFrame
+
+
+def _piece_name(prim) -> str:
+    """Blender writes ``/root/NAME/NAME`` (a transform holding its mesh): the transform's name then."""
+    parent = prim.GetParent()
+    if parent and parent.GetName() == prim.GetName():
+        return parent.GetName()
+    return prim.GetName()
+
+
+def read_usd_frames(path: str | Path) -> tuple[list[MeshFrame], str]:
+    """The frames of a USD animation and its up axis ("y" or "z").
+
+    Raises
+    ------
+    InputError
+        The file cannot be opened, holds no mesh, or a piece's faces change
+        between frames, name the file, piece and frame.
+    """
+    from pxr import Tf, Usd, UsdGeom
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: USD file not found")
+    try:
+        stage = Usd.Stage.Open(str(path))
+    except Tf.ErrorException as exc:
+        raise InputError(f"{path}: cannot open as USD ({str(exc).strip().splitlines()[-1]})") from None
+    meshes = [p for p in stage.Traverse() if p.IsA(UsdGeom.Mesh)]
+    if not meshes:
+        raise InputError(f"{path}: no Mesh prims: expected one mesh per piece")
+    names = [_piece_name(p) for p in meshes]
+    seen: set[str] = set()
+    for n, p in zip(names, meshes):
+        if n in seen:
+            raise InputError(f"{path}: two pieces are named {n!r} (at {p.GetPath()}); piece names must differ")
+        seen.add(n)
+    if stage.HasAuthoredTimeCodeRange():
+        start, end = stage.GetStartTimeCode(), stage.GetEndTimeCode()
+        times = [Usd.TimeCode(float(t)) for t in range(int(np.floor(start)), int(np.floor(end)) + 1)]
+        if not times:
+            raise InputError(f"{path}: its time code range {start} to {end} holds no frame")
+    else:  # no animation: one frame, the default values
+        times = [Usd.TimeCode.Default()]
+    topology = []
+    for p, name in zip(meshes, names):
+        mesh = UsdGeom.Mesh(p)
+        counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get(), np.int64)
+        idx = np.asarray(mesh.GetFaceVertexIndicesAttr().Get(), np.int64)
+        if counts.size == 0 or counts.sum() != idx.size or (counts < 3).any():
+            raise InputError(f"{path}: piece {name!r} ({p.GetPath()}) has no faces or inconsistent face counts")
+        topology.append((counts, idx))
+    cache = UsdGeom.XformCache()
+    frames = []
+    for t in times:
+        cache.SetTime(t)
+        V, polys, offset = [], [], 0
+        for p, name, (counts, idx) in zip(meshes, names, topology):
+            mesh = UsdGeom.Mesh(p)
+            P = np.asarray(mesh.GetPointsAttr().Get(t), np.float64).reshape(-1, 3)
+            if idx.max() >= len(P):
+                raise InputError(f"{path}: piece {name!r} at frame {t.GetValue():g}: a face uses point {idx.max()} "
+                                 f"of {len(P)}")
+            M = np.asarray(cache.GetLocalToWorldTransform(p), np.float64)  # row vectors: x' = [x 1] M
+            X = P @ M[:3, :3] + M[3, :3]
+            if not np.isfinite(X).all():
+                raise InputError(f"{path}: piece {name!r} at frame {t.GetValue():g}: NaN or infinite coordinates")
+            V.append(X)
+            splits = np.split(idx + offset, np.cumsum(counts)[:-1])
+            polys.append(splits)
+            offset += len(P)
+        frames.append(MeshFrame(path, list(names), np.concatenate(V), polys))
+    rest = frames[0]
+    for t, frame in zip(times[1:], frames[1:]):
+        if len(frame.V) != len(rest.V):
+            raise InputError(f"{path}: frame {t.GetValue():g} has {len(frame.V)} points, the first has "
+                             f"{len(rest.V)}: a piece's points change in number")
+    up = "y" if UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.y else "z"
+    return frames, up

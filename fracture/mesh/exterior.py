@@ -1,0 +1,57 @@
+"""Queries against the exterior surface B with libigl's trees built once.
+
+``igl.fast_winding_number`` and ``igl.point_mesh_squared_distance`` rebuild
+their hierarchy over B on every call; code that asks many times (bisection,
+per-iteration projections, seed sampling) holds an :class:`Exterior` instead.
+"""
+
+from __future__ import annotations
+
+from functools import cached_property
+
+import igl
+import numpy as np
+
+from fracture.mesh.topology import face_frames
+
+
+class Exterior:
+    """A closed triangle mesh with a winding-number hierarchy and an AABB tree, each built on its
+    first query (the refinement asks only for closest points: the hierarchy of B's 56K triangles
+    in the bunny scene alone takes 50 ms)."""
+
+    def __init__(self, V: np.ndarray, F: np.ndarray):
+        self.V = np.ascontiguousarray(V, np.float64)
+        self.F = np.ascontiguousarray(F, np.int64)
+
+    @cached_property
+    def _wn(self):
+        wn = igl.FastWindingNumberBVH()
+        wn.init(self.V, self.F)
+        return wn
+
+    @cached_property
+    def _tree(self):
+        tree = igl.AABB()
+        tree.init(self.V, self.F)
+        return tree
+
+    @cached_property
+    def normals(self) -> np.ndarray:
+        """Unit outward normals of B's triangles, ``(m, 3)``."""
+        return face_frames(self.V, self.F)[1]
+
+    def normal_at(self, P: np.ndarray) -> np.ndarray:
+        """Unit outward normals of B at the points of B closest to ``P``, ``(k, 3)``."""
+        return self.normals[self.closest(P)[1]]
+
+    def inside(self, P: np.ndarray) -> np.ndarray:
+        """Whether points are inside (winding number above one half)."""
+        return self._wn.winding_number(np.ascontiguousarray(P, np.float64).reshape(-1, 3)) > 0.5
+
+    def closest(self, P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Squared distances, triangle ids and closest points on B of points ``(k, 3)``."""
+        return self._tree.squared_distance(self.V, self.F, np.ascontiguousarray(P, np.float64).reshape(-1, 3))
+
+    def distance(self, P: np.ndarray) -> np.ndarray:
+        return np.sqrt(self.closest(P)[0])

@@ -1,0 +1,173 @@
+"""The experiment runner: configured stages in order, one run directory.
+
+:func:`run` executes the stages of :data:`fracture.pipeline.stages.STAGES` (an
+explicit ordered tuple; a caller may pass its own) up to ``until`` inside a
+staging directory, then writes ``config.yaml`` and ``manifest.json`` and moves
+the directory into place (see :mod:`fracture.io.atomic`). Stages hand
+in-memory results to later stages through ``RunContext.products`` (a
+:class:`~fracture.pipeline.context.Products`) and write their files with the
+``RunContext.save_*`` helpers, which record each file for the manifest.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import platform
+import sys
+import time
+from datetime import datetime, timezone
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+from fracture.errors import StageError
+from fracture.io.atomic import staged_directory
+from fracture.pipeline.config import dump_config
+from fracture.pipeline.context import RunContext
+from fracture.pipeline.stages import STAGES, Stage
+
+# Distributions whose versions go into the manifest.
+_PACKAGES = ("numpy", "scipy", "numba", "open3d", "pymeshlab", "libigl", "noise", "PyYAML", "imageio", "fracref")
+
+
+def available_stages(stages: tuple[Stage, ...] = STAGES) -> list[str]:
+    """The stages' names, in pipeline order."""
+    return [s.name for s in stages]
+
+
+def timing_table(manifest: dict) -> str:
+    """Seconds per stage and in all, as a small table (printed at the end of a run)."""
+    stages = manifest.get("stages", {})
+    width = max([len(n) for n in stages] + [5])
+    rows = [f"  {name:<{width}}  {info['seconds']:8.1f} s" for name, info in stages.items()]
+    total = sum(info["seconds"] for info in stages.values())
+    return "\n".join(["time per stage:", *rows, f"  {'total':<{width}}  {total:8.1f} s"])
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def _versions() -> dict[str, str]:
+    out = {}
+    for name in _PACKAGES:
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            out[name] = "not installed"
+    return out
+
+
+def stages_until(until: str | None, stages: tuple[Stage, ...] = STAGES) -> tuple[Stage, ...]:
+    """The stages to run, ending with the one named ``until`` (all when None)."""
+    names = available_stages(stages)
+    if until is None:
+        return stages
+    if until not in names:
+        raise StageError(f"--until {until!r}: unknown stage; expected one of {', '.join(names)}")
+    return stages[: names.index(until) + 1]
+
+
+def _run_stage(ctx: RunContext, stage: Stage, keep_products: bool, out: Path) -> dict:
+    """Run one stage, or reuse its cached result (:mod:`fracture.pipeline.cache`); returns what the manifest says of it.
+
+    The stage's result is what it adds to the context: files, products (kept
+    only for stages whose products a later stage reads), counts, statistics
+    and notes.
+    """
+    name, cache = stage.name, ctx.cache
+    if cache is None:
+        stage.run(ctx)
+        return {}
+    from fracture.pipeline.cache import stage_key
+
+    previous = next(reversed(ctx.keys.values()), "")
+    key = ctx.keys[name] = stage_key(name, ctx.cfg, previous)
+    entry = cache.load(name, key)
+    products = cache.restore(entry, ctx.dir) if entry is not None else None
+    if products is not None:
+        ctx.files.extend(rel for rel in entry.files if rel not in ctx.files)
+        ctx.products.update(products)
+        ctx.counts.update(entry.meta["counts"])
+        ctx.stats.update(entry.meta["stats"])
+        ctx.notes.extend(entry.meta["notes"])
+        ctx.say(f"{name}: reused from the cache ({entry.path}; made by {entry.meta['run']})")
+        return {"cache": "reused", "cache_entry": str(entry.path), "made_by": entry.meta["run"]}
+    n_files, n_notes = len(ctx.files), len(ctx.notes)
+    products, counts, stats = ctx.products.made(), dict(ctx.counts), dict(ctx.stats)
+    stage.run(ctx)
+    changed = lambda new, old: {k: v for k, v in new.items() if k not in old or old[k] is not v}  # noqa: E731
+    meta = dict(counts=changed(ctx.counts, counts), stats=changed(ctx.stats, stats), notes=ctx.notes[n_notes:],
+                run=str(out))
+    stored = cache.store(name, key, ctx.dir, ctx.files[n_files:],
+                         changed(ctx.products.made(), products) if keep_products else {}, meta)
+    return {"cache": "stored" if stored is not None else "not stored (the cache cannot be written)"}
+
+
+def run(cfg: dict, out: str | Path, until: str | None = None, force: bool = False, progress: bool = True,
+        listener=None, cache=None, stages: tuple[Stage, ...] = STAGES) -> Path:
+    """Run the configured stages into the run directory ``out``.
+
+    Parameters
+    ----------
+    cfg : dict
+        A resolved config from :func:`fracture.pipeline.config.load_config`.
+    out : str or Path
+        Run directory; must not exist (or be empty) unless ``force``.
+    until : str, optional
+        Last stage to run.
+    force : bool
+        Replace an existing run directory (only once the new run succeeded).
+    progress : bool
+        Show progress bars on stderr.
+    listener : callable, optional
+        ``listener(event, data)``: ``("stage", {"name"})`` before each stage and
+        ``("iteration", {...})`` after each refinement iteration (positions,
+        faces, psi, speed, energy, iteration), from the running thread.
+    cache : StageCache, optional
+        Reuse and store stage results (:mod:`fracture.pipeline.cache`).
+    stages : tuple of Stage
+        The pipeline (default :data:`~fracture.pipeline.stages.STAGES`); a stage of one's own replaces
+        one of the same name.
+
+    Returns
+    -------
+    Path
+        The run directory, holding ``config.yaml``, ``manifest.json`` and the
+        stages' outputs.
+    """
+    chosen = stages_until(until, stages)
+    started = datetime.now(timezone.utc)
+    manifest: dict[str, Any] = {
+        "name": cfg["name"],
+        "seed": cfg["seed"],
+        "started": started.isoformat(timespec="seconds"),
+        "python": platform.python_version(),
+        "platform": platform.platform(),
+        "packages": _versions(),
+        "stages": {},
+    }
+    with staged_directory(out, force) as staging:
+        ctx = RunContext(cfg=cfg, dir=staging, progress=progress, listener=listener, cache=cache)
+        ctx.path("config.yaml").write_text(dump_config(cfg), encoding="utf-8")
+        for stage in chosen:
+            t0 = time.perf_counter()
+            ctx.tell("stage", name=stage.name)
+            info = _run_stage(ctx, stage, keep_products=stage is not stages[-1], out=Path(out))
+            manifest["stages"][stage.name] = {"seconds": round(time.perf_counter() - t0, 4), **info}
+        if cache is not None:
+            cache.trim()  # once per run: it walks every entry
+        manifest["stats"] = ctx.stats
+        manifest["counts"] = ctx.counts
+        manifest["notes"] = ctx.notes
+        manifest["finished"] = datetime.now(timezone.utc).isoformat(timespec="seconds")
+        manifest["files"] = {rel: {"sha256": _sha256(staging / rel), "bytes": (staging / rel).stat().st_size}
+                             for rel in sorted(ctx.files)}
+        # Written last: a directory with a manifest is a complete run.
+        (staging / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n", encoding="utf-8")
+    return Path(out)

@@ -1,0 +1,131 @@
+"""The ``fields`` stage: zeta, xi, psi and the strength pyramid on a grid."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fields.build import build_fields, fields_memory, grid_for
+from fields.pyramid import StrengthPyramid
+from fields.slices import axis_slice, slice_image
+from fracture.errors import ConfigError
+from fracture.pipeline.context import RunContext
+
+PREVIEW_FIELDS = ("zeta", "xi", "psi")
+# Target width in pixels of one preview slice (pixels are repeated up to it).
+_PREVIEW_WIDTH = 400
+_PREVIEW_GAP = 8
+
+
+def fields_from_config(cfg: dict, BV: np.ndarray, SV: np.ndarray, SF: np.ndarray, step=None, zeta=None,
+                       distance=None, pyramids=None):
+    """:func:`fields.build.build_fields` with the parameters of a resolved config (``zeta``, ``distance`` and
+    ``pyramids``: parts known already, see there)."""
+    return build_fields(
+        BV, SV, SF,
+        resolution=cfg["grid"]["resolution"],
+        padding=cfg["grid"]["padding"],
+        layers=cfg["strength"]["layers"],
+        seed=cfg["seed"],
+        normalize=cfg["strength"]["normalize"],
+        stress_length=cfg["stress"]["length"],
+        strength_weight=cfg["psi"]["strength_weight"],
+        stress_weight=cfg["psi"]["stress_weight"],
+        levels=cfg["pyramid"]["levels"],
+        sigma=cfg["pyramid"]["sigma"],
+        step=step,
+        zeta=zeta,
+        distance=distance,
+        pyramids=pyramids,
+    )
+
+
+def check_grid_memory(cfg: dict, BV: np.ndarray) -> None:
+    """Refuse, before allocating, a grid whose fields need more than ``grid.max_memory_gb``."""
+    grid = grid_for(BV, cfg["grid"]["resolution"], cfg["grid"]["padding"])
+    need = fields_memory(grid.size, cfg["pyramid"]["levels"]) / 1e9
+    if need > cfg["grid"]["max_memory_gb"]:
+        shape = "x".join(str(n) for n in grid.shape)
+        raise ConfigError("config", "grid.resolution",
+                          f"{cfg['grid']['resolution']} gives a {shape} grid ({grid.size:,} nodes) whose fields need "
+                          f"about {need:.1f} GB, more than grid.max_memory_gb ({cfg['grid']['max_memory_gb']:g} GB); "
+                          "expected a lower resolution, or raise the limit if this machine has the memory")
+
+
+def fields_stage(ctx: RunContext) -> None:
+    cfg = ctx.cfg
+    (BV, BF), cf = ctx.products.exterior, ctx.products.coarse
+    check_grid_memory(cfg, BV)
+    known = cached_parts(ctx) if ctx.cache is not None else {}
+    with ctx.bar(3, "fields") as bar:
+        fs = fields_from_config(cfg, BV, cf.V, cf.F, step=lambda name: (bar.set_postfix_str(name), bar.update()),
+                                **known)
+    for name in ("zeta", "distance"):
+        if ctx.cache is not None and name not in known:
+            ctx.cache.keep(name, known_key(ctx, name), fs.field(name))
+    ctx.products.fields = fs
+
+    ctx.save_json("fields/grid.json", fs.grid.to_dict())
+    for name in PREVIEW_FIELDS:
+        ctx.save_array(f"fields/{name}.npy", fs.field(name).astype(np.float32))
+    ctx.save_array("fields/pyramid.npy", fs.pyramid.levels.astype(np.float32))
+    ctx.save_png("fields/preview.png", preview_image(fs, cfg["preview"]))
+
+    ctx.counts.update(
+        grid_nodes=fs.grid.size,
+        pyramid_levels=fs.pyramid.n_levels,
+        exterior_triangles=int(len(BF)),
+    )
+    ctx.stats["fields"] = {
+        "grid_shape": list(fs.grid.shape),
+        **{f"{n}_range": [float(fs.field(n).min()), float(fs.field(n).max())] for n in PREVIEW_FIELDS},
+    }
+
+
+def known_key(ctx: RunContext, name: str) -> str:
+    """The cache key of a part of the fields of this run: the strength field ``zeta``, the distances
+    ``distance`` to the coarse fracture surface, or the pyramids of zeta (``zeta pyramid``) and of the stress
+    (``xi pyramid``): what each depends on of the config, and the coarse stage (its exterior and surface)."""
+    from fracture.pipeline.cache import code_version, digest
+
+    cfg = ctx.cfg
+    depends = {"zeta": (cfg["strength"], cfg["seed"]), "distance": (),
+               "zeta pyramid": (cfg["strength"], cfg["seed"], cfg["pyramid"]),
+               "xi pyramid": (cfg["stress"], cfg["pyramid"])}[name]
+    grid = (cfg["grid"]["resolution"], cfg["grid"]["padding"])
+    return digest(name, ctx.keys["coarse"], grid, depends, code_version())
+
+
+def cached_parts(ctx: RunContext) -> dict:
+    """The strength field, the distances and the pyramids from the cache (where a run with the same inputs
+    made them; a pyramid the cache does not have is built and kept)."""
+    values = {name: ctx.cache.value(name, known_key(ctx, name)) for name in ("zeta", "distance")}
+    known = {name: v for name, v in values.items() if v is not None}
+    cfg = ctx.cfg
+
+    def pyramid(name: str, grid, field: np.ndarray) -> StrengthPyramid:
+        key = known_key(ctx, f"{name} pyramid")
+        made = ctx.cache.value("pyramid", key)
+        if made is None:
+            made = StrengthPyramid(grid, field, levels=cfg["pyramid"]["levels"], sigma=cfg["pyramid"]["sigma"])
+            ctx.cache.keep("pyramid", key, made)
+        return made
+
+    return {**known, "pyramids": pyramid}
+
+
+def preview_image(fs, preview: dict) -> np.ndarray:
+    """zeta, xi and psi side by side on one slice plane, as an RGB image."""
+    axis = preview["axis"]
+    if axis is None:
+        axis = int(np.argmin(fs.grid.shape))
+    panels = []
+    for name in PREVIEW_FIELDS:
+        plane, _ = axis_slice(fs.grid, fs.field(name), axis, preview["offset"])
+        scale = max(1, _PREVIEW_WIDTH // plane.shape[0])
+        panels.append(slice_image(plane, preview["colormap"], scale=scale))
+    height = panels[0].shape[0]
+    gap = np.full((height, _PREVIEW_GAP, 3), 255, np.uint8)
+    row = [panels[0]]
+    for p in panels[1:]:
+        row += [gap, p]
+    return np.concatenate(row, axis=1)
