@@ -38,3 +38,9 @@ tol.on_b = 1e-9
 # Input meshes: a triangle whose doubled area is at most this times the
 # squared diagonal has no area (corners coinciding or on a line).
 tol.degenerate = 1e-14
+
+# Refinement: the static intersection tests of triangles (self-intersection
+# checks, flips) count a contact within this fraction of the triangles'
+# scale as a crossing: exact predicates are not needed on top of the
+# continuous collision step, which keeps a thickness far above it.
+tol.static_test = 1e-10

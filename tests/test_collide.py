@@ -70,13 +70,16 @@ def test_testing_only_the_moving_vertices_stops_the_same_ones():
 
 
 def _brute_force_pairs(V, F):
-    from fracture.refine.collide import _EPS, _triangles_intersect
-    return {(f, g) for f in range(len(F)) for g in range(f + 1, len(F)) if _triangles_intersect(V, F, f, g, _EPS)}
+    from fracture.refine.collide import triangles_intersect
+    from fracture.tolerances import tol
+    return {(f, g) for f in range(len(F)) for g in range(f + 1, len(F))
+            if triangles_intersect(V, F, f, g, tol.static_test)}
 
 
 def test_the_square_root_free_side_test_rejects_only_segments_the_full_test_rejects():
-    from fracture.refine.collide import _EPS, _clearly_one_side, _segment_hits_triangle
-    from fracture.refine.vec import _cross, _dot
+    from fracture.refine import vec
+    from fracture.refine.collide import _clearly_one_side, _segment_hits_triangle
+    from fracture.tolerances import tol
     rng = np.random.default_rng(11)
     rejected = 0
     for flat in (1.0, 1e-9, 1e-13, 0.0):  # the segment's ends ever closer to the plane, then in it
@@ -85,10 +88,10 @@ def test_the_square_root_free_side_test_rejects_only_segments_the_full_test_reje
             p[2], q[2] = p[2] * flat, q[2] * flat
             a[2] = b[2] = c[2] = 0.0
             e1, e2 = tuple(b - a), tuple(c - a)
-            n = _cross(e1, e2)
-            nn2 = _dot(n, n)
+            n = vec.cross(e1, e2)
+            nn2 = vec.dot(n, n)
             P, Q, A = tuple(p), tuple(q), tuple(a)
-            for eps in (_EPS, 1e-3):
+            for eps in (tol.static_test, 1e-3):
                 if _clearly_one_side(P, Q, A, n, nn2, eps):
                     rejected += 1
                     assert not _segment_hits_triangle(P, Q, A, e1, e2, n, np.sqrt(nn2), eps)

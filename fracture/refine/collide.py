@@ -29,12 +29,21 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from fracture.tolerances import tol
+
 from fracture.refine import hashgrid
 from fracture.refine.fans import certified_fans, closed_vertices, share_certified
 from fracture.refine.kernels import EdgeTable, edge_table
-from fracture.refine.vec import _cross, _dot, _lerp, _pt, _sub
+from fracture.refine import vec
 
-_EPS = 1e-10  # relative tolerance of the static tests
+_EPS = tol.static_test
+# The features a triangle represents (_represented), as bits of one integer: bit k its vertex k,
+# bit _EDGE_SHIFT + k its edge k (F[f, k] -> F[f, k + 1]).
+_VERTEX_0 = 1
+_ALL_VERTICES = 0b000111
+_EDGE_SHIFT = 3
+_EDGE_0 = 1 << _EDGE_SHIFT
+_ALL_EDGES = 0b111000
 
 
 # -- geometry ------------------------------------------------------------------------------
@@ -43,15 +52,15 @@ _EPS = 1e-10  # relative tolerance of the static tests
 @numba.njit(cache=True)
 def _point_triangle_distance2(p, a, b, c):
     """Squared distance from p to triangle abc (Ericson, Real-Time Collision Detection 5.1.5)."""
-    ab, ac, ap = _sub(b, a), _sub(c, a), _sub(p, a)
-    d1, d2 = _dot(ab, ap), _dot(ac, ap)
+    ab, ac, ap = vec.sub(b, a), vec.sub(c, a), vec.sub(p, a)
+    d1, d2 = vec.dot(ab, ap), vec.dot(ac, ap)
     if d1 <= 0.0 and d2 <= 0.0:
         q = a
     else:
-        bp = _sub(p, b)
-        d3, d4 = _dot(ab, bp), _dot(ac, bp)
-        cp = _sub(p, c)
-        d5, d6 = _dot(ab, cp), _dot(ac, cp)
+        bp = vec.sub(p, b)
+        d3, d4 = vec.dot(ab, bp), vec.dot(ac, bp)
+        cp = vec.sub(p, c)
+        d5, d6 = vec.dot(ab, cp), vec.dot(ac, cp)
         vc = d1 * d4 - d3 * d2
         vb = d5 * d2 - d1 * d6
         va = d3 * d6 - d5 * d4
@@ -72,25 +81,25 @@ def _point_triangle_distance2(p, a, b, c):
             s = 1.0 / (va + vb + vc)
             v, w = vb * s, vc * s
             q = (a[0] + ab[0] * v + ac[0] * w, a[1] + ab[1] * v + ac[1] * w, a[2] + ab[2] * v + ac[2] * w)
-    d = _sub(p, q)
-    return _dot(d, d)
+    d = vec.sub(p, q)
+    return vec.dot(d, d)
 
 
 @numba.njit(cache=True)
 def _segment_segment_distance2(p1, q1, p2, q2):
     """Squared distance between segments p1q1 and p2q2 (Ericson 5.1.9)."""
-    d1, d2, r = _sub(q1, p1), _sub(q2, p2), _sub(p1, p2)
-    a, e, f = _dot(d1, d1), _dot(d2, d2), _dot(d2, r)
+    d1, d2, r = vec.sub(q1, p1), vec.sub(q2, p2), vec.sub(p1, p2)
+    a, e, f = vec.dot(d1, d1), vec.dot(d2, d2), vec.dot(d2, r)
     if a <= 1e-300 and e <= 1e-300:
-        return _dot(r, r)
+        return vec.dot(r, r)
     if a <= 1e-300:
         s, t = 0.0, min(max(f / e, 0.0), 1.0)
     else:
-        c = _dot(d1, r)
+        c = vec.dot(d1, r)
         if e <= 1e-300:
             t, s = 0.0, min(max(-c / a, 0.0), 1.0)
         else:
-            b = _dot(d1, d2)
+            b = vec.dot(d1, d2)
             den = a * e - b * b
             s = min(max((b * f - c * e) / den, 0.0), 1.0) if den > 0.0 else 0.0
             t = (b * s + f) / e
@@ -100,7 +109,7 @@ def _segment_segment_distance2(p1, q1, p2, q2):
                 t, s = 1.0, min(max((b - c) / a, 0.0), 1.0)
     x = (p1[0] + d1[0] * s - p2[0] - d2[0] * t, p1[1] + d1[1] * s - p2[1] - d2[1] * t,
          p1[2] + d1[2] * s - p2[2] - d2[2] * t)
-    return _dot(x, x)
+    return vec.dot(x, x)
 
 
 @numba.njit(cache=True)
@@ -113,8 +122,8 @@ def _coplanar_times(a0, a1, b0, b1, c0, c1, d0, d1, out):
     too (touching without crossing, and sheets that move in their own plane).
     """
     def f(t):
-        a = _lerp(a0, a1, t)
-        return _dot(_cross(_sub(_lerp(b0, b1, t), a), _sub(_lerp(c0, c1, t), a)), _sub(_lerp(d0, d1, t), a))
+        a = vec.lerp(a0, a1, t)
+        return vec.dot(vec.cross(vec.sub(vec.lerp(b0, b1, t), a), vec.sub(vec.lerp(c0, c1, t), a)), vec.sub(vec.lerp(d0, d1, t), a))
 
     # the cubic's coefficients from four samples (exact for a cubic)
     f0, f1, f2, f3 = f(0.0), f(1.0 / 3.0), f(2.0 / 3.0), f(1.0)
@@ -174,15 +183,15 @@ def _coplanar_times(a0, a1, b0, b1, c0, c1, d0, d1, out):
 def _relative_move(p0, p1, q0, q1):
     """|(p1 - p0) - (q1 - q0)|: how much closer two points can get during the step."""
     x = (p1[0] - p0[0] - q1[0] + q0[0], p1[1] - p0[1] - q1[1] + q0[1], p1[2] - p0[2] - q1[2] + q0[2])
-    return np.sqrt(_dot(x, x))
+    return np.sqrt(vec.dot(x, x))
 
 
 @numba.njit(cache=True)
 def _inside_at(p, a, b, c, eps):
     """The projection of p onto the plane of abc lies in the triangle (barycentric tolerance eps)."""
-    e1, e2, x = _sub(b, a), _sub(c, a), _sub(p, a)
-    d00, d01, d11 = _dot(e1, e1), _dot(e1, e2), _dot(e2, e2)
-    d20, d21 = _dot(x, e1), _dot(x, e2)
+    e1, e2, x = vec.sub(b, a), vec.sub(c, a), vec.sub(p, a)
+    d00, d01, d11 = vec.dot(e1, e1), vec.dot(e1, e2), vec.dot(e2, e2)
+    d20, d21 = vec.dot(x, e1), vec.dot(x, e2)
     den = d00 * d11 - d01 * d01
     if den <= 1e-30 * d00 * d11:
         return False  # degenerate triangle: the edge-edge tests see it
@@ -194,9 +203,9 @@ def _inside_at(p, a, b, c, eps):
 @numba.njit(cache=True)
 def _segments_cross_at(p, q, r, s, eps):
     """Coplanar segments pq and rs cross (line parameters within [-eps, 1 + eps])."""
-    d1, d2, w = _sub(q, p), _sub(s, r), _sub(p, r)
-    a, b, c = _dot(d1, d1), _dot(d1, d2), _dot(d2, d2)
-    d, e = _dot(d1, w), _dot(d2, w)
+    d1, d2, w = vec.sub(q, p), vec.sub(s, r), vec.sub(p, r)
+    a, b, c = vec.dot(d1, d1), vec.dot(d1, d2), vec.dot(d2, d2)
+    d, e = vec.dot(d1, w), vec.dot(d2, w)
     den = a * c - b * b
     if den <= 1e-24 * a * c:
         return False  # parallel: the vertex-triangle tests see these
@@ -219,7 +228,7 @@ def _vertex_triangle_hit(p0, p1, a0, a1, b0, b1, c0, c1, eta2, times):
         t = times[i]
         # coplanar at t: a hit if p is in the triangle then (a test of
         # position in the plane, well conditioned however the root is)
-        if _inside_at(_lerp(p0, p1, t), _lerp(a0, a1, t), _lerp(b0, b1, t), _lerp(c0, c1, t), 1e-9):
+        if _inside_at(vec.lerp(p0, p1, t), vec.lerp(a0, a1, t), vec.lerp(b0, b1, t), vec.lerp(c0, c1, t), 1e-9):
             return True
     # contact at the end of the step that is closer than at its start (pairs
     # resting in contact, e.g. sheets meeting on B, may stay so)
@@ -237,7 +246,7 @@ def _edge_edge_hit(p0, p1, q0, q1, r0, r1, s0, s1, eta2, times):
     n = _coplanar_times(p0, p1, q0, q1, r0, r1, s0, s1, times)
     for i in range(n):
         t = times[i]
-        if _segments_cross_at(_lerp(p0, p1, t), _lerp(q0, q1, t), _lerp(r0, r1, t), _lerp(s0, s1, t), 1e-9):
+        if _segments_cross_at(vec.lerp(p0, p1, t), vec.lerp(q0, q1, t), vec.lerp(r0, r1, t), vec.lerp(s0, s1, t), 1e-9):
             return True
     end = _segment_segment_distance2(p1, q1, r1, s1)
     return end <= eta2 and end < start
@@ -289,7 +298,7 @@ def _represented(F, n, eid):
     for f in range(m):
         if not taken[eid[3 * f]] and not taken[eid[3 * f + 1]] and not taken[eid[3 * f + 2]]:
             taken[eid[3 * f]] = taken[eid[3 * f + 1]] = taken[eid[3 * f + 2]] = True
-            rep[f] = 56
+            rep[f] = _ALL_EDGES
     for rule in range(3):  # two edges left; represents an edge already; any
         for f in range(m):
             left = 0
@@ -300,7 +309,7 @@ def _represented(F, n, eid):
             for k in range(3):
                 if not taken[eid[3 * f + k]]:
                     taken[eid[3 * f + k]] = True
-                    rep[f] |= 8 << k
+                    rep[f] |= _EDGE_0 << k
     # every vertex of a triangle is on one of its edges, whose representative holds it too
     held = np.zeros(n, np.bool_)
     for least in (3, 2, 1):
@@ -315,7 +324,7 @@ def _represented(F, n, eid):
             for k in range(3):
                 if not held[F[f, k]]:
                     held[F[f, k]] = True
-                    rep[f] |= 1 << k
+                    rep[f] |= _VERTEX_0 << k
     return rep
 
 
@@ -362,15 +371,15 @@ def _feature_tests(X0, X1, F, B, lo, hi, rep, pairs, eta, every, on, sure, stop)
             continue  # every feature of one fan: they cannot meet
         for (s, t) in ((a, b), (b, a)):  # the vertices s represents against triangle t
             r = rep[s]
-            if not r & 7:
+            if not r & _ALL_VERTICES:
                 continue
-            near = ((((r & 1) != 0) & _near(B, F[s, 0], lo, hi, t, F))
-                    | ((((r & 2) != 0) & _near(B, F[s, 1], lo, hi, t, F)) << 1)
-                    | ((((r & 4) != 0) & _near(B, F[s, 2], lo, hi, t, F)) << 2))
+            near = ((((r & _VERTEX_0) != 0) & _near(B, F[s, 0], lo, hi, t, F))
+                    | ((((r & (_VERTEX_0 << 1)) != 0) & _near(B, F[s, 1], lo, hi, t, F)) << 1)
+                    | ((((r & (_VERTEX_0 << 2)) != 0) & _near(B, F[s, 2], lo, hi, t, F)) << 2))
             for k in range(3):
                 if near & (1 << k) and (every or on[F[s, k]] or _any_on(on, F, t)):
                     hits += _vertex_triangle_pair(X0, X1, F, F[s, k], t, eta2, times, stop)
-        if not rep[a] & 56 or not rep[b] & 56:
+        if not rep[a] & _ALL_EDGES or not rep[b] & _ALL_EDGES:
             continue
         for k in range(3):  # the edges a represents against those b does
             for (f, row, pad) in ((a, k, eta), (b, 3 + k, 0.0)):
@@ -383,7 +392,7 @@ def _feature_tests(X0, X1, F, B, lo, hi, rep, pairs, eta, every, on, sure, stop)
             p, q = F[a, k], F[a, (k + 1) % 3]
             for j in range(3):
                 r, s = F[b, j], F[b, (j + 1) % 3]
-                near |= ((((rep[a] >> (3 + k)) & (rep[b] >> (3 + j)) & 1) != 0)
+                near |= ((((rep[a] >> (_EDGE_SHIFT + k)) & (rep[b] >> (_EDGE_SHIFT + j)) & 1) != 0)
                          & (p != r) & (p != s) & (q != r) & (q != s)
                          & (box[k, 3] >= box[3 + j, 0]) & (box[3 + j, 3] >= box[k, 0]) & (box[k, 4] >= box[3 + j, 1])
                          & (box[3 + j, 4] >= box[k, 1]) & (box[k, 5] >= box[3 + j, 2])
@@ -396,8 +405,8 @@ def _feature_tests(X0, X1, F, B, lo, hi, rep, pairs, eta, every, on, sure, stop)
                 r, s = F[b, j], F[b, (j + 1) % 3]
                 if not near & (1 << (3 * k + j)) or not (every or on[p] or on[q] or on[r] or on[s]):
                     continue
-                if _edge_edge_hit(_pt(X0, p), _pt(X1, p), _pt(X0, q), _pt(X1, q),
-                                  _pt(X0, r), _pt(X1, r), _pt(X0, s), _pt(X1, s), eta2, times):
+                if _edge_edge_hit(vec.point(X0, p), vec.point(X1, p), vec.point(X0, q), vec.point(X1, q),
+                                  vec.point(X0, r), vec.point(X1, r), vec.point(X0, s), vec.point(X1, s), eta2, times):
                     hits += 1
                     stop[p] = stop[q] = stop[r] = stop[s] = True
     return hits
@@ -407,8 +416,8 @@ def _feature_tests(X0, X1, F, B, lo, hi, rep, pairs, eta, every, on, sure, stop)
 def _vertex_triangle_pair(X0, X1, F, v, f, eta2, times, stop):
     """Test vertex v against triangle f (not one of its corners); marks a colliding pair in ``stop``."""
     a, b, c = F[f, 0], F[f, 1], F[f, 2]
-    if not _vertex_triangle_hit(_pt(X0, v), _pt(X1, v), _pt(X0, a), _pt(X1, a),
-                                _pt(X0, b), _pt(X1, b), _pt(X0, c), _pt(X1, c), eta2, times):
+    if not _vertex_triangle_hit(vec.point(X0, v), vec.point(X1, v), vec.point(X0, a), vec.point(X1, a),
+                                vec.point(X0, b), vec.point(X1, b), vec.point(X0, c), vec.point(X1, c), eta2, times):
         return 0
     stop[v] = stop[a] = stop[b] = stop[c] = True
     return 1
@@ -549,16 +558,16 @@ def _segment_hits_triangle(p, q, a, e1, e2, n, nn, eps):
     triangle with barycentric tolerance ``eps``. Touching counts: that is the
     conservative side for a check that must be 0.
     """
-    d = _sub(q, p)
-    tol = eps * nn * np.sqrt(_dot(d, d))
-    op, oq = _dot(n, _sub(p, a)), _dot(n, _sub(q, a))
+    d = vec.sub(q, p)
+    tol = eps * nn * np.sqrt(vec.dot(d, d))
+    op, oq = vec.dot(n, vec.sub(p, a)), vec.dot(n, vec.sub(q, a))
     if (op > tol and oq > tol) or (op < -tol and oq < -tol) or (abs(op) <= tol and abs(oq) <= tol):
         return False
     t = op / (op - oq)
-    x = _sub(_lerp(p, q, t), a)
+    x = vec.sub(vec.lerp(p, q, t), a)
     # barycentric coordinates of x in the triangle's plane
-    d00, d01, d11 = _dot(e1, e1), _dot(e1, e2), _dot(e2, e2)
-    d20, d21 = _dot(x, e1), _dot(x, e2)
+    d00, d01, d11 = vec.dot(e1, e1), vec.dot(e1, e2), vec.dot(e2, e2)
+    d20, d21 = vec.dot(x, e1), vec.dot(x, e2)
     den = d00 * d11 - d01 * d01
     if den <= 0.0:
         return False
@@ -574,14 +583,14 @@ def _clearly_one_side(p, q, a, n, nn2, eps):
     factor of sqrt 2, far beyond rounding: that test would reject the segment too. Squares, so no
     square roots (most pairs the static tests see are neighbours whose far edges lie off the
     other's plane)."""
-    d = _sub(q, p)
-    tol2 = eps * eps * nn2 * _dot(d, d)
-    op, oq = _dot(n, _sub(p, a)), _dot(n, _sub(q, a))
+    d = vec.sub(q, p)
+    tol2 = eps * eps * nn2 * vec.dot(d, d)
+    op, oq = vec.dot(n, vec.sub(p, a)), vec.dot(n, vec.sub(q, a))
     return (tol2 > 1e-200) & (op * oq > 0.0) & (op * op > 2.0 * tol2) & (oq * oq > 2.0 * tol2)
 
 
 @numba.njit(cache=True)
-def _triangles_intersect(X, F, f, g, eps):
+def triangles_intersect(X, F, f, g, eps):
     """Triangles f and g meet anywhere but at the vertex or the edge they share.
 
     Two triangles with one shared vertex s meet beyond it only along a
@@ -599,16 +608,16 @@ def _triangles_intersect(X, F, f, g, eps):
     if count >= 2:
         return False  # triangles on one edge meet only along it (coplanar folds aside)
     for (s, t) in ((f, g), (g, f)):
-        a = _pt(X, F[t, 0])
-        e1, e2 = _sub(_pt(X, F[t, 1]), a), _sub(_pt(X, F[t, 2]), a)
-        n = _cross(e1, e2)  # once per triangle, not per edge tested against it
-        nn2 = _dot(n, n)
+        a = vec.point(X, F[t, 0])
+        e1, e2 = vec.sub(vec.point(X, F[t, 1]), a), vec.sub(vec.point(X, F[t, 2]), a)
+        n = vec.cross(e1, e2)  # once per triangle, not per edge tested against it
+        nn2 = vec.dot(n, n)
         nn = -1.0  # its length, once a segment needs the full test
         for k in range(3):
             u, v = F[s, k], F[s, (k + 1) % 3]
             if u == shared or v == shared:
                 continue
-            p, q = _pt(X, u), _pt(X, v)
+            p, q = vec.point(X, u), vec.point(X, v)
             if _clearly_one_side(p, q, a, n, nn2, eps):
                 continue
             if nn < 0.0:
@@ -623,7 +632,7 @@ def _pair_tests(X, F, pairs, eps, first):
     """How many of the triangle ``pairs`` intersect; the first ``len(first)`` of them are written to ``first``."""
     count = 0
     for i in range(pairs.shape[0]):
-        if _triangles_intersect(X, F, pairs[i, 0], pairs[i, 1], eps):
+        if triangles_intersect(X, F, pairs[i, 0], pairs[i, 1], eps):
             if count < first.shape[0]:
                 first[count, 0], first[count, 1] = pairs[i, 0], pairs[i, 1]
             count += 1

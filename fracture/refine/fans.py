@@ -28,7 +28,7 @@ import numba
 import numpy as np
 
 from fracture.refine.kernels import EdgeTable
-from fracture.refine.vec import _cross, _dot, _norm, _pt, _sub
+from fracture.refine import vec
 
 # A positive component, or a cross product that places a direction in a wedge, must exceed this
 # fraction of the product of the lengths involved: far beyond rounding, so a pass is a proof.
@@ -60,11 +60,11 @@ def _fan_test(s, p, q, N0, H, N1, size2, normal, across, lim2, score):
     N1`` stay on the positive side of s's normal (by the margin: ``size2``), and whether its
     projection holds s's probe strictly inside (a side close to the probe's direction fails s); ``across``
     holds every vertex's probe x normal."""
-    ns, z = _pt(normal, s), _pt(across, s)
-    low = min(_dot(ns, N0), _dot(ns, H), _dot(ns, N1))
-    side_p, side_q = _dot(p, z), -_dot(q, z)  # n . (p x w) and n . (w x q)
-    passes = ((low > 0.0) & (low * low > size2) & (side_p * side_p > lim2[s] * _dot(p, p))
-              & (side_q * side_q > lim2[s] * _dot(q, q)))
+    ns, z = vec.point(normal, s), vec.point(across, s)
+    low = min(vec.dot(ns, N0), vec.dot(ns, H), vec.dot(ns, N1))
+    side_p, side_q = vec.dot(p, z), -vec.dot(q, z)  # n . (p x w) and n . (w x q)
+    passes = ((low > 0.0) & (low * low > size2) & (side_p * side_p > lim2[s] * vec.dot(p, p))
+              & (side_q * side_q > lim2[s] * vec.dot(q, q)))
     # one count per vertex: the triangles holding the probe, plus 2^32 per failed triangle
     score[s] += ((side_p > 0.0) & (side_q > 0.0)) + (np.int64(not passes) << 32)
 
@@ -79,8 +79,8 @@ def _certified(X0, X1, F, closed, moving):
     probe = np.empty((n, 3))
     for f in range(m):
         a, b, c = F[f, 0], F[f, 1], F[f, 2]
-        pa, pb, pc = _pt(X0, a), _pt(X0, b), _pt(X0, c)
-        A = _cross(_sub(pb, pa), _sub(pc, pa))
+        pa, pb, pc = vec.point(X0, a), vec.point(X0, b), vec.point(X0, c)
+        A = vec.cross(vec.sub(pb, pa), vec.sub(pc, pa))
         for k in range(3):
             normal[a, k] += A[k]
             normal[b, k] += A[k]
@@ -93,13 +93,13 @@ def _certified(X0, X1, F, closed, moving):
     across = np.empty((n, 3))
     lim2 = np.empty(n)
     for s in range(n):
-        length = _norm(_pt(normal, s))
+        length = vec.norm(vec.point(normal, s))
         if length > 0.0:
             for k in range(3):
                 normal[s, k] /= length
-        z = _cross(_pt(probe, s), _pt(normal, s))
+        z = vec.cross(vec.point(probe, s), vec.point(normal, s))
         across[s, 0], across[s, 1], across[s, 2] = z
-        lim2[s] = _MARGIN * _MARGIN * _dot(z, z)
+        lim2[s] = _MARGIN * _MARGIN * vec.dot(z, z)
     # every triangle keeps a positive component along the normal of each of its corners:
     # its normal N(t) = u(t) x v(t), edges moving linearly, is a quadratic whose Bernstein
     # coefficients u0 x v0, (u0 x v1 + u1 x v0) / 2, u1 x v1 bound it (convex hull), so
@@ -108,15 +108,15 @@ def _certified(X0, X1, F, closed, moving):
     score = np.zeros(n, np.int64)
     for f in range(m):
         a, b, c = F[f, 0], F[f, 1], F[f, 2]
-        u0, v0 = _sub(_pt(X0, b), _pt(X0, a)), _sub(_pt(X0, c), _pt(X0, a))
-        N0 = N1 = H = _cross(u0, v0)
+        u0, v0 = vec.sub(vec.point(X0, b), vec.point(X0, a)), vec.sub(vec.point(X0, c), vec.point(X0, a))
+        N0 = N1 = H = vec.cross(u0, v0)
         if moving:
-            u1, v1 = _sub(_pt(X1, b), _pt(X1, a)), _sub(_pt(X1, c), _pt(X1, a))
-            N1 = _cross(u1, v1)
-            M1, M2 = _cross(u0, v1), _cross(u1, v0)
+            u1, v1 = vec.sub(vec.point(X1, b), vec.point(X1, a)), vec.sub(vec.point(X1, c), vec.point(X1, a))
+            N1 = vec.cross(u1, v1)
+            M1, M2 = vec.cross(u0, v1), vec.cross(u1, v0)
             H = (0.5 * (M1[0] + M2[0]), 0.5 * (M1[1] + M2[1]), 0.5 * (M1[2] + M2[2]))
-        size2 = 2.0 * _MARGIN * _MARGIN * (_dot(N0, N0) + _dot(N1, N1))
-        w0 = _sub(v0, u0)  # edge b -> c
+        size2 = 2.0 * _MARGIN * _MARGIN * (vec.dot(N0, N0) + vec.dot(N1, N1))
+        w0 = vec.sub(v0, u0)  # edge b -> c
         _fan_test(a, u0, v0, N0, H, N1, size2, normal, across, lim2, score)
         _fan_test(b, w0, (-u0[0], -u0[1], -u0[2]), N0, H, N1, size2, normal, across, lim2, score)
         _fan_test(c, (-v0[0], -v0[1], -v0[2]), (-w0[0], -w0[1], -w0[2]), N0, H, N1, size2, normal, across, lim2, score)

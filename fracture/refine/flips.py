@@ -15,10 +15,11 @@ import numba
 import numpy as np
 
 from fracture.refine import hashgrid
-from fracture.refine.collide import _EPS, _triangles_intersect, triangle_grid
+from fracture.refine.collide import triangle_grid, triangles_intersect
+from fracture.tolerances import tol
 from fracture.refine.fans import certified_fans, closed_vertices, share_certified
-from fracture.refine.kernels import EdgeTable, _find_edge, edge_table
-from fracture.refine.vec import _cross, _dot, _pt, _sub
+from fracture.refine.kernels import EdgeTable, edge_table, find_edge
+from fracture.refine import vec
 
 
 @numba.njit(cache=True, inline="always")
@@ -40,8 +41,8 @@ def _obtuse(V, a, b, c):
 
 @numba.njit(cache=True, inline="always")
 def _normal(V, a, b, c):
-    A = _pt(V, a)
-    return _cross(_sub(_pt(V, b), A), _sub(_pt(V, c), A))
+    A = vec.point(V, a)
+    return vec.cross(vec.sub(vec.point(V, b), A), vec.sub(vec.point(V, c), A))
 
 
 @numba.njit(cache=True, inline="always")
@@ -84,10 +85,10 @@ def _try_flip(V, F, sides, r, twin, busy, made, table):
     a = _normal(V, u, v, w)
     b = _normal(V, v, u, x)
     n_old = (a[0] + b[0], a[1] + b[1], a[2] + b[2])
-    if _dot(_normal(V, w, x, v), n_old) <= 0.0 or _dot(_normal(V, x, w, u), n_old) <= 0.0:
+    if vec.dot(_normal(V, w, x, v), n_old) <= 0.0 or vec.dot(_normal(V, x, w, u), n_old) <= 0.0:
         return -1
     pair = (min(w, x), max(w, x))
-    if pair in made or _find_edge(table[4], table[5], table[6], table[0], w, x) >= 0:
+    if pair in made or find_edge(table.start, table.hi, table.row, table.eid, w, x) >= 0:
         return -1
     vw, wu = twin[3 * f + (ka + 1) % 3], twin[3 * f + (ka + 2) % 3]
     ux, xv = twin[3 * g + (kb + 1) % 3], twin[3 * g + (kb + 2) % 3]
@@ -221,7 +222,7 @@ def _meet_found(V, F, tris, starts, grid, ids, skip, sure, eps, out):
             for n in range(k):
                 c = ids[buf[n]]
                 if (not skip[c] and c != f and not _boxes_apart(V, F, f, c) and not share_certified(F, f, c, sure)
-                        and _triangles_intersect(V, F, f, c, eps)):
+                        and triangles_intersect(V, F, f, c, eps)):
                     out[i] = True
                     break
 
@@ -230,7 +231,7 @@ def _meet_any(V: np.ndarray, F: np.ndarray, tris: np.ndarray, ids: np.ndarray) -
     """Which triangles ``tris`` meet one of the triangles ``ids``."""
     out = np.zeros(len(tris), bool)
     _meet_found(V, F, tris, np.arange(len(tris) + 1), _grid_of(V, F, ids), ids, np.zeros(len(F), bool),
-                np.zeros(len(V), bool), _EPS, out)
+                np.zeros(len(V), bool), tol.static_test, out)
     return out
 
 
@@ -252,11 +253,11 @@ def _unsafe(V: np.ndarray, F: np.ndarray, grid: tuple, group: np.ndarray, sure: 
     is_changed = group >= 0
     changed = np.flatnonzero(is_changed)
     meets = np.zeros(len(F), bool)
-    _meeting(V, F, changed[hashgrid.pairs(_grid_of(V, F, changed))], is_changed, sure, _EPS, meets)
+    _meeting(V, F, changed[hashgrid.pairs(_grid_of(V, F, changed))], is_changed, sure, tol.static_test, meets)
     tris = changed[np.argsort(group[changed], kind="stable")]
     starts = np.r_[0, np.flatnonzero(np.diff(group[tris])) + 1, len(tris)]
     out = meets[tris]
-    _meet_found(V, F, tris, starts, grid, np.arange(len(F)), is_changed, sure, _EPS, out)
+    _meet_found(V, F, tris, starts, grid, np.arange(len(F)), is_changed, sure, tol.static_test, out)
     meets[tris] = out
     return meets[changed]
 
@@ -269,7 +270,7 @@ def _meeting(V, F, pairs, changed, sure, eps, out):
         a, b = pairs[i, 0], pairs[i, 1]
         if (not changed[a] or out[a]) and (not changed[b] or out[b]):
             continue  # decides nothing new
-        if not share_certified(F, a, b, sure) and _triangles_intersect(V, F, a, b, eps):
+        if not share_certified(F, a, b, sure) and triangles_intersect(V, F, a, b, eps):
             out[a] |= changed[a]
             out[b] |= changed[b]
 
@@ -279,7 +280,7 @@ def _unsafe_all(V: np.ndarray, F: np.ndarray, is_changed: np.ndarray, sure: np.n
     pairs, and those with a changed triangle are tested. When many triangles changed this costs
     less than a look-up in the grid per triangle."""
     out = np.zeros(len(F), bool)
-    _meeting(V, F, hashgrid.pairs(triangle_grid(V, F)), is_changed, sure, _EPS, out)
+    _meeting(V, F, hashgrid.pairs(triangle_grid(V, F)), is_changed, sure, tol.static_test, out)
     return out[is_changed]
 
 

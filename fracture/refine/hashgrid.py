@@ -29,21 +29,40 @@ pass over the buckets.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba
 import numpy as np
 
-from fracture.refine.kernels import _spread
+from fracture.refine import morton
 
 _BITS = 21  # bits per packed cell coordinate
 _OFF = 1 << (_BITS - 1)
 _SPAN = float(1 << (_BITS - 2))  # boxes span at most this many level-0 cells (see cell_size)
 
 
+class HashGrid(NamedTuple):
+    """A built grid (:func:`build`): per level the inverse cell size (``scale``); each element's
+    ``level``; per level the offset of its table in ``start`` (``toff``) and its mask (``tmask``:
+    tables are powers of two, ``-1`` for an empty level); the buckets as CSR ranges
+    ``start[b]:start[b + 1]`` of slots; per slot its element (``items``), its cell's packed
+    coordinates (``key``) and its element's box (``box``: lower then upper corner)."""
+
+    scale: np.ndarray
+    level: np.ndarray
+    toff: np.ndarray
+    tmask: np.ndarray
+    start: np.ndarray
+    items: np.ndarray
+    key: np.ndarray
+    box: np.ndarray
+
+
 @numba.njit(cache=True, inline="always")
 def _hash(ix, iy, iz, mask):
     """The cell's Morton code, cut to the table: cells near each other share cache lines
     (the elements come in Morton order too, see :func:`~fracture.refine.kernels.spatial_order`)."""
-    return (_spread(ix) | (_spread(iy) << 1) | (_spread(iz) << 2)) & mask
+    return morton.code(ix, iy, iz) & mask
 
 
 @numba.njit(cache=True, inline="always")
@@ -87,12 +106,7 @@ def _scales(inv, levels):
 def build(lo, hi, inv):
     """Hash the boxes ``lo, hi (k, 3)`` of ``k`` elements.
 
-    Returns the grid as a tuple ``(scale, level, toff, tmask, start, items, key, box)``:
-    per level the inverse cell size; each element's level; per level the
-    offset of its table in ``start`` and its mask (tables are powers of two,
-    ``-1`` mask for an empty level); the buckets as CSR ranges
-    ``start[b]:start[b + 1]`` of slots; per slot its element, its cell's
-    packed coordinates and its element's box (lower then upper corner).
+    Returns the :class:`HashGrid`.
     """
     k = lo.shape[0]
     level = np.empty(k, np.int64)
@@ -157,7 +171,7 @@ def build(lo, hi, inv):
         for c in range(3):
             box[p, c] = lo[e, c]
             box[p, 3 + c] = hi[e, c]
-    return scale[: top + 1], level, toff, tmask, start, items, key, box
+    return HashGrid(scale[: top + 1], level, toff, tmask, start, items, key, box)
 
 
 @numba.njit(cache=True)
@@ -282,8 +296,8 @@ def _pairs_on_two_levels(grid, out, count):
     one level look up the cells their boxes cover on the other, from whichever side covers fewer
     cells (the many small elements of level 0 looking up every coarse level would mostly find
     empty buckets; the few coarse ones cover many fine cells)."""
-    items, box = grid[5], grid[7]
-    top = grid[3].shape[0] - 1
+    items, box = grid.items, grid.box
+    top = grid.tmask.shape[0] - 1
     corners = _corner_slots(grid)
     buf = np.empty(256, np.int64)
     for coarse in range(1, top + 1):
@@ -367,7 +381,7 @@ def gather(grid, qlo, qhi, buf):
     ``buf`` grows when full.
     """
     buf, count = _slots(grid, qlo, qhi, 0, 64, buf)
-    items = grid[5]
+    items = grid.items
     for i in range(count):
         buf[i] = items[buf[i]]
     return buf, count

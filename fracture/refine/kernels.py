@@ -17,9 +17,27 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property
+from typing import NamedTuple
 
 import numba
 import numpy as np
+
+from fracture.refine import morton
+
+
+class EdgeArrays(NamedTuple):
+    """The arrays of an edge table, as compiled code takes them (:class:`EdgeTable` names them for
+    Python): per directed triangle edge its edge id, per edge its triangle count and first two
+    directed edges, and the directed edges bucketed by their lower vertex (``start`` CSR ranges
+    over ``hi``, the upper vertex, and ``row``, the directed edge ``3 f + k``)."""
+
+    eid: np.ndarray
+    count: np.ndarray
+    first: np.ndarray
+    second: np.ndarray
+    start: np.ndarray
+    hi: np.ndarray
+    row: np.ndarray
 
 
 @numba.njit(cache=True)
@@ -64,11 +82,11 @@ def _edge_table(F, n):
         elif count[e] == 1:
             second[e] = d
         count[e] += 1
-    return eid, count, first, second, start, hi, row
+    return EdgeArrays(eid, count, first, second, start, hi, row)
 
 
 @numba.njit(cache=True, inline="always")
-def _find_edge(start, hi, row, eid, a, b):
+def find_edge(start, hi, row, eid, a, b):
     lo, up = min(a, b), max(a, b)
     if lo + 1 >= start.shape[0]:
         return -1
@@ -82,7 +100,7 @@ def _find_edge(start, hi, row, eid, a, b):
 def _find_edges(start, hi, row, eid, E):
     out = np.empty(E.shape[0], np.int64)
     for i in range(E.shape[0]):
-        out[i] = _find_edge(start, hi, row, eid, E[i, 0], E[i, 1])
+        out[i] = find_edge(start, hi, row, eid, E[i, 0], E[i, 1])
     return out
 
 
@@ -98,19 +116,21 @@ class EdgeTable:
         Number of triangles on each edge.
     first, second : (ne,) int
         The first two directed edges (rows ``3 f + k``) of each edge; -1 if none.
+    start, hi, row
+        The directed edges bucketed by their lower vertex (:class:`EdgeArrays`).
     """
 
     eid: np.ndarray
     count: np.ndarray
     first: np.ndarray
     second: np.ndarray
-    _start: np.ndarray
-    _hi: np.ndarray
-    _row: np.ndarray
+    start: np.ndarray
+    hi: np.ndarray
+    row: np.ndarray
 
-    def arrays(self) -> tuple:
-        """The table as the tuple ``_edge_table`` returns, for compiled code."""
-        return self.eid, self.count, self.first, self.second, self._start, self._hi, self._row
+    def arrays(self) -> EdgeArrays:
+        """The table's arrays, for compiled code."""
+        return EdgeArrays(self.eid, self.count, self.first, self.second, self.start, self.hi, self.row)
 
     @cached_property
     def row_count(self) -> np.ndarray:
@@ -126,7 +146,7 @@ class EdgeTable:
     def find(self, E: np.ndarray) -> np.ndarray:
         """Edge ids of vertex pairs ``E (k, 2)`` (-1 where there is no such edge)."""
         E = np.ascontiguousarray(E, np.int64).reshape(-1, 2)
-        return _find_edges(self._start, self._hi, self._row, self.eid, E)
+        return _find_edges(self.start, self.hi, self.row, self.eid, E)
 
     def rows_of(self, eids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The directed triangle edges (rows ``3 f + k``) on the edges ``eids``, and each row's index into ``eids``."""
@@ -192,33 +212,6 @@ def face_geometry(V, F):
     return A, N
 
 
-@numba.njit(cache=True, inline="always")
-def _spread(x):
-    """The low 21 bits of ``x`` spread to every third bit."""
-    x &= 0x1FFFFF
-    x = (x | (x << 32)) & 0x1F00000000FFFF
-    x = (x | (x << 16)) & 0x1F0000FF0000FF
-    x = (x | (x << 8)) & 0x100F00F00F00F00F
-    x = (x | (x << 4)) & 0x10C30C30C30C30C3
-    x = (x | (x << 2)) & 0x1249249249249249
-    return x
-
-
-@numba.njit(cache=True)
-def _morton(V):
-    lo = np.empty(3)
-    size = 0.0
-    for c in range(3):
-        lo[c] = V[:, c].min()
-        size = max(size, V[:, c].max() - lo[c])
-    s = (2**21 - 1) / size if size > 0.0 else 0.0
-    code = np.empty(V.shape[0], np.int64)
-    for i in range(V.shape[0]):
-        code[i] = (_spread(np.int64((V[i, 0] - lo[0]) * s)) | (_spread(np.int64((V[i, 1] - lo[1]) * s)) << 1)
-                   | (_spread(np.int64((V[i, 2] - lo[2]) * s)) << 2))
-    return code
-
-
 @numba.njit(cache=True)
 def _faces_by_first_vertex(F, new, n):
     """Triangles renumbered by ``new`` (old vertex -> new) and ordered by their lowest new vertex (counting sort)."""
@@ -245,7 +238,7 @@ def spatial_order(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     ``j`` old triangle ``forder[j]``.
     """
     V = np.ascontiguousarray(V, np.float64)
-    vorder = np.argsort(_morton(V), kind="stable") if len(V) else np.zeros(0, np.int64)
+    vorder = np.argsort(morton.codes(V), kind="stable") if len(V) else np.zeros(0, np.int64)
     new = np.empty(len(V), np.int64)
     new[vorder] = np.arange(len(V))
     return vorder, _faces_by_first_vertex(np.ascontiguousarray(F, np.int64), new, len(V))
