@@ -9,6 +9,7 @@
 from __future__ import annotations
 
 import argparse
+import logging
 import sys
 from pathlib import Path
 
@@ -17,6 +18,8 @@ from fracture.errors import ConfigError
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="fracref", description="Physics-inspired adaptive fracture refinement.")
+    p.add_argument("--log-level", default="warning", choices=["warning", "info", "debug"],
+                   help="messages of the library to show on stderr (default: warning)")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     r = sub.add_parser("run", help="run an experiment config into a run directory")
@@ -47,8 +50,11 @@ def _parser() -> argparse.ArgumentParser:
     w.add_argument("--quiet", action="store_true", help="no progress bar")
     _cache_flags(w)
 
-    c = sub.add_parser("config", help="print the resolved config")
-    c.add_argument("config", type=Path)
+    c = sub.add_parser("config", help="print the resolved config, or what config keys mean")
+    c.add_argument("config", type=Path, nargs="?", help="experiment YAML file (not needed with --explain)")
+    c.add_argument("--explain", metavar="KEY", nargs="?", const="",
+                   help="say what KEY means (its default, range and description); a section lists its keys; "
+                        "no KEY: every key")
     c.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY.PATH=VALUE")
 
     sub.add_parser("stages", help="list the pipeline stages")
@@ -139,6 +145,7 @@ def _main(argv: list[str] | None) -> int:
     from fracture.errors import InputError, ResultError, StageError
 
     prepare_process()
+    logging.basicConfig(level=args.log_level.upper(), format="%(name)s: %(message)s", stream=sys.stderr)
     try:
         if args.command == "stages":
             print("\n".join(runner.available_stages()))
@@ -154,6 +161,13 @@ def _main(argv: list[str] | None) -> int:
             return _view(args)
         if args.command == "sweep":
             return _sweep(args)
+        if args.command == "config" and args.explain is not None:
+            from fracture.pipeline.config import explain
+
+            print(explain(args.explain))
+            return 0
+        if args.config is None:
+            raise ConfigError("fracref config", "", "expected a config file (or --explain KEY)")
         cfg = load_config(args.config, args.overrides)
         if args.command == "config":
             sys.stdout.write(dump_config(cfg))

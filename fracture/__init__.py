@@ -10,5 +10,11 @@ Laid out by the paper:
 - :mod:`fracture.pipeline`: configs, the runner and its stages, the cache, sweeps.
 
 Importing a module changes nothing in the process (:mod:`fracture.process` holds the explicit
-set-up calls).
+set-up calls). Library messages go to the ``fracture`` logger (:mod:`logging`), which has only a
+:class:`~logging.NullHandler`: an application decides whether and where they appear (``fracref
+--log-level info``).
 """
+
+import logging
+
+logging.getLogger(__name__).addHandler(logging.NullHandler())

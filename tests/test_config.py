@@ -1,3 +1,5 @@
+import subprocess
+import sys
 import textwrap
 from pathlib import Path
 
@@ -156,3 +158,41 @@ def test_dumped_config_is_plain_yaml(small_config):
     text = dump_config(load_config(small_config))
     assert "!!" not in text
     assert yaml.safe_load(text)["seed"] == 7
+
+
+def test_explain_says_what_a_key_means_from_the_same_declarations_the_code_uses():
+    """``fracref config --explain``: a key's default, range and description, a section's keys; the
+    refine section is the refinement's own parameter type (its defaults are RefineParams')."""
+    from dataclasses import fields
+
+    from fracture.pipeline.config import SCHEMA, explain
+    from fracture.refine.params import RefineParams
+
+    assert explain("refine.step") == ("refine.step = 0.5: a number in [0.0001, 10]. Nominal move per iteration "
+                                      "(grid cells) where grad psi has its root mean square")
+    assert explain("strength.layers.bricks.mortar").startswith("strength.layers.bricks.mortar = 0.01: a number in [0, 1]")
+    lines = explain("refine").splitlines()
+    assert [line.split(" = ")[0] for line in lines] == [f"refine.{k}" for k in SCHEMA["refine"]]
+    assert {f.name: f.default for f in fields(RefineParams)} == {
+        k: p.default for k, p in SCHEMA["refine"].items() if k != "snapshots"}
+    with pytest.raises(ConfigError, match="unknown key 'stpe' after refine; expected one of iterations"):
+        explain("refine.stpe")
+    out = subprocess.run([sys.executable, "-m", "fracref", "config", "--explain", "psi.stress_weight"],
+                         capture_output=True, text=True)
+    assert out.returncode == 0 and out.stdout.startswith("psi.stress_weight = 0.4: a number in [0, 100]")
+    bad = subprocess.run([sys.executable, "-m", "fracref", "config", "--explain", "psi.stres"], capture_output=True,
+                         text=True)
+    assert bad.returncode != 0 and "unknown key 'stres' after psi" in bad.stderr and "Traceback" not in bad.stderr
+
+
+def test_every_key_of_the_refine_section_reaches_the_refinement():
+    """No key of the config's refine section is dropped on the way to the code: every one but the
+    pipeline's own (snapshots) is a RefineParams field, and a key RefineParams lacks is an error."""
+    from fracture.pipeline.stages.refine import refine_params
+
+    cfg = load_config(CONFIGS / "example.yaml", ["refine.step=0.31", "refine.hold=5"])
+    params = refine_params(cfg)
+    assert (params.step, params.hold) == (0.31, 5)
+    cfg["refine"]["not_a_parameter"] = 1
+    with pytest.raises(TypeError, match="not_a_parameter"):
+        refine_params(cfg)

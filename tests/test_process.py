@@ -46,3 +46,20 @@ print("ok")
 """
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr[-2000:]
+
+
+def test_library_messages_reach_the_log_only_when_the_application_asks(tmp_path, small_config):
+    """The library logs to the ``fracture`` logger (a NullHandler of its own, no output by default);
+    ``fracref --log-level info`` shows the stages' messages on stderr."""
+    run = lambda *level: subprocess.run(  # noqa: E731
+        [sys.executable, "-m", "fracref", *level, "run", str(small_config), "--out", str(tmp_path / "run"),
+         "--force", "--quiet", "--until", "fields"], capture_output=True, text=True)
+    quiet = run()
+    assert quiet.returncode == 0 and "fracture.pipeline.runner" not in quiet.stderr
+    told = run("--log-level", "info")
+    assert told.returncode == 0, told.stderr[-2000:]
+    assert "fracture.pipeline.runner: coarse: started" in told.stderr
+    assert "fracture.pipeline.runner: fields: done in" in told.stderr
+    code = "import logging, fracture; print(logging.getLogger().handlers, logging.getLogger('fracture').handlers)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True).stdout
+    assert out.startswith("[] [<NullHandler")

@@ -35,6 +35,7 @@ from open3d.visualization import gui, rendering
 from fields.colormap import colorbar
 from fracture.io.atomic import atomic_write_bytes, atomic_write_text, png_bytes
 from fracture.errors import ConfigError, InputError, ResultError, StageError
+from fracture.pipeline.config import explain
 from viewer import annotate
 from viewer.annotate import Bar
 from viewer.data import FIELDS, RunData, Surface, SweepPoint, read_sweep
@@ -65,6 +66,14 @@ def tunables(cfg: dict) -> list[tuple[str, object]]:
             if isinstance(v, (int, float)) and not isinstance(v, bool):
                 out.append((f"strength.layers.{i}.{k}", v))
     return out
+
+
+def _schema_key(cfg: dict, key: str) -> str:
+    """The config schema's name of a tunable: a strength layer's key by its kind, not its index."""
+    parts = key.split(".")
+    if parts[:2] == ["strength", "layers"] and len(parts) == 4:
+        parts[2] = cfg["strength"]["layers"][int(parts[2])]["kind"]
+    return ".".join(parts)
 
 
 def set_key(cfg: dict, path: str, value) -> None:
@@ -290,7 +299,9 @@ class Viewer:
             else:
                 edit.double_value = value
                 edit.decimal_precision = 4
-            row.add_child(gui.Label(key.split(".", 1)[-1] if key != "seed" else "seed"))
+            label = gui.Label(key.split(".", 1)[-1] if key != "seed" else "seed")
+            label.tooltip = edit.tooltip = explain(_schema_key(self.cfg, key))  # what fracref config --explain says
+            row.add_child(label)
             row.add_stretch()
             row.add_child(edit)
             group.add_child(row)

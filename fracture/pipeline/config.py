@@ -23,6 +23,7 @@ import yaml
 
 from fields.colormap import NAMES as COLORMAPS
 from fields.strength import KINDS, LAYER_COMMON
+from fracture.refine.params import described_fields
 from fracture.pipeline.schema import ConfigError, Layers, Param, schema_defaults, validate
 
 SET_SOURCE = "--set"
@@ -81,33 +82,8 @@ SCHEMA: dict[str, Any] = {
         "sigma": Param(1.0, lo=0.01, hi=64.0, doc="width of level 1 in voxels; doubles per level"),
     },
     "refine": {
-        "iterations": Param(60, "int", lo=0, hi=10000, doc="largest number of iterations of the flow, all stages"),
-        "stage_iterations": Param(15, "int", lo=1, hi=10000,
-                                  doc="largest number of iterations of one stage of the coarse-to-fine schedule"),
-        "coarse_levels": Param(2, "int", lo=1, hi=8,
-                               doc="every stage follows the mean of this many consecutive pyramid levels: the "
-                                   "first the coarsest, each next one a level finer, the last the finest; "
-                                   "pyramid.levels gives one stage on every level (the paper's field)"),
-        "tolerance": Param(0.02, lo=0.0, hi=10.0,
-                           doc="a stage has settled when the mean vertex move of an iteration is below this "
-                               "(grid cells) and it split at most 0.5 % of the triangles"),
-        "step": Param(0.5, lo=1e-4, hi=10.0,
-                      doc="nominal move per iteration (grid cells) where grad psi has its root mean square"),
-        "max_move": Param(1.0, lo=1e-3, hi=10.0, doc="largest move of a vertex per iteration (grid cells)"),
-        "fold": Param(0.5, lo=1e-3, hi=0.9,
-                      doc="largest move of a triangle's corners relative to each other per iteration, as a "
-                          "fraction of its smallest altitude (no triangle turns over within a step)"),
-        "split_distance": Param(0.15, lo=0.0, hi=10.0,
-                                doc="split where a sample leaves its triangle by more than this in a nominal step "
-                                    "(grid cells): where psi varies across the triangle"),
-        "tension": Param(0.05, lo=1e-4, hi=10.0,
-                         doc="psi is shifted so its minimum is this fraction of its range (surface tension)"),
-        "min_edge": Param(0.1, lo=1e-4, hi=10.0,
-                          doc="samples closer than this to a corner are skipped in the last stage (grid cells; "
-                              "earlier stages keep half their finest level's width)"),
-        "max_triangles": Param(200000, "int", lo=10, hi=20_000_000, doc="no splits beyond this many triangles"),
-        "thickness": Param(1e-6, lo=0.0, hi=1.0, doc="closer than this counts as a collision (grid cells)"),
-        "hold": Param(3, "int", lo=0, hi=100, doc="iterations a vertex stopped by a collision stays stopped"),
+        **{name: Param(default, "int" if kind is int else "float", lo=m["lo"], hi=m["hi"], doc=m["doc"])
+           for name, kind, default, m in described_fields()},  # the code's own parameter type
         "snapshots": Param(True, "bool", doc="save every iteration for the viewer (refined/iterations.*)"),
     },
     "animate": {
@@ -357,3 +333,37 @@ def _plain_name(name: str) -> bool:
 def dump_config(cfg: dict) -> str:
     """The resolved config as YAML that :func:`load_config` reads back unchanged."""
     return yaml.safe_dump(cfg, sort_keys=False, default_flow_style=None, width=100)
+
+
+def explain(key: str) -> str:
+    """What a config key means: its default, what it accepts and its description; for a section (or
+    ``strength.layers``, ``strength.layers.KIND``) every key in it, one per line. A strength layer's
+    key is named by its kind (``strength.layers.bricks.mortar``). Raises :class:`ConfigError` for an
+    unknown key. The viewer's tooltips say the same."""
+    parts = [p for p in key.replace("[", ".").replace("]", "").split(".") if p]
+    node: Any = SCHEMA
+    for i, part in enumerate(parts):
+        if isinstance(node, Layers) and part in node.kinds:
+            node = {**node.common, **node.kinds[part]}
+        elif isinstance(node, Layers) and part in node.common:
+            node = node.common[part]
+        elif isinstance(node, dict) and part in node:
+            node = node[part]
+        else:
+            keys = list(node.kinds) + list(node.common) if isinstance(node, Layers) else list(node) if isinstance(
+                node, dict) else []
+            raise ConfigError("--explain", key, f"unknown key {part!r}"
+                              + (f" after {'.'.join(parts[:i])}" if i else "")
+                              + (f"; expected one of {', '.join(keys)}" if keys else ""))
+    name = ".".join(parts)
+    if isinstance(node, Param):
+        return _explain_param(name, node)
+    if isinstance(node, Layers):
+        return "\n".join([f"{name}: {node.expected()}"]
+                         + [f"{name}.{kind}: --explain {name}.{kind} lists its keys" for kind in node.kinds])
+    return "\n".join(explain(f"{name}.{k}" if name else k) for k in node)
+
+
+def _explain_param(name: str, p: Param) -> str:
+    text = f"{name} = {p.default!r}: {p.expected()}"
+    return text + (f". {p.doc[0].upper()}{p.doc[1:]}" if p.doc else "")

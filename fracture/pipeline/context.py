@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import logging
 import sys
 from dataclasses import dataclass, field, fields
 from pathlib import Path
@@ -12,6 +13,8 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from fracture.io.atomic import png_bytes
+
+log = logging.getLogger(__name__)
 
 if TYPE_CHECKING:
     from fields.build import FieldSet
@@ -101,6 +104,7 @@ class RunContext:
         return tqdm(total=total, desc=desc, disable=not self.progress, leave=True, file=sys.stderr)
 
     def say(self, text: str) -> None:
-        """A line for the user among the progress bars (silent when progress is off)."""
+        """A line for the user among the progress bars (silent when progress is off), and on the log."""
+        log.info("%s", text)
         if self.progress:
             tqdm.write(text, file=sys.stderr)

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import platform
 import sys
 import time
@@ -26,6 +27,8 @@ from fracture.io.atomic import staged_directory
 from fracture.pipeline.config import dump_config
 from fracture.pipeline.context import RunContext
 from fracture.pipeline.stages import STAGES, Stage
+
+log = logging.getLogger(__name__)
 
 # Distributions whose versions go into the manifest.
 _PACKAGES = ("numpy", "scipy", "numba", "open3d", "pymeshlab", "libigl", "noise", "PyYAML", "imageio", "fracref")
@@ -97,6 +100,7 @@ def _run_stage(ctx: RunContext, stage: Stage, keep_products: bool, out: Path) ->
         ctx.stats.update(entry.meta["stats"])
         ctx.notes.extend(entry.meta["notes"])
         ctx.say(f"{name}: reused from the cache ({entry.path}; made by {entry.meta['run']})")
+        log.info("%s: reused from the cache entry %s", name, entry.path)
         return {"cache": "reused", "cache_entry": str(entry.path), "made_by": entry.meta["run"]}
     n_files, n_notes = len(ctx.files), len(ctx.notes)
     products, counts, stats = ctx.products.made(), dict(ctx.counts), dict(ctx.stats)
@@ -158,8 +162,10 @@ def run(cfg: dict, out: str | Path, until: str | None = None, force: bool = Fals
         for stage in chosen:
             t0 = time.perf_counter()
             ctx.tell("stage", name=stage.name)
+            log.info("%s: started", stage.name)
             info = _run_stage(ctx, stage, keep_products=stage is not stages[-1], out=Path(out))
             manifest["stages"][stage.name] = {"seconds": round(time.perf_counter() - t0, 4), **info}
+            log.info("%s: done in %.2f s", stage.name, manifest["stages"][stage.name]["seconds"])
         if cache is not None:
             cache.trim()  # once per run: it walks every entry
         manifest["stats"] = ctx.stats

@@ -78,6 +78,7 @@ from fracture.refine.flips import flip_edges
 from fracture.refine.flow import energy, energy_gradient
 from fracture.refine.kernels import EdgeTable, edge_table, row_edges, spatial_order
 from fracture.refine.mesh import RefineMesh
+from fracture.refine.params import RefineParams
 from fracture.refine.remesh import plan_chord_splits, plan_splits
 from fracture.refine.state import VertexState
 from fracture.refine.step import (BOUNDARY_MOVE, ImplicitStep, StepSize, limit_by_shortest_edge, limit_moves,
@@ -101,25 +102,6 @@ _LITTLE_GAIN = 1e-4
 # this fraction: at full size an iteration costs the most and gains the least (the wall's last stage: 10
 # iterations of 0.1-0.9 % each, 2.5 times the time of the whole refinement before them, 2 points of weak share).
 _FULL_GAIN = 1e-2
-
-
-@dataclass
-class RefineParams:
-    """Thresholds of the refinement; lengths are in grid cells (the finest spacing)."""
-
-    iterations: int = 60  # all stages together
-    stage_iterations: int = 15  # at most per stage
-    tolerance: float = 0.02  # a stage has settled when the mean move is below this and nothing split
-    step: float = 0.5  # at a stage's start a vertex of median speed moves this far per step
-    max_move: float = 1.0  # no vertex moves further per step
-    fold: float = 0.5  # ... nor two corners of a triangle relative to each other by more than this of its altitude
-    split_distance: float = 0.15  # split where a sample leaves its triangle by more than this in a step
-    tension: float = 0.05  # psi is shifted so its minimum is this fraction of its range
-    min_edge: float = 0.1  # samples closer than this to a corner are skipped (the last stage)
-    coarse_levels: int = 2  # every stage follows the mean of this many consecutive pyramid levels
-    max_triangles: int = 200_000
-    thickness: float = 1e-6  # closer than this counts as a collision
-    hold: int = 3  # iterations a vertex stopped by a collision stays stopped
 
 
 @dataclass

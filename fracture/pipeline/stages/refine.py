@@ -16,6 +16,7 @@ Outputs (material space):
 from __future__ import annotations
 
 import json
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -27,10 +28,17 @@ from fracture.refine.engine import RefineParams, Refiner
 from fracture.refine.mesh import RefineMesh
 from fracture.pipeline.context import RunContext
 
+_log = logging.getLogger(__name__)
+
+
+# keys of the config's refine section that are the pipeline's, not the refinement's
+_PIPELINE_KEYS = ("snapshots",)
+
 
 def refine_params(cfg: dict) -> RefineParams:
-    keys = RefineParams.__dataclass_fields__
-    return RefineParams(**{k: v for k, v in cfg["refine"].items() if k in keys})
+    """The refinement's parameters from a resolved config (every key of its ``refine`` section but the
+    pipeline's own; an unknown key is an error, not dropped)."""
+    return RefineParams(**{k: v for k, v in cfg["refine"].items() if k not in _PIPELINE_KEYS})
 
 
 def refine_stage(ctx: RunContext) -> None:
@@ -52,6 +60,8 @@ def refine_stage(ctx: RunContext) -> None:
                 snaps.add(r)
             bar.set_postfix_str(f"{len(r.mesh.F)} triangles")
             bar.update()
+            _log.debug("iteration %d: %d triangles, functional %.6g, mean move %.3g cells", it + 1, len(r.mesh.F),
+                       r.log.functional[-1], r.log.mean_move[-1])
             if ctx.listener is not None:
                 ctx.tell("iteration", iteration=it + 1, positions=r.mesh.V.copy(), faces=r.mesh.F.copy(),
                          psi=r.psi.copy(), speed=np.linalg.norm(r.velocity, axis=1), energy=r.log.functional[-1])
@@ -59,6 +69,7 @@ def refine_stage(ctx: RunContext) -> None:
         bar.total = bar.n  # the surface settled: the bar ends full at the iterations it took
         bar.set_postfix_str(f"{len(mesh.F)} triangles, {log.stop}")
         bar.refresh()
+    _log.info("refine: %d triangles after %d iterations; %s", len(mesh.F), log.iterations, log.stop)
     ctx.products.refined = mesh
 
     write_ply(ctx.path("refined/fracture_surface.ply"), mesh.V, mesh.F,
