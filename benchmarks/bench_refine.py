@@ -33,7 +33,7 @@ PAPER = {"bunny": (174_000, 11.7), "branch": (123_000, 5.0), "wall": (208_000, 1
 def run_scene(name: str, iterations: int | None, repeat: int, out) -> None:
     import copy
 
-    from fracture.refine.collide import self_intersections
+    from fracture.mesh.intersect import self_intersections
 
     over = ["input.frames=8", f"refine.max_triangles={PAPER[name][0]}"]
     if iterations is not None:

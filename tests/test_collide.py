@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 from conftest import colliding_vertices, grid_sheet
-from fracture.refine.collide import self_intersections, stop_collisions
+from fracture.mesh.intersect import self_intersections
+from fracture.refine.collide import stop_collisions
 
 
 def test_a_vertex_through_a_triangle_is_stopped_and_a_miss_is_not():
@@ -70,15 +71,15 @@ def test_testing_only_the_moving_vertices_stops_the_same_ones():
 
 
 def _brute_force_pairs(V, F):
-    from fracture.refine.collide import triangles_intersect
+    from fracture.mesh.intersect import triangles_intersect
     from fracture.tolerances import tol
     return {(f, g) for f in range(len(F)) for g in range(f + 1, len(F))
             if triangles_intersect(V, F, f, g, tol.static_test)}
 
 
 def test_the_square_root_free_side_test_rejects_only_segments_the_full_test_rejects():
-    from fracture.refine import vec
-    from fracture.refine.collide import _clearly_one_side, _segment_hits_triangle
+    from fracture.mesh import vec
+    from fracture.mesh.intersect import _clearly_one_side, _segment_hits_triangle
     from fracture.tolerances import tol
     rng = np.random.default_rng(11)
     rejected = 0
@@ -125,7 +126,7 @@ def _two_sheets_with_a_fin(seed):
 
 def test_every_vertex_and_edge_is_represented_once_by_a_triangle_on_it():
     from fracture.refine.collide import _represented
-    from fracture.refine.kernels import edge_table
+    from fracture.mesh.edges import edge_table
     V, F, _ = _two_sheets_with_a_fin(0)
     table = edge_table(F, len(V))
     rep = _represented(F, len(V), table.eid)
@@ -140,17 +141,18 @@ def test_every_vertex_and_edge_is_represented_once_by_a_triangle_on_it():
 
 
 def test_the_representatives_find_the_colliding_features_that_testing_all_of_them_finds():
-    from fracture.refine import hashgrid
-    from fracture.refine.collide import _box_grid, _feature_tests, _path_boxes, _represented, _swept_boxes
-    from fracture.refine.kernels import edge_table
+    from fracture.mesh import hashgrid
+    from fracture.mesh.intersect import box_grid, swept_boxes
+    from fracture.refine.collide import _feature_tests, _path_boxes, _represented
+    from fracture.mesh.edges import edge_table
     eta = 1e-3
     for seed in range(3):
         X0, F, X1 = _two_sheets_with_a_fin(seed)
         table = edge_table(F, len(X0))
         expect = colliding_vertices(X0, X1, F, eta)
-        lo, hi = _swept_boxes(X0, X1, F, eta)
+        lo, hi = swept_boxes(X0, X1, F, eta)
         stop = np.zeros(len(X0), bool)
         _feature_tests(X0, X1, F, _path_boxes(X0, X1), lo, hi, _represented(F, len(X0), table.eid),
-                       hashgrid.pairs(_box_grid(lo, hi, X0, F)), eta, True, np.zeros(len(X0), bool),
+                       hashgrid.pairs(box_grid(lo, hi, X0, F)), eta, True, np.zeros(len(X0), bool),
                        np.zeros(len(X0), bool), stop)
         assert expect.sum() > 20 and np.array_equal(stop, expect)

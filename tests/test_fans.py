@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from conftest import colliding_vertices, grid_sheet
 from fracture.refine.fans import certified_fans, closed_vertices
-from fracture.refine.kernels import edge_table
+from fracture.mesh.edges import edge_table
 
 
 def _fan(k=6, turns=1, lift=0.0):
@@ -108,6 +108,7 @@ def test_no_fan_that_passes_has_a_colliding_pair(move):
 
 
 def test_stopping_collisions_with_or_without_the_fans_gives_the_same_step(monkeypatch):
+    from fracture.mesh.intersect import self_intersections
     from fracture.refine import collide
     results = []
     for use_fans in (True, False):
@@ -116,11 +117,11 @@ def test_stopping_collisions_with_or_without_the_fans_gives_the_same_step(monkey
         out = []
         for seed in range(4):
             X0, F, X1 = _crumpled_sheet(seed, move=0.03)
-            assert collide.self_intersections(X0, F) == 0
+            assert self_intersections(X0, F) == 0
             assert _passes(X0, F, X1).sum() > 30 or not use_fans  # of 64 closed vertices
             stopped, pairs = collide.stop_collisions(X0, X1, F, 1e-9)
             out.append((stopped, X1, pairs))
-            assert collide.self_intersections(X1, F) == 0
+            assert self_intersections(X1, F) == 0
         results.append(out)
     assert sum(r[0].sum() for r in results[0]) > 10  # some vertices were stopped
     for (s1, x1, p1), (s2, x2, p2) in zip(*results):

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.spatial import Delaunay
 
-from fracture.refine.collide import self_intersections
+from fracture.mesh.intersect import self_intersections
 from fracture.refine.flips import flip_edges
 from fracture.mesh.topology import unique_edges
 
@@ -105,7 +105,7 @@ def _two_sheets(seed, n=300):
 
 def _plain_passes(V, F, sides, passes):
     from fracture.refine.flips import _flip, _pair_buffer
-    from fracture.refine.kernels import edge_table
+    from fracture.mesh.edges import edge_table
     t = edge_table(F, len(V))
     pairs = _pair_buffer(len(F), passes)
     flipped = _flip(V, F, sides, passes, pairs, t.arrays())
@@ -116,10 +116,10 @@ def _plain_passes(V, F, sides, passes):
 def test_testing_the_flipped_triangles_at_once_or_one_by_one_agrees(seed):
     """Some flips cut the other sheet, and some cut a triangle another flip changed (which the old
     triangles' boxes need not contain)."""
-    from fracture.refine.collide import triangle_grid
+    from fracture.mesh.intersect import triangle_grid
     from fracture.refine.fans import certified_fans, closed_vertices
     from fracture.refine.flips import _regions, _unsafe, _unsafe_all
-    from fracture.refine.kernels import edge_table
+    from fracture.mesh.edges import edge_table
     V, F, sides = _two_sheets(seed)
     start = F.copy()
     closed = closed_vertices(F, len(V), edge_table(F, len(V)))
@@ -161,7 +161,7 @@ def test_triangles_joined_by_flips_cover_the_same_polygon_before_and_after(seed)
 
 
 def test_a_given_edge_table_flips_like_a_built_one():
-    from fracture.refine.kernels import edge_table
+    from fracture.mesh.edges import edge_table
     rng = np.random.default_rng(6)
     P = rng.random((200, 2))
     V = np.column_stack([P, 0.02 * np.sin(7 * P[:, 1])])

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from fracture.refine import hashgrid
+from fracture.mesh import hashgrid
 
 
 def _boxes(k, seed):

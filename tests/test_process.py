@@ -63,3 +63,19 @@ def test_library_messages_reach_the_log_only_when_the_application_asks(tmp_path,
     code = "import logging, fracture; print(logging.getLogger().handlers, logging.getLogger('fracture').handlers)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True).stdout
     assert out.startswith("[] [<NullHandler")
+
+
+def test_a_change_in_one_compiled_package_clears_the_caches_of_both(tmp_path):
+    """The refinement's kernels call the mesh package's: a change there makes both caches stale."""
+    from fracture.refine import clear_stale_numba_cache
+
+    refine, mesh = tmp_path / "refine", tmp_path / "mesh"
+    for pkg in (refine, mesh):
+        (pkg / "__pycache__").mkdir(parents=True)
+        (pkg / "k.py").write_text("import numba\nx = 1\n")
+    clear_stale_numba_cache([refine, mesh])
+    compiled = refine / "__pycache__" / "collide.f-1.py311.1.nbc"
+    compiled.write_bytes(b"machine code calling mesh.k")
+    assert not clear_stale_numba_cache([refine, mesh]) and compiled.exists()
+    (mesh / "k.py").write_text("import numba\nx = 2\n")
+    assert clear_stale_numba_cache([refine, mesh]) and not compiled.exists()

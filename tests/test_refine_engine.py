@@ -97,7 +97,7 @@ def test_a_sample_asks_for_a_split_when_it_leaves_its_triangle():
 
 def test_settle_boundary_stops_a_vertex_whose_way_onto_b_is_blocked():
     """A boundary vertex pulled 0.03 inside the box; a small sheet lies across its way back to y = 0."""
-    from fracture.refine.collide import self_intersections
+    from fracture.mesh.intersect import self_intersections
     pyramid = two_weak_sheets()
     BV, BF = box([0, 0, 0], [1, 1, 1], (8, 8, 8))
     sheet_mesh = flat_cut()
@@ -200,7 +200,7 @@ def test_the_loop_ends_when_collisions_keep_a_boundary_vertex_off_b(monkeypatch)
 def test_chord_splits_take_every_boundary_edge_far_from_b_and_only_those():
     """plan_chord_splits: a boundary edge whose middle is farther than ``far`` from B is split at its middle,
     long enough edges only, never one on a vertex off B, and no triangle carries two split edges."""
-    from fracture.refine.kernels import edge_table, row_edges
+    from fracture.mesh.edges import edge_table, row_edges
     from fracture.refine.remesh import plan_chord_splits
 
     mesh = flat_cut()  # the plane x = 0.52 across the unit box; B stands in as a projection

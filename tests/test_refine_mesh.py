@@ -7,7 +7,7 @@ import pytest
 
 from fracture.mesh.topology import face_frames
 from fracture.mesh.primitives import sheet
-from fracture.refine.kernels import spatial_order
+from fracture.refine.order import spatial_order
 from fracture.refine.mesh import RefineMesh
 from fracture.mesh.topology import unique_edges
 

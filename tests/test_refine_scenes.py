@@ -14,10 +14,10 @@ from fracture.pipeline.config import load_config
 from fracture.mesh.exterior import Exterior
 from fracture.fidelity import run_figures
 from fracture.io.ply import read_ply
-from fracture.refine.collide import self_intersections
+from fracture.mesh.intersect import self_intersections
 from fracture.refine.crossings_on_b import crossing_pairs
 from fracture.refine.engine import RefineParams, Refiner
-from fracture.refine.kernels import edge_table, row_edges
+from fracture.mesh.edges import edge_table, row_edges
 from fracture.refine.mesh import RefineMesh
 from fracture.refine.remesh import plan_splits
 from fracture.coarse.scenes import build_scene

@@ -9,7 +9,7 @@ import pytest
 from fields.pyramid import StrengthPyramid
 from fracture.coarse.scenes.weak_sheets import SHEETS, weak_sheet_case
 from fracture.fidelity import area_samples
-from fracture.refine.collide import self_intersections
+from fracture.mesh.intersect import self_intersections
 from fracture.refine.engine import RefineParams, Refiner
 from fracture.refine.mesh import RefineMesh
 

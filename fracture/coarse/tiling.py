@@ -368,7 +368,7 @@ def _simplify_sheets(X: np.ndarray, FF: np.ndarray, sides: np.ndarray):
 def _simplified(X: np.ndarray, FF: np.ndarray, sides: np.ndarray):
     """:func:`_simplify_sheets`, except for sheets whose coarsened triangles would cross another sheet:
     those keep their triangles from the contouring (which never cross)."""
-    from fracture.refine.collide import self_intersections
+    from fracture.mesh.intersect import self_intersections
 
     keep = np.zeros(len(FF), bool)
     base = sides.max(initial=0) + 1

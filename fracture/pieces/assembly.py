@@ -44,7 +44,7 @@ import scipy.sparse as sp
 
 from fracture.coarse.surface import flood_fill_patches
 from fracture.pieces.imprint import Imprint
-from fracture.refine.collide import self_intersections
+from fracture.mesh.intersect import self_intersections
 from fracture.refine.mesh import RefineMesh
 from fracture.mesh.topology import (barycentric_weights, diagonal, directed_edge_face, directed_edges, signed_volume,
                                weld)
@@ -429,7 +429,7 @@ def crossing_pairs(V: np.ndarray, F: np.ndarray) -> int:
     libigl's exact-arithmetic test (CGAL predicates): triangles that come
     within rounding of each other without meeting are not counted, unlike
     the tolerant count the refinement uses for its moving surface
-    (:func:`fracture.refine.collide.self_intersections`). That count runs
+    (:func:`fracture.mesh.intersect.self_intersections`). That count runs
     first: it is three times faster and misses no crossing (coplanar
     overlaps aside), so where it finds none the exact test is skipped.
     """

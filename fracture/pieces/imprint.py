@@ -33,7 +33,7 @@ import numpy as np
 from fracture.errors import InputError
 from fracture.mesh.exterior import Exterior
 from fracture.refine.crossings_on_b import splits_would_cross
-from fracture.refine.kernels import edge_table, row_edges
+from fracture.mesh.edges import edge_table, row_edges
 from fracture.refine.mesh import RefineMesh
 
 # A point within this barycentric distance of an edge (or two edges) of a B

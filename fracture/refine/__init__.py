@@ -2,8 +2,8 @@
 
 numba caches each compiled function beside its source and checks only that
 file's time stamp, but the kernels here call each other across modules
-(flips and collisions use the hash grid): a change in one module would leave
-stale machine code in the others' caches. :func:`clear_stale_numba_cache`
+(and those of :mod:`fracture.mesh`: flips and collisions use its hash grid):
+a change in one module would leave stale machine code in the others' caches. :func:`clear_stale_numba_cache`
 clears the cache when the package's sources differ from those it was compiled
 from; programs call it once (:func:`fracture.process.prepare_process`), importing
 the package does not.
@@ -16,28 +16,37 @@ import re
 from pathlib import Path
 
 
-def clear_stale_numba_cache(package: Path | None = None) -> bool:
-    """Delete numba's cache files in ``package/__pycache__`` (default: this package's) unless they were
-    made from the current sources of the ``package/*.py`` modules that use numba; returns whether
-    anything was deleted."""
-    package = package or Path(__file__).parent
-    sources = (p.read_bytes() for p in sorted(package.glob("*.py")))
+def _compiled_packages() -> list[Path]:
+    """The packages whose numba kernels call each other: the refinement's and the mesh queries'."""
+    here = Path(__file__).parent
+    return [here, here.parent / "mesh"]
+
+
+def clear_stale_numba_cache(packages: Path | list[Path] | None = None) -> bool:
+    """Delete numba's cache files in every ``package/__pycache__`` (default: the refinement's and the
+    mesh queries', whose kernels call each other) unless they were made from the current sources of
+    all their ``*.py`` modules that use numba; returns whether anything was deleted."""
+    packages = _compiled_packages() if packages is None else [packages] if isinstance(packages, Path) else packages
+    sources = (p.read_bytes() for package in packages for p in sorted(package.glob("*.py")))
     digest = hashlib.sha1(b"".join(s for s in sources if b"import numba" in s)).hexdigest()
-    cache = package / "__pycache__"
-    stamp = cache / "numba-sources.sha1"
+    stamps = [package / "__pycache__" / "numba-sources.sha1" for package in packages]
     try:
-        if stamp.read_text() == digest:
+        if all(stamp.read_text() == digest for stamp in stamps):
             return False
     except OSError:
         pass
+    stale = []
     try:
-        stale = list(cache.glob("*.nb[ic]"))
-        for f in stale:
-            f.unlink(missing_ok=True)
-        cache.mkdir(exist_ok=True)
-        tmp = stamp.with_suffix(".tmp")
-        tmp.write_text(digest)
-        tmp.replace(stamp)
+        for package, stamp in zip(packages, stamps):
+            cache = package / "__pycache__"
+            found = list(cache.glob("*.nb[ic]"))
+            for f in found:
+                f.unlink(missing_ok=True)
+            stale += found
+            cache.mkdir(exist_ok=True)
+            tmp = stamp.with_suffix(".tmp")
+            tmp.write_text(digest)
+            tmp.replace(stamp)
     except OSError:  # a read-only install: numba caches elsewhere or not at all
         return False
     return bool(stale)

@@ -1,4 +1,4 @@
-"""Collision constraints and the self-intersection count (Section 4.4), compiled with numba.
+"""Collision constraints (Section 4.4), compiled with numba.
 
 Continuous collision detection in the style of Bridson et al. 2002: every
 vertex moves on a straight line from ``X0`` to ``X1`` during a step. A vertex
@@ -11,7 +11,7 @@ pair collides: a surface that does not intersect itself at ``X0`` does not
 at ``X1``.
 
 Broad phase: the swept boxes of the triangles go into a hierarchical
-spatial hash (:mod:`fracture.refine.hashgrid`), which lists every
+spatial hash (:mod:`fracture.mesh.hashgrid`), which lists every
 overlapping pair once; each pair tests the vertices and edges its two
 triangles represent (every feature has one representative triangle, Curtis
 et al. 2008). Pairs of triangles around a vertex whose fan provably cannot
@@ -19,9 +19,8 @@ fold during the step (:mod:`fracture.refine.fans`) are skipped, and pairs
 further apart than their relative move are dropped before the cubic.
 libigl and pymeshlab answer static questions only (``pymeshlab`` selects
 self-intersecting faces of one mesh state), so the moving test is written
-here, and the static count
-:func:`self_intersections` uses the same hash (the tests check it against an
-all-pairs search).
+here; the static count (:func:`fracture.mesh.intersect.self_intersections`)
+uses the same hash.
 """
 
 from __future__ import annotations
@@ -31,10 +30,11 @@ import numpy as np
 
 from fracture.tolerances import tol
 
-from fracture.refine import hashgrid
+from fracture.mesh import hashgrid
 from fracture.refine.fans import certified_fans, closed_vertices, share_certified
-from fracture.refine.kernels import EdgeTable, edge_table
-from fracture.refine import vec
+from fracture.mesh.edges import edge_table, EdgeTable
+from fracture.mesh import vec
+from fracture.mesh.intersect import box_grid, swept_boxes, typical_cell
 
 _EPS = tol.static_test
 # The features a triangle represents (_represented), as bits of one integer: bit k its vertex k,
@@ -253,26 +253,6 @@ def _edge_edge_hit(p0, p1, q0, q1, r0, r1, s0, s1, eta2, times):
 
 
 @numba.njit(cache=True)
-def _swept_boxes(X0, X1, elems, pad):
-    """The boxes ``lo, hi (k, 3)`` of elements ``elems (k, w)`` (vertex ids) swept from ``X0`` to ``X1``,
-    grown by ``pad``."""
-    k, w = elems.shape
-    lo = np.empty((k, 3))
-    hi = np.empty((k, 3))
-    for e in range(k):
-        for c in range(3):
-            a = np.inf
-            b = -np.inf
-            for j in range(w):
-                v = elems[e, j]
-                a = min(a, X0[v, c], X1[v, c])
-                b = max(b, X0[v, c], X1[v, c])
-            lo[e, c] = a - pad
-            hi[e, c] = b + pad
-    return lo, hi
-
-
-@numba.njit(cache=True)
 def _represented(F, n, eid):
     """Which features every triangle represents (Curtis et al. 2008): bit ``k`` its vertex ``k``,
     bit ``3 + k`` its edge ``k`` (``F[f, k] -> F[f, k + 1]``, edge id ``eid[3 f + k]``); each
@@ -441,25 +421,13 @@ def _pairs_touching(F, pairs, on):
     return out
 
 
-def _typical_cell(X, E):
-    """Four times the median length of edges ``E`` (of at most 4096 of them, evenly spread). Any size
-    gives the same pairs: smaller cells hold fewer elements but put each in more of them. With the
-    buckets sorted by x (:mod:`~fracture.refine.hashgrid`) the size matters little: a build and the
-    pairs of the bunny's 159K triangles' swept boxes took 62 to 68 ms at 2.5 to 6 edges."""
-    if not len(E):
-        return 1.0
-    E = E[:: -(-len(E) // 4096)]
-    e = X[E[:, 1]] - X[E[:, 0]]
-    return 4.0 * float(np.sqrt(np.median(np.einsum("ij,ij->i", e, e))))
-
-
 def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, eta: float, table: EdgeTable | None = None,
                     max_rounds: int = 32, return_grid: bool = False, moving: np.ndarray | None = None,
                     closed: np.ndarray | None = None):
     """Stop the vertices of colliding pairs, in place in ``X1``, until the step is collision-free.
 
     Broad phase: the pairs of triangles whose swept boxes overlap, from one
-    :mod:`~fracture.refine.hashgrid`. Each vertex and each edge is represented
+    :mod:`~fracture.mesh.hashgrid`. Each vertex and each edge is represented
     by one of its triangles, and a pair of triangles tests the features they
     represent (Curtis, Tamstorf and Manocha 2008): every vertex-triangle and
     edge-edge pair that can meet is tested once, and the grid holds a third of
@@ -484,7 +452,7 @@ def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, eta: float, t
     eta : float
         Thickness: closer than this counts as contact.
     table : EdgeTable, optional
-        The edges of ``F`` (:func:`~fracture.refine.kernels.edge_table`);
+        The edges of ``F`` (:func:`~fracture.mesh.edges.edge_table`);
         built if not given.
     closed : (n,) bool, optional
         :func:`~fracture.refine.fans.closed_vertices` of ``F``, if known.
@@ -496,7 +464,7 @@ def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, eta: float, t
     pairs : int
         Colliding pairs found in the first round.
     grid : tuple
-        With ``return_grid``: the :mod:`~fracture.refine.hashgrid` of the
+        With ``return_grid``: the :mod:`~fracture.mesh.hashgrid` of the
         triangles' swept boxes (grown by ``eta``), which contain the
         triangles at ``X1`` too.
     """
@@ -508,8 +476,8 @@ def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, eta: float, t
         return (stopped, 0, None) if return_grid else (stopped, 0)
     table = table if table is not None else edge_table(F, n)
     eta = float(eta)
-    lo, hi = _swept_boxes(X0, X1, F, eta)
-    grid = _box_grid(lo, hi, X0, F)
+    lo, hi = swept_boxes(X0, X1, F, eta)
+    grid = box_grid(lo, hi, X0, F)
     overlapping = hashgrid.pairs(grid)
     rep = _represented(F, n, np.ascontiguousarray(table.eid, np.int64))
     B = _path_boxes(X0, X1)
@@ -547,118 +515,3 @@ def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, eta: float, t
 # -- static self-intersections ---------------------------------------------------------------
 
 
-@numba.njit(cache=True, inline="always")
-def _segment_hits_triangle(p, q, a, e1, e2, n, nn, eps):
-    """Segment pq meets the triangle at ``a`` with edges ``e1, e2`` from it (normal ``n = e1 x e2`` of
-    length ``nn``), edges included, crossing its plane.
-
-    Signed volumes decide the side of p and q (a segment within ``eps``
-    relative of the plane at both ends lies in it: coplanar overlaps are not
-    crossings of a surface); the crossing point is then tested against the
-    triangle with barycentric tolerance ``eps``. Touching counts: that is the
-    conservative side for a check that must be 0.
-    """
-    d = vec.sub(q, p)
-    tol = eps * nn * np.sqrt(vec.dot(d, d))
-    op, oq = vec.dot(n, vec.sub(p, a)), vec.dot(n, vec.sub(q, a))
-    if (op > tol and oq > tol) or (op < -tol and oq < -tol) or (abs(op) <= tol and abs(oq) <= tol):
-        return False
-    t = op / (op - oq)
-    x = vec.sub(vec.lerp(p, q, t), a)
-    # barycentric coordinates of x in the triangle's plane
-    d00, d01, d11 = vec.dot(e1, e1), vec.dot(e1, e2), vec.dot(e2, e2)
-    d20, d21 = vec.dot(x, e1), vec.dot(x, e2)
-    den = d00 * d11 - d01 * d01
-    if den <= 0.0:
-        return False
-    v = (d11 * d20 - d01 * d21) / den
-    w = (d00 * d21 - d01 * d20) / den
-    return v >= -eps and w >= -eps and v + w <= 1.0 + eps
-
-
-@numba.njit(cache=True, inline="always")
-def _clearly_one_side(p, q, a, n, nn2, eps):
-    """Both ends of segment pq lie on one side of the plane through ``a`` with normal ``n``
-    (``n . n = nn2``), each further from it than :func:`_segment_hits_triangle`'s tolerance by a
-    factor of sqrt 2, far beyond rounding: that test would reject the segment too. Squares, so no
-    square roots (most pairs the static tests see are neighbours whose far edges lie off the
-    other's plane)."""
-    d = vec.sub(q, p)
-    tol2 = eps * eps * nn2 * vec.dot(d, d)
-    op, oq = vec.dot(n, vec.sub(p, a)), vec.dot(n, vec.sub(q, a))
-    return (tol2 > 1e-200) & (op * oq > 0.0) & (op * op > 2.0 * tol2) & (oq * oq > 2.0 * tol2)
-
-
-@numba.njit(cache=True)
-def triangles_intersect(X, F, f, g, eps):
-    """Triangles f and g meet anywhere but at the vertex or the edge they share.
-
-    Two triangles with one shared vertex s meet beyond it only along a
-    segment from s whose far end lies on an edge opposite s (otherwise the
-    segment runs along an edge at s, inside the other triangle's plane): so
-    only the two opposite edges are tested.
-    """
-    shared = -1
-    count = 0
-    for i in range(3):
-        for j in range(3):
-            if F[f, i] == F[g, j]:
-                shared = F[f, i]
-                count += 1
-    if count >= 2:
-        return False  # triangles on one edge meet only along it (coplanar folds aside)
-    for (s, t) in ((f, g), (g, f)):
-        a = vec.point(X, F[t, 0])
-        e1, e2 = vec.sub(vec.point(X, F[t, 1]), a), vec.sub(vec.point(X, F[t, 2]), a)
-        n = vec.cross(e1, e2)  # once per triangle, not per edge tested against it
-        nn2 = vec.dot(n, n)
-        nn = -1.0  # its length, once a segment needs the full test
-        for k in range(3):
-            u, v = F[s, k], F[s, (k + 1) % 3]
-            if u == shared or v == shared:
-                continue
-            p, q = vec.point(X, u), vec.point(X, v)
-            if _clearly_one_side(p, q, a, n, nn2, eps):
-                continue
-            if nn < 0.0:
-                nn = np.sqrt(nn2)
-            if _segment_hits_triangle(p, q, a, e1, e2, n, nn, eps):
-                return True
-    return False
-
-
-@numba.njit(cache=True)
-def _pair_tests(X, F, pairs, eps, first):
-    """How many of the triangle ``pairs`` intersect; the first ``len(first)`` of them are written to ``first``."""
-    count = 0
-    for i in range(pairs.shape[0]):
-        if triangles_intersect(X, F, pairs[i, 0], pairs[i, 1], eps):
-            if count < first.shape[0]:
-                first[count, 0], first[count, 1] = pairs[i, 0], pairs[i, 1]
-            count += 1
-    return count
-
-
-def _box_grid(lo: np.ndarray, hi: np.ndarray, X: np.ndarray, F: np.ndarray) -> tuple:
-    """A :mod:`~fracture.refine.hashgrid` of boxes ``lo, hi`` of triangles ``F`` over ``X``, its cells
-    sized by their edges (:func:`_typical_cell`)."""
-    return hashgrid.build(lo, hi, 1.0 / hashgrid.cell_size(lo, hi, _typical_cell(X, F[:, :2])))
-
-
-def triangle_grid(V: np.ndarray, F: np.ndarray) -> tuple:
-    """A :mod:`~fracture.refine.hashgrid` of the triangles' bounding boxes."""
-    return _box_grid(*_swept_boxes(V, V, F, 0.0), V, F)
-
-
-def self_intersections(V: np.ndarray, F: np.ndarray, report: int = 0) -> int | tuple[int, np.ndarray]:
-    """Number of pairs of triangles that meet other than at a shared vertex or edge.
-
-    With ``report > 0`` also returns up to that many of the pairs, ``(k, 2)``.
-    """
-    V = np.ascontiguousarray(V, np.float64)
-    F = np.ascontiguousarray(F, np.int64)
-    first = np.zeros((report, 2), np.int64)
-    count = 0
-    if len(F) >= 2:
-        count = _pair_tests(V, F, hashgrid.pairs(triangle_grid(V, F)), _EPS, first)
-    return (int(count), first[:min(count, report)]) if report else int(count)

@@ -76,7 +76,8 @@ from fracture.refine.crossings_on_b import close_pairs
 from fracture.refine.fans import closed_vertices
 from fracture.refine.flips import flip_edges
 from fracture.refine.flow import energy, energy_gradient
-from fracture.refine.kernels import EdgeTable, edge_table, row_edges, spatial_order
+from fracture.mesh.edges import edge_table, EdgeTable, row_edges
+from fracture.refine.order import spatial_order
 from fracture.refine.mesh import RefineMesh
 from fracture.refine.params import RefineParams
 from fracture.refine.remesh import plan_chord_splits, plan_splits
@@ -228,7 +229,7 @@ class Refiner:
 
     def put_in_spatial_order(self) -> None:
         """Number vertices along a Morton curve and triangles by their first vertex
-        (:func:`~fracture.refine.kernels.spatial_order`): the iterations' loops then read
+        (:func:`~fracture.refine.order.spatial_order`): the iterations' loops then read
         neighbours from nearby memory. Done when the mesh grew by a fifth since the last time."""
         if len(self.mesh.V) > 1.2 * self._ordered:
             self._renumber(*spatial_order(self.mesh.V, self.mesh.F))

@@ -27,8 +27,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from fracture.refine.kernels import EdgeTable
-from fracture.refine import vec
+from fracture.mesh.edges import EdgeTable
+from fracture.mesh import vec
 
 # A positive component, or a cross product that places a direction in a wedge, must exceed this
 # fraction of the product of the lengths involved: far beyond rounding, so a pass is a proof.

@@ -14,12 +14,12 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from fracture.refine import hashgrid
-from fracture.refine.collide import triangle_grid, triangles_intersect
+from fracture.mesh import hashgrid
+from fracture.mesh.intersect import triangle_grid, triangles_intersect
 from fracture.tolerances import tol
 from fracture.refine.fans import certified_fans, closed_vertices, share_certified
-from fracture.refine.kernels import EdgeTable, edge_table, find_edge
-from fracture.refine import vec
+from fracture.mesh.edges import edge_table, EdgeTable, find_edge
+from fracture.mesh import vec
 
 
 @numba.njit(cache=True, inline="always")
@@ -109,7 +109,7 @@ def _try_flip(V, F, sides, r, twin, busy, made, table):
 def _flip(V, F, sides, max_passes, pairs, table):
     """Up to ``max_passes`` passes, each flipping a set of edges that share no triangle; the flipped
     triangle pairs go to ``pairs`` (room for m // 2 + 1 per pass). ``table`` is the edge table of
-    ``F`` as given (:meth:`~fracture.refine.kernels.EdgeTable.arrays`).
+    ``F`` as given (:meth:`~fracture.mesh.edges.EdgeTable.arrays`).
 
     The first pass tries every edge; a later one only the outer edges of the
     triangles the pass before flipped (the others' triangles are unchanged,
@@ -296,10 +296,10 @@ def flip_edges(V: np.ndarray, F: np.ndarray, sides: np.ndarray, max_passes: int 
     are tested (a static test against their surroundings), every group of
     triangles joined by flips with one that meets something goes back to its
     first triangles, and the groups kept are tested again against those until
-    none meets anything. ``grid`` may give a :mod:`~fracture.refine.hashgrid`
+    none meets anything. ``grid`` may give a :mod:`~fracture.mesh.hashgrid`
     of boxes that contain the triangles as given (triangle ``f`` its element
     ``f``, e.g. the collision step's); else one is built if needed.
-    ``table``, the :class:`~fracture.refine.kernels.EdgeTable` of ``F`` as
+    ``table``, the :class:`~fracture.mesh.edges.EdgeTable` of ``F`` as
     given, saves building it, and ``closed``, its
     :func:`~fracture.refine.fans.closed_vertices`, finding those. The
     triangles around a vertex whose fan does not fold after the flips

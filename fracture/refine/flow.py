@@ -30,7 +30,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from fracture.refine.kernels import face_geometry
+from fracture.mesh.faces import face_geometry
 
 
 @numba.njit(cache=True, inline="always")

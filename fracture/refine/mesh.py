@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from fracture.refine.kernels import edge_table
+from fracture.mesh.edges import edge_table
 
 
 @dataclass

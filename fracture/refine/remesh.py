@@ -43,7 +43,8 @@ import numpy as np
 
 from fracture.refine.crossings_on_b import splits_would_cross
 from fracture.refine.flow import sample_displacement
-from fracture.refine.kernels import EdgeTable, _unit_normal_into, face_geometry, first_per_group
+from fracture.mesh.edges import EdgeTable, first_per_group
+from fracture.mesh.faces import unit_normal_into, face_geometry
 
 # Samples inside a triangle keep every barycentric coordinate at least this
 # (a sample near an edge would make a sliver); edge samples stay this far
@@ -240,7 +241,7 @@ def split_wanted(T, P, bary, d, v, F, dt, k_edge, has_edge, near2, far, min_qual
         for k in range(3):
             x, y, z = T[f, k, 0] - P[f, 0], T[f, k, 1] - P[f, 1], T[f, k, 2] - P[f, 2]
             near = min(near, x * x + y * y + z * z)
-        t = _unit_normal_into(T[f, 1, 0] - T[f, 0, 0], T[f, 1, 1] - T[f, 0, 1], T[f, 1, 2] - T[f, 0, 2],
+        t = unit_normal_into(T[f, 1, 0] - T[f, 0, 0], T[f, 1, 1] - T[f, 0, 1], T[f, 1, 2] - T[f, 0, 2],
                               T[f, 2, 0] - T[f, 0, 0], T[f, 2, 1] - T[f, 0, 1], T[f, 2, 2] - T[f, 0, 2], N, f)
         if near < near2:
             continue

@@ -23,7 +23,7 @@ import numpy as np
 
 from fracture.io.ply import write_ply
 from fracture.refine import kernels_cached
-from fracture.refine.collide import self_intersections
+from fracture.mesh.intersect import self_intersections
 from fracture.refine.engine import RefineParams, Refiner
 from fracture.refine.mesh import RefineMesh
 from fracture.pipeline.context import RunContext

@@ -34,7 +34,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from fracture.refine import morton
+from fracture.mesh import morton
 
 _BITS = 21  # bits per packed cell coordinate
 _OFF = 1 << (_BITS - 1)
@@ -61,7 +61,7 @@ class HashGrid(NamedTuple):
 @numba.njit(cache=True, inline="always")
 def _hash(ix, iy, iz, mask):
     """The cell's Morton code, cut to the table: cells near each other share cache lines
-    (the elements come in Morton order too, see :func:`~fracture.refine.kernels.spatial_order`)."""
+    (the elements come in Morton order too, see :func:`~fracture.refine.order.spatial_order`)."""
     return morton.code(ix, iy, iz) & mask
 
 

@@ -1,28 +1,15 @@
-"""Compiled per-iteration kernels of the refinement (numba, cached on disk).
-
-Each iteration touches every vertex, triangle and edge of a surface that
-grows to 10^5 triangles. NumPy versions of these steps build several
-temporaries of the full size and sort 3m edge keys several times; here each
-is one pass:
-
-* :func:`edge_table` buckets directed edges by their lower vertex (a counting
-  sort, O(m)) instead of sorting keys, and gives every undirected edge an id,
-  its triangle count and its first two directed edges;
-* :func:`face_geometry` gives every triangle's area and unit normal in one pass;
-* :func:`spatial_order` numbers vertices along a Morton curve and triangles
-  by their first vertex, so that neighbours are near in memory.
-"""
+"""Edge tables of triangle lists (numba): every undirected edge's id, its triangle count and its first
+two directed edges, built in O(m) by bucketing directed edges by their lower vertex (a counting sort)
+instead of sorting keys. Every module that asks which edges a surface has, and how many triangles
+are on each, asks this one table."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from functools import cached_property
 from typing import NamedTuple
 
 import numba
 import numpy as np
-
-from fracture.refine import morton
 
 
 class EdgeArrays(NamedTuple):
@@ -104,9 +91,8 @@ def _find_edges(start, hi, row, eid, E):
     return out
 
 
-@dataclass
-class EdgeTable:
-    """The undirected edges of a triangle list.
+class EdgeTable(EdgeArrays):
+    """The undirected edges of a triangle list: :class:`EdgeArrays` with the questions asked of them.
 
     Attributes
     ----------
@@ -117,20 +103,12 @@ class EdgeTable:
     first, second : (ne,) int
         The first two directed edges (rows ``3 f + k``) of each edge; -1 if none.
     start, hi, row
-        The directed edges bucketed by their lower vertex (:class:`EdgeArrays`).
+        The directed edges bucketed by their lower vertex.
     """
 
-    eid: np.ndarray
-    count: np.ndarray
-    first: np.ndarray
-    second: np.ndarray
-    start: np.ndarray
-    hi: np.ndarray
-    row: np.ndarray
-
     def arrays(self) -> EdgeArrays:
-        """The table's arrays, for compiled code."""
-        return EdgeArrays(self.eid, self.count, self.first, self.second, self.start, self.hi, self.row)
+        """The table's arrays as a plain :class:`EdgeArrays`, for compiled code."""
+        return EdgeArrays(*self)
 
     @cached_property
     def row_count(self) -> np.ndarray:
@@ -186,59 +164,3 @@ def row_edges(F: np.ndarray, rows: np.ndarray) -> np.ndarray:
 def edge_table(F: np.ndarray, n: int) -> EdgeTable:
     """Build the :class:`EdgeTable` of triangles ``F`` over ``n`` vertices, in O(m)."""
     return EdgeTable(*_edge_table(np.ascontiguousarray(F, np.int64), int(n)))
-
-
-@numba.njit(cache=True, inline="always")
-def _unit_normal_into(ux, uy, uz, vx, vy, vz, N, f):
-    """Write the unit normal of the triangle with edge vectors u and v into ``N[f]`` (left as it is
-    for a degenerate triangle); returns the length of u x v, twice the triangle's area."""
-    nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
-    t = np.sqrt(nx * nx + ny * ny + nz * nz)
-    if t > 0.0:
-        N[f, 0], N[f, 1], N[f, 2] = nx / t, ny / t, nz / t
-    return t
-
-
-@numba.njit(cache=True)
-def face_geometry(V, F):
-    """Areas ``(m,)`` and unit normals ``(m, 3)`` (zero for degenerate triangles)."""
-    m = F.shape[0]
-    A = np.empty(m)
-    N = np.zeros((m, 3))
-    for f in range(m):
-        a, b, c = F[f, 0], F[f, 1], F[f, 2]
-        A[f] = 0.5 * _unit_normal_into(V[b, 0] - V[a, 0], V[b, 1] - V[a, 1], V[b, 2] - V[a, 2],
-                                       V[c, 0] - V[a, 0], V[c, 1] - V[a, 1], V[c, 2] - V[a, 2], N, f)
-    return A, N
-
-
-@numba.njit(cache=True)
-def _faces_by_first_vertex(F, new, n):
-    """Triangles renumbered by ``new`` (old vertex -> new) and ordered by their lowest new vertex (counting sort)."""
-    m = F.shape[0]
-    start = np.zeros(n + 1, np.int64)
-    for f in range(m):
-        start[min(new[F[f, 0]], new[F[f, 1]], new[F[f, 2]]) + 1] += 1
-    for v in range(n):
-        start[v + 1] += start[v]
-    order = np.empty(m, np.int64)
-    for f in range(m):
-        k = min(new[F[f, 0]], new[F[f, 1]], new[F[f, 2]])
-        order[start[k]] = f
-        start[k] += 1
-    return order
-
-
-def spatial_order(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Vertex and triangle orders that keep neighbours near in memory.
-
-    Vertices go along a Morton (Z-order) curve through their bounding box,
-    triangles by their lowest vertex in that order. Returns ``(vorder,
-    forder)``: new vertex ``i`` is old vertex ``vorder[i]``, new triangle
-    ``j`` old triangle ``forder[j]``.
-    """
-    V = np.ascontiguousarray(V, np.float64)
-    vorder = np.argsort(morton.codes(V), kind="stable") if len(V) else np.zeros(0, np.int64)
-    new = np.empty(len(V), np.int64)
-    new[vorder] = np.arange(len(V))
-    return vorder, _faces_by_first_vertex(np.ascontiguousarray(F, np.int64), new, len(V))

@@ -1,6 +1,6 @@
 """Morton (Z-order) codes: the integer coordinates of a cell interleaved bit by bit, so that cells near
-each other in space get codes near each other (the vertex order of :func:`~fracture.refine.kernels.spatial_order`
-and the bucket order of :mod:`~fracture.refine.hashgrid`)."""
+each other in space get codes near each other (the vertex order of :func:`~fracture.refine.order.spatial_order`
+and the bucket order of :mod:`~fracture.mesh.hashgrid`)."""
 
 from __future__ import annotations
 
