@@ -228,7 +228,7 @@ def test_every_scene_animates_into_closed_pieces(name, tmp_path):
 
 def test_pieces_are_verified_before_a_run_succeeds():
     from fracture.errors import ResultError
-    from fracture.pipeline.stages.animate import verify_pieces
+    from fracture.pieces.checks import verify_pieces
 
     V, F = box((0, 0, 0), (1, 1, 1), (2, 2, 2))
     good = mesh_checks(V, F)
