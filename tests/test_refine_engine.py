@@ -165,10 +165,10 @@ def test_closest_points_on_b_are_asked_again_only_for_vertices_that_moved():
     assert asked == [len(ids), 3, 1]
 
 
-def test_the_loop_ends_when_collisions_keep_a_boundary_vertex_off_b(monkeypatch):
+def test_the_loop_ends_when_collisions_keep_a_boundary_vertex_off_b():
     """Collisions block one boundary vertex in every step (as if a sheet lay across its way back onto
     B): the stages still end, and the reason says that it stays off B and how far."""
-    import fracture.refine.engine as engine
+    from fracture.refine.collide import stop_collisions
     pyramid = two_weak_sheets()
     BV, BF = box([0, 0, 0], [1, 1, 1], (8, 8, 8))
     mesh = flat_cut()
@@ -176,23 +176,20 @@ def test_the_loop_ends_when_collisions_keep_a_boundary_vertex_off_b(monkeypatch)
     v = on_y0[np.argmin(np.abs(mesh.V[on_y0, 2] - 0.5))]
     mesh.V[v, 1] = 0.03
     P = mesh.V[v].copy()  # blocked, v stays here (the loop renumbers the vertices)
-    real = engine.stop_collisions
 
     def blocked(X0, X1, *args, **kwargs):
-        out = real(X0, X1, *args, **kwargs)
+        out = stop_collisions(X0, X1, *args, **kwargs)
         at = np.flatnonzero((X0 == P).all(axis=1))
         X1[at] = X0[at]
         out[0][at] = True
         return out
 
-    monkeypatch.setattr(engine, "stop_collisions", blocked)
     params = RefineParams(iterations=40, max_triangles=400)
-    log = Refiner(mesh, pyramid, BV, BF, params, np.random.default_rng(0)).run()
+    log = Refiner(mesh, pyramid, BV, BF, params, np.random.default_rng(0), collisions=blocked).run()
     assert log.iterations <= params.iterations
     assert "1 boundary vertex stays off B" in log.stop
     assert abs(log.boundary_error[-1] - 0.03) < 1e-9
     # without the block the same run ends with the boundary on B
-    monkeypatch.setattr(engine, "stop_collisions", real)
     log = Refiner(flat_cut(), pyramid, BV, BF, params, np.random.default_rng(0)).run()
     assert "off B" not in log.stop and log.boundary_error[-1] < 1e-12
 

@@ -112,6 +112,7 @@ def _window(scenario: str, run_dir: Path, out: Path) -> dict:
     return json.loads((out / "result.json").read_text())
 
 
+@pytest.mark.gui
 def test_the_window_shows_three_panels_that_follow_their_controls(run_dir, tmp_path):
     res = _window("panels", run_dir, tmp_path)
     for shown, refit in res["camera_refit"]:
@@ -130,6 +131,7 @@ def test_the_window_shows_three_panels_that_follow_their_controls(run_dir, tmp_p
     assert video_frames(res["video"]) == (res["frames"], (640, 360))
 
 
+@pytest.mark.gui
 def test_dragging_turns_each_panel_about_its_subject_and_exports_leave_the_cameras(run_dir, tmp_path):
     res = _window("navigate", run_dir, tmp_path)
     assert res["errors"] == []
@@ -151,6 +153,7 @@ def test_dragging_turns_each_panel_about_its_subject_and_exports_leave_the_camer
     assert content_share(read(res["screenshot"])) > 0.05
 
 
+@pytest.mark.gui
 def test_rerun_in_the_window_gives_a_new_result_without_freezing_it(run_dir, tmp_path):
     res = _window("rerun", run_dir, tmp_path)
     assert len(res["rerun_dirs"]) == 1 and res["shown"] == res["rerun_dirs"][0]
@@ -175,6 +178,7 @@ def sweep_dir(tmp_path_factory):
     return base / "sweep"
 
 
+@pytest.mark.gui
 def test_a_sweep_opens_with_its_points_to_choose_and_flip(sweep_dir, tmp_path):
     res = _window("sweep", sweep_dir, tmp_path)
     a, b = res["points"]
@@ -291,6 +295,7 @@ def test_exports_are_numbered_and_never_overwrite(tmp_path):
     assert numbered(tmp_path / "renders", "window_animation", ".mp4").name == "window_animation_001.mp4"
 
 
+@pytest.mark.gui
 def test_saved_views_come_back_and_the_window_fits_its_default_size(run_dir, tmp_path):
     from viewer.state import read_view_file
 

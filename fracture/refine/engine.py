@@ -136,11 +136,17 @@ class IterationLog:
 
 
 class Refiner:
-    """Evolves and refines a fracture surface toward low psi (module notes)."""
+    """Evolves and refines a fracture surface toward low psi (module notes).
+
+    ``collisions`` is the collision step (default
+    :func:`~fracture.refine.collide.stop_collisions`, same signature): a seam for
+    another collision response, or for a test that blocks a vertex.
+    """
 
     def __init__(self, mesh: RefineMesh, pyramid, BV: np.ndarray, BF: np.ndarray, params: RefineParams,
-                 rng: np.random.Generator):
+                 rng: np.random.Generator, *, collisions=stop_collisions):
         self.mesh, self.pyramid, self.params, self.rng = mesh, pyramid, params, rng
+        self.stop_collisions = collisions
         self.h = float(np.min(pyramid.grid.spacing))
         self.on_b = tol.on_b * self.h  # a boundary vertex this close to B is on it
         self.log = IterationLog()
@@ -332,7 +338,7 @@ class Refiner:
             return float(np.sqrt(d2.max()))
         X1 = m.V.copy()
         X1[ids[off]] = P[off]
-        stopped, _ = stop_collisions(m.V, X1, m.F, self.params.thickness * self.h, table or self.edges(),
+        stopped, _ = self.stop_collisions(m.V, X1, m.F, self.params.thickness * self.h, table or self.edges(),
                                      moving=ids[off])
         self.state.hold[stopped] = self.params.hold
         m.V = X1
@@ -455,7 +461,7 @@ class Refiner:
             value = energy(trial, m.F, psibar1 + self.offset)
             clock = log.tick("step", clock)
             if value <= before + 1e-12 * abs(before):
-                hit, _, grid = stop_collisions(m.V, trial, m.F, p.thickness * self.h, table, return_grid=True,
+                hit, _, grid = self.stop_collisions(m.V, trial, m.F, p.thickness * self.h, table, return_grid=True,
                                                moving=went, closed=closed)
                 clock = log.tick("collisions", clock)
                 if hit.any():  # stopped vertices stay where they were, with their field
