@@ -44,3 +44,38 @@ tol.degenerate = 1e-14
 # scale as a crossing: exact predicates are not needed on top of the
 # continuous collision step, which keeps a thickness far above it.
 tol.static_test = 1e-10
+
+# A positive floor for denominators that can be zero (a degenerate triangle's
+# area, a zero vector's length): anything it is compared with in a sound case
+# is far above it, so it changes no result except a division by zero.
+tol.tiny = 1e-300
+
+# Refinement: a step is accepted when the minimised functional rises by no more
+# than this fraction of its value (the rounding of its sums over the surface).
+tol.functional_rise = 1e-12
+
+# Edge flips: an edge is Delaunay when its opposite angles' cotangents sum to
+# more than minus this (rounding of the cotangents).
+tol.delaunay = 1e-12
+
+# Continuous collisions (Bridson et al. 2002), relative tests:
+# the coplanarity cubic is taken as quadratic when its leading coefficient is
+# below this fraction of the others;
+tol.cubic_leading = 1e-14
+# a root of the cubic is this close (relative to its coefficients' scale) to zero;
+tol.cubic_root = 1e-9
+# barycentric and line-parameter slack when a vertex meets a triangle or two
+# edges cross at the coplanar moment;
+tol.contact_slack = 1e-9
+# a triangle is degenerate (the edge-edge tests see it) below this relative
+# Gram determinant, two edges parallel (the vertex-triangle tests see them)
+# below the second;
+tol.degenerate_gram = 1e-30
+tol.parallel_edges = 1e-24
+# the static segment-triangle test decides without square roots only when its
+# squared tolerance is above this (a segment of zero length is tested fully).
+tol.side_test_floor = 1e-200
+
+# Imprint: a closest point within this fraction of its size of a surface
+# vertex is that vertex.
+tol.coincide = 1e-12

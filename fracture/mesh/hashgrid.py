@@ -35,6 +35,7 @@ import numba
 import numpy as np
 
 from fracture.mesh import morton
+from fracture.tolerances import tol
 
 _BITS = 21  # bits per packed cell coordinate
 _OFF = 1 << (_BITS - 1)
@@ -390,6 +391,6 @@ def gather(grid, qlo, qhi, buf):
 def cell_size(lo: np.ndarray, hi: np.ndarray, typical: float) -> float:
     """A level-0 cell of size ``typical``, enlarged where the boxes' extent would overflow the packed cells."""
     if not len(lo):
-        return max(typical, 1e-12)
+        return max(typical, tol.zero)
     reach = float(max(np.abs(lo).max(), np.abs(hi).max()))
-    return max(typical, reach / _SPAN, 1e-12)
+    return max(typical, reach / _SPAN, tol.zero)

@@ -14,6 +14,9 @@ import numpy as np
 from fracture.mesh import hashgrid, vec
 from fracture.tolerances import tol
 
+# compiled code reads tolerances as module constants (fracture/tolerances.py says why each)
+_SIDE_TEST_FLOOR = tol.side_test_floor
+
 _EPS = tol.static_test
 
 
@@ -88,7 +91,7 @@ def _clearly_one_side(p, q, a, n, nn2, eps):
     d = vec.sub(q, p)
     tol2 = eps * eps * nn2 * vec.dot(d, d)
     op, oq = vec.dot(n, vec.sub(p, a)), vec.dot(n, vec.sub(q, a))
-    return (tol2 > 1e-200) & (op * oq > 0.0) & (op * op > 2.0 * tol2) & (oq * oq > 2.0 * tol2)
+    return (tol2 > _SIDE_TEST_FLOOR) & (op * oq > 0.0) & (op * op > 2.0 * tol2) & (oq * oq > 2.0 * tol2)
 
 
 @numba.njit(cache=True)

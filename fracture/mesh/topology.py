@@ -14,6 +14,7 @@ from scipy.spatial import cKDTree
 
 from fracture.mesh.edges import edge_table, row_edges
 from fracture.mesh.faces import face_geometry
+from fracture.tolerances import tol
 
 
 def directed_edges(F: np.ndarray) -> np.ndarray:
@@ -96,9 +97,9 @@ def edge_outward(V: np.ndarray, F: np.ndarray, E: np.ndarray, strict: bool = Tru
     mid = 0.5 * (V[E[:, 0]] + V[E[:, 1]])
     d *= np.where(np.einsum("ij,ij->i", d, V[third] - mid) > 0, -1.0, 1.0)[:, None]
     length = np.linalg.norm(d, axis=1, keepdims=True)
-    if strict and np.any(length <= 1e-300):
+    if strict and np.any(length <= tol.tiny):
         raise ValueError("a triangle on the boundary is degenerate (zero area)")
-    return d / np.maximum(length, 1e-300)
+    return d / np.maximum(length, tol.tiny)
 
 
 def boundary_conormals(V: np.ndarray, F: np.ndarray, E: np.ndarray, strict: bool = True,
@@ -114,7 +115,7 @@ def boundary_conormals(V: np.ndarray, F: np.ndarray, E: np.ndarray, strict: bool
         d *= np.linalg.norm(V[E[:, 1]] - V[E[:, 0]], axis=1)[:, None]
     verts = np.unique(E)
     out = scatter_add(np.searchsorted(verts, E.T.ravel()), np.concatenate([d, d]), len(verts))
-    return verts, out / np.maximum(np.linalg.norm(out, axis=1), 1e-300)[:, None]
+    return verts, out / np.maximum(np.linalg.norm(out, axis=1), tol.tiny)[:, None]
 
 
 def face_frames(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -35,6 +35,7 @@ from fracture.mesh.exterior import Exterior
 from fracture.refine.crossings_on_b import splits_would_cross
 from fracture.mesh.edges import edge_table, row_edges
 from fracture.refine.mesh import RefineMesh
+from fracture.tolerances import tol
 
 # A point within this barycentric distance of an edge (or two edges) of a B
 # triangle is put on that edge (vertex): no sliver triangles of relative
@@ -182,7 +183,7 @@ def _barycentric(p, T):
     e1, e2, x = b - a, c - a, p - a
     d00, d01, d11 = (e1 * e1).sum(1), (e1 * e2).sum(1), (e2 * e2).sum(1)
     d20, d21 = (x * e1).sum(1), (x * e2).sum(1)
-    den = np.maximum(d00 * d11 - d01 * d01, 1e-300)
+    den = np.maximum(d00 * d11 - d01 * d01, tol.tiny)
     v = (d11 * d20 - d01 * d21) / den
     w = (d00 * d21 - d01 * d20) / den
     return np.stack([1.0 - v - w, v, w], 1)
@@ -197,7 +198,7 @@ def _insert(surf: _Surface, p, f0, claimed: set, where: str) -> int:
         v = tri[int(np.argmax(bary))]
         if v not in claimed:
             return v
-        if np.linalg.norm(np.asarray(surf.V[v]) - p) <= 1e-12 * max(1.0, np.abs(p).max()):
+        if np.linalg.norm(np.asarray(surf.V[v]) - p) <= tol.coincide * max(1.0, np.abs(p).max()):
             raise InputError(f"{where}: the refined fracture surface cannot be joined to the object's surface at "
                              f"{np.round(p, 6).tolist()}: two points where its cracks reach the surface coincide "
                              f"there{_RETRY}")
@@ -221,7 +222,7 @@ def _fan_normal(surf: _Surface, u: int) -> np.ndarray:
     A = np.array([surf.V[a] for _, a, _ in fan]) - U
     B = np.array([surf.V[b] for _, _, b in fan]) - U
     n = np.cross(A, B).sum(axis=0)
-    return n / max(np.linalg.norm(n), 1e-300)
+    return n / max(np.linalg.norm(n), tol.tiny)
 
 
 def _trace(surf: _Surface, p: int, q: int, claimed: set, cut: set, where: str) -> list[int]:

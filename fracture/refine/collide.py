@@ -36,6 +36,14 @@ from fracture.mesh.edges import edge_table, EdgeTable
 from fracture.mesh import vec
 from fracture.mesh.intersect import box_grid, swept_boxes, typical_cell
 
+# compiled code reads tolerances as module constants (fracture/tolerances.py says why each)
+_TINY = tol.tiny
+_CUBIC_LEADING = tol.cubic_leading
+_CUBIC_ROOT = tol.cubic_root
+_DEGENERATE_GRAM = tol.degenerate_gram
+_PARALLEL_EDGES = tol.parallel_edges
+_CONTACT_SLACK = tol.contact_slack
+
 _EPS = tol.static_test
 # The features a triangle represents (_represented), as bits of one integer: bit k its vertex k,
 # bit _EDGE_SHIFT + k its edge k (F[f, k] -> F[f, k + 1]).
@@ -90,13 +98,13 @@ def _segment_segment_distance2(p1, q1, p2, q2):
     """Squared distance between segments p1q1 and p2q2 (Ericson 5.1.9)."""
     d1, d2, r = vec.sub(q1, p1), vec.sub(q2, p2), vec.sub(p1, p2)
     a, e, f = vec.dot(d1, d1), vec.dot(d2, d2), vec.dot(d2, r)
-    if a <= 1e-300 and e <= 1e-300:
+    if a <= _TINY and e <= _TINY:
         return vec.dot(r, r)
-    if a <= 1e-300:
+    if a <= _TINY:
         s, t = 0.0, min(max(f / e, 0.0), 1.0)
     else:
         c = vec.dot(d1, r)
-        if e <= 1e-300:
+        if e <= _TINY:
             t, s = 0.0, min(max(-c / a, 0.0), 1.0)
         else:
             b = vec.dot(d1, d2)
@@ -136,7 +144,7 @@ def _coplanar_times(a0, a1, b0, b1, c0, c1, d0, d1, out):
     nk = 1
     # roots of 3 c3 t^2 + 2 c2 t + c1
     qa, qb, qc = 3.0 * k3, 2.0 * k2, k1
-    if abs(qa) > 1e-14 * (abs(qb) + abs(qc) + 1e-300):
+    if abs(qa) > _CUBIC_LEADING * (abs(qb) + abs(qc) + _TINY):
         disc = qb * qb - 4.0 * qa * qc
         if disc >= 0.0:
             sq = np.sqrt(disc)
@@ -153,7 +161,7 @@ def _coplanar_times(a0, a1, b0, b1, c0, c1, d0, d1, out):
             knots[nk] = r
             nk += 1
     n = 0
-    tiny = 1e-9 * scale + 1e-300
+    tiny = _CUBIC_ROOT * scale + _TINY
     prev_t, prev_f = 0.0, f0
     if abs(f0) <= tiny:
         out[n] = 0.0
@@ -193,7 +201,7 @@ def _inside_at(p, a, b, c, eps):
     d00, d01, d11 = vec.dot(e1, e1), vec.dot(e1, e2), vec.dot(e2, e2)
     d20, d21 = vec.dot(x, e1), vec.dot(x, e2)
     den = d00 * d11 - d01 * d01
-    if den <= 1e-30 * d00 * d11:
+    if den <= _DEGENERATE_GRAM * d00 * d11:
         return False  # degenerate triangle: the edge-edge tests see it
     v = (d11 * d20 - d01 * d21) / den
     w = (d00 * d21 - d01 * d20) / den
@@ -207,7 +215,7 @@ def _segments_cross_at(p, q, r, s, eps):
     a, b, c = vec.dot(d1, d1), vec.dot(d1, d2), vec.dot(d2, d2)
     d, e = vec.dot(d1, w), vec.dot(d2, w)
     den = a * c - b * b
-    if den <= 1e-24 * a * c:
+    if den <= _PARALLEL_EDGES * a * c:
         return False  # parallel: the vertex-triangle tests see these
     u = (b * e - c * d) / den
     v = (a * e - b * d) / den
@@ -228,7 +236,7 @@ def _vertex_triangle_hit(p0, p1, a0, a1, b0, b1, c0, c1, eta2, times):
         t = times[i]
         # coplanar at t: a hit if p is in the triangle then (a test of
         # position in the plane, well conditioned however the root is)
-        if _inside_at(vec.lerp(p0, p1, t), vec.lerp(a0, a1, t), vec.lerp(b0, b1, t), vec.lerp(c0, c1, t), 1e-9):
+        if _inside_at(vec.lerp(p0, p1, t), vec.lerp(a0, a1, t), vec.lerp(b0, b1, t), vec.lerp(c0, c1, t), _CONTACT_SLACK):
             return True
     # contact at the end of the step that is closer than at its start (pairs
     # resting in contact, e.g. sheets meeting on B, may stay so)
@@ -246,7 +254,7 @@ def _edge_edge_hit(p0, p1, q0, q1, r0, r1, s0, s1, eta2, times):
     n = _coplanar_times(p0, p1, q0, q1, r0, r1, s0, s1, times)
     for i in range(n):
         t = times[i]
-        if _segments_cross_at(vec.lerp(p0, p1, t), vec.lerp(q0, q1, t), vec.lerp(r0, r1, t), vec.lerp(s0, s1, t), 1e-9):
+        if _segments_cross_at(vec.lerp(p0, p1, t), vec.lerp(q0, q1, t), vec.lerp(r0, r1, t), vec.lerp(s0, s1, t), _CONTACT_SLACK):
             return True
     end = _segment_segment_distance2(p1, q1, r1, s1)
     return end <= eta2 and end < start

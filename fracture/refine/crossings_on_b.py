@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.spatial import cKDTree
+from fracture.tolerances import tol
 
 
 def crossing_pairs(X: np.ndarray, E: np.ndarray, normal_at, gap: float = 0.0) -> np.ndarray:
@@ -102,7 +103,7 @@ def _candidates(M: np.ndarray, L: np.ndarray, gap: float) -> np.ndarray:
 def _point_segment(p, a, b):
     """Distances ``(k,)`` of 2D points ``p`` from segments ``a b``."""
     ab = b - a
-    t = np.clip(np.einsum("ij,ij->i", p - a, ab) / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-300), 0.0, 1.0)
+    t = np.clip(np.einsum("ij,ij->i", p - a, ab) / np.maximum(np.einsum("ij,ij->i", ab, ab), tol.tiny), 0.0, 1.0)
     return np.linalg.norm(a + t[:, None] * ab - p, axis=1)
 
 

@@ -382,7 +382,7 @@ class Refiner:
         _, psibar, grad = self.vertex_field()
         w = psibar + self.offset
         dE, area = energy_gradient(m.V, m.F, w, grad)
-        v = -dE / np.maximum(area, 1e-300)[:, None]
+        v = -dE / np.maximum(area, tol.tiny)[:, None]
         rows = table.boundary_rows
         if not len(rows):
             self.off_b = np.zeros(0, np.int64)
@@ -460,7 +460,7 @@ class Refiner:
             psibar1[went] = fresh[1]
             value = energy(trial, m.F, psibar1 + self.offset)
             clock = log.tick("step", clock)
-            if value <= before + 1e-12 * abs(before):
+            if value <= before + tol.functional_rise * abs(before):
                 hit, _, grid = self.stop_collisions(m.V, trial, m.F, p.thickness * self.h, table, return_grid=True,
                                                moving=went, closed=closed)
                 clock = log.tick("collisions", clock)
@@ -470,7 +470,7 @@ class Refiner:
                     psibar1[hit] = s.psibar[hit]
                     value = energy(trial, m.F, psibar1 + self.offset)
                     clock = log.tick("step", clock)
-            if value <= before + 1e-12 * abs(before):
+            if value <= before + tol.functional_rise * abs(before):
                 X1, after, stopped = trial, value, hit
                 s.psi[went], s.psibar[went], s.grad[went] = fresh  # the next iteration's field
                 s.field_at[went] = trial[went]

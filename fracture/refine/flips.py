@@ -21,6 +21,9 @@ from fracture.refine.fans import certified_fans, closed_vertices, share_certifie
 from fracture.mesh.edges import edge_table, EdgeTable, find_edge
 from fracture.mesh import vec
 
+# compiled code reads tolerances as module constants (fracture/tolerances.py says why each)
+_DELAUNAY = tol.delaunay
+
 
 @numba.njit(cache=True, inline="always")
 def _cot(V, a, b, c):
@@ -78,7 +81,7 @@ def _try_flip(V, F, sides, r, twin, busy, made, table):
     # the angles opposite the edge add up to more than pi: cot a + cot b < 0
     # (sin(a + b) = sin a sin b (cot a + cot b), with both angles in (0, pi));
     # only if one of them is obtuse, which two dot products tell (most edges)
-    if not (_obtuse(V, w, u, v) or _obtuse(V, x, v, u)) or _cot(V, w, u, v) + _cot(V, x, v, u) >= -1e-12:
+    if not (_obtuse(V, w, u, v) or _obtuse(V, x, v, u)) or _cot(V, w, u, v) + _cot(V, x, v, u) >= -_DELAUNAY:
         return -1
     # the tests that read only the quad's corners before those that look up
     # memory far away (the made set and the edge table): 15 % less time

@@ -31,6 +31,10 @@ import numba
 import numpy as np
 
 from fracture.mesh.faces import face_geometry
+from fracture.tolerances import tol
+
+# compiled code reads tolerances as module constants (fracture/tolerances.py says why each)
+_TINY = tol.tiny
 
 
 @numba.njit(cache=True, inline="always")
@@ -127,7 +131,7 @@ def energy_gradient(V: np.ndarray, F: np.ndarray, psi: np.ndarray, grad: np.ndar
 def velocity(V: np.ndarray, F: np.ndarray, psi: np.ndarray, grad: np.ndarray) -> np.ndarray:
     """Eq. 3: the velocity ``-dE/dx_i / A_i`` of every vertex, ``(n, 3)``."""
     dE, area = energy_gradient(V, F, psi, grad)
-    return -dE / np.maximum(area, 1e-300)[:, None]
+    return -dE / np.maximum(area, _TINY)[:, None]
 
 
 def energy(V: np.ndarray, F: np.ndarray, psi: np.ndarray) -> float:

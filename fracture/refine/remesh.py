@@ -45,6 +45,10 @@ from fracture.refine.crossings_on_b import splits_would_cross
 from fracture.refine.flow import sample_displacement
 from fracture.mesh.edges import EdgeTable, first_per_group
 from fracture.mesh.faces import unit_normal_into, face_geometry
+from fracture.tolerances import tol
+
+# compiled code reads tolerances as module constants (fracture/tolerances.py says why each)
+_TINY = tol.tiny
 
 # Samples inside a triangle keep every barycentric coordinate at least this
 # (a sample near an edge would make a sliver); edge samples stay this far
@@ -253,7 +257,7 @@ def split_wanted(T, P, bary, d, v, F, dt, k_edge, has_edge, near2, far, min_qual
             k = k_edge[f]
             j = (k + 1) % 3
             ex, ey, ez = T[f, j, 0] - T[f, k, 0], T[f, j, 1] - T[f, k, 1], T[f, j, 2] - T[f, k, 2]
-            length = max(np.sqrt(ex * ex + ey * ey + ez * ez), 1e-300)
+            length = max(np.sqrt(ex * ex + ey * ey + ez * ez), _TINY)
             ex, ey, ez = ex / length, ey / length, ez / length
             along = dx * ex + dy * ey + dz * ez
             ax, ay, az = dx - along * ex, dy - along * ey, dz - along * ez
@@ -265,5 +269,5 @@ def split_wanted(T, P, bary, d, v, F, dt, k_edge, has_edge, near2, far, min_qual
                 x, y, z = T[f, k, 0] - T[f, i, 0], T[f, k, 1] - T[f, i, 1], T[f, k, 2] - T[f, i, 2]
                 sq += x * x + y * y + z * z
             want[f] = (abs(dx * N[f, 0] + dy * N[f, 1] + dz * N[f, 2]) > far
-                       and q * 0.5 * t / max(sq, 1e-300) > min_quality)
+                       and q * 0.5 * t / max(sq, _TINY) > min_quality)
     return want, N

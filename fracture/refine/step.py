@@ -45,6 +45,10 @@ import numba
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
+from fracture.tolerances import tol
+
+# compiled code reads tolerances as module constants (fracture/tolerances.py says why each)
+_TINY = tol.tiny
 
 # Boundary vertices move at most this fraction of their shortest edge per step (module notes).
 BOUNDARY_MOVE = 0.3
@@ -67,7 +71,7 @@ def weighted_cotangent_laplacian(V: np.ndarray, F: np.ndarray, w: np.ndarray) ->
         a = T[:, (k + 1) % 3] - T[:, k]
         b = T[:, (k + 2) % 3] - T[:, k]
         cross = np.linalg.norm(np.cross(a, b), axis=1)
-        cots[:, k] = np.einsum("ij,ij->i", a, b) / np.maximum(cross, 1e-300)
+        cots[:, k] = np.einsum("ij,ij->i", a, b) / np.maximum(cross, _TINY)
     c = 0.5 * cots * w[:, None]
     i = np.concatenate([F[:, 1], F[:, 2], F[:, 0]])
     j = np.concatenate([F[:, 2], F[:, 0], F[:, 1]])
@@ -103,7 +107,7 @@ class ImplicitStep:
         """The displacement ``d``, ``(n, 3)``: ``L`` is :func:`weighted_cotangent_laplacian` (it does not
         depend on ``tau``), ``area`` the barycentric vertex area ``A_i`` (the diagonal of ``M``),
         ``v`` the explicit velocity of Eq. 3."""
-        M = np.maximum(area, 1e-300)
+        M = np.maximum(area, _TINY)
         K = (sp.diags(M) - tau * L).tocsc()
         K.sort_indices()
         b = np.ascontiguousarray(tau * M[:, None] * v)
@@ -176,7 +180,7 @@ def limit_moves(V, F, d, fold, cap):
         ux, uy, uz = V[b, 0] - V[a, 0], V[b, 1] - V[a, 1], V[b, 2] - V[a, 2]
         vx, vy, vz = V[c, 0] - V[a, 0], V[c, 1] - V[a, 1], V[c, 2] - V[a, 2]
         twice = np.sqrt((uy * vz - uz * vy) ** 2 + (uz * vx - ux * vz) ** 2 + (ux * vy - uy * vx) ** 2)
-        altitude = twice / max(longest, 1e-300)
+        altitude = twice / max(longest, _TINY)
         for k in range(3):
             a, b = F[f, k], F[f, (k + 1) % 3]
             rx, ry, rz = d[b, 0] - d[a, 0], d[b, 1] - d[a, 1], d[b, 2] - d[a, 2]
@@ -233,7 +237,7 @@ class StepSize:
     def begin(self, gradient_scale: float) -> float:
         """Start a stage: the nominal ``tau`` moves a vertex where grad psi is ``gradient_scale`` (the
         stage field's root mean square gradient) by ``step`` grid cells."""
-        self.tau = self.start = self.step * self.h / max(gradient_scale, 1e-300)
+        self.tau = self.start = self.step * self.h / max(gradient_scale, _TINY)
         return self.tau
 
     @property

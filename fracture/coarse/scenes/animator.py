@@ -21,6 +21,7 @@ import numpy as np
 from scipy.spatial import ConvexHull
 
 from fracture.coarse.animation import rigid_fit
+from fracture.tolerances import tol
 
 GRAVITY = 9.81
 
@@ -28,7 +29,7 @@ GRAVITY = 9.81
 def rotation(axis: np.ndarray, angle: float) -> np.ndarray:
     """Rotation matrix about a unit axis (Rodrigues)."""
     axis = np.asarray(axis, np.float64)
-    k = axis / max(np.linalg.norm(axis), 1e-300)
+    k = axis / max(np.linalg.norm(axis), tol.tiny)
     K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
     return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
 
