@@ -80,8 +80,7 @@ def perlin(U: np.ndarray, frequency, rng: np.random.Generator, octaves: int = 1,
     Notes
     -----
     ``noise.pnoise3`` takes one point per call; a generator over the points
-    costs about 1 us per point, which is fine for fields sampled once per run
-    (about 0.15 s for a 50^3 grid).
+    is fine for fields sampled once per run (``benchmarks/bench_fields.py``).
     """
     offset = rng.uniform(0.0, _NOISE_OFFSET_RANGE, 3)
     Q = np.asarray(U, np.float64) * np.asarray(frequency, np.float64) + offset

@@ -4,11 +4,9 @@ Every refinement iteration allocates and frees the same large arrays again
 (hash grids, pair lists, edge tables: tens of MB at 100K triangles). glibc
 hands blocks above its mmap threshold back to the kernel on ``free`` and
 trims the top of its heap beyond another threshold, so each new array is
-zeroed and faulted in again page by page: on the bunny at 174K triangles,
-about 80K page faults and 0.2 s of kernel time per refinement. With both
-thresholds raised, freed blocks stay in the heap and the next arrays reuse
-pages already mapped (about 35K faults on a first refinement, none on the
-next in the same process).
+zeroed and faulted in again page by page (``benchmarks/README.md`` has the
+counts). With both thresholds raised, freed blocks stay in the heap and the
+next arrays reuse pages already mapped.
 
 The setting is process-wide and lasts: a process keeps the memory of its
 peak (which it had anyway) until it ends. Without glibc (macOS, musl) this

@@ -207,8 +207,7 @@ def _near_surface(ids: np.ndarray, shape, origin: np.ndarray, h: float, V: np.nd
     ``(V, F)``, exactly.
 
     Asking libigl's AABB tree about every node costs most of the labelling on
-    fine grids (8M nodes at 240 voxels, 40 s); the surface is near few of
-    them. So the distances are first taken on the nodes of every ``stride``-th
+    fine grids; the surface is near few of them. So the distances are first taken on the nodes of every ``stride``-th
     grid line: a node is within ``stride sqrt(3) / 2`` voxels of one of them,
     and by the triangle inequality only nodes whose coarse neighbour is within
     ``reach`` plus that (and a voxel to spare) can be within ``reach``. Those

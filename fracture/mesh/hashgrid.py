@@ -183,7 +183,7 @@ def _sort_buckets(lo, scale, toff, start, items, key):
     (``lo * s`` in ``[ix - 1, ix + 1)``): a counting sort on 2n sub-cells of
     that span puts a bucket of n slots almost in order, and an insertion sort
     finishes. (An insertion sort alone moves a slot past a quarter of its
-    bucket on average: half the time of a grid's build on refined meshes.)
+    bucket on average.)
     """
     n_max = 0
     for b in range(toff[-1]):

@@ -23,8 +23,8 @@ _EPS = tol.static_test
 def typical_cell(X, E):
     """Four times the median length of edges ``E`` (of at most 4096 of them, evenly spread). Any size
     gives the same pairs: smaller cells hold fewer elements but put each in more of them. With the
-    buckets sorted by x (:mod:`~fracture.mesh.hashgrid`) the size matters little: a build and the
-    pairs of the bunny's 159K triangles' swept boxes took 62 to 68 ms at 2.5 to 6 edges."""
+    buckets sorted by x (:mod:`~fracture.mesh.hashgrid`) the size matters little
+    (``benchmarks/README.md``)."""
     if not len(E):
         return 1.0
     E = E[:: -(-len(E) // 4096)]

@@ -430,8 +430,8 @@ def crossing_pairs(V: np.ndarray, F: np.ndarray) -> int:
     within rounding of each other without meeting are not counted, unlike
     the tolerant count the refinement uses for its moving surface
     (:func:`fracture.mesh.intersect.self_intersections`). That count runs
-    first: it is three times faster and misses no crossing (coplanar
-    overlaps aside), so where it finds none the exact test is skipped.
+    first: it is faster and misses no crossing (coplanar overlaps aside), so
+    where it finds none the exact test is skipped.
     """
     if len(F) < 2 or not self_intersections(V, F):
         return 0

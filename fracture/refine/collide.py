@@ -274,11 +274,9 @@ def _represented(F, n, eid):
     triangle with two of them takes both, then a triangle that represents
     an edge already takes its others, and the rest go to their first
     triangle. The vertices then go to triangles that represent an edge,
-    first to those that can take all three of theirs, then two, then one.
-    On a refined bunny (159K triangles) this leaves 63 % of the triangles
-    with an edge and 23 % with a vertex, against 69 % and 41 % when every
-    feature goes to its first triangle that takes it, and the feature tests
-    take 15 % less time.
+    first to those that can take all three of theirs, then two, then one
+    (fewer representing triangles than first-come, first-served: see
+    ``benchmarks/README.md``).
     """
     m = F.shape[0]
     rep = np.zeros(m, np.int64)

@@ -100,8 +100,7 @@ _FEW_SPLITS = 0.005
 # ... and its moves are small, or its step lowered the functional by less than this fraction.
 _LITTLE_GAIN = 1e-4
 # Once the triangle budget is full, a stage has settled when an iteration lowers its functional by less than
-# this fraction: at full size an iteration costs the most and gains the least (the wall's last stage: 10
-# iterations of 0.1-0.9 % each, 2.5 times the time of the whole refinement before them, 2 points of weak share).
+# this fraction: at full size an iteration costs the most and gains the least (benchmarks/README.md).
 _FULL_GAIN = 1e-2
 
 

@@ -84,7 +84,7 @@ def _try_flip(V, F, sides, r, twin, busy, made, table):
     if not (_obtuse(V, w, u, v) or _obtuse(V, x, v, u)) or _cot(V, w, u, v) + _cot(V, x, v, u) >= -_DELAUNAY:
         return -1
     # the tests that read only the quad's corners before those that look up
-    # memory far away (the made set and the edge table): 15 % less time
+    # memory far away (the made set and the edge table)
     a = _normal(V, u, v, w)
     b = _normal(V, v, u, x)
     n_old = (a[0] + b[0], a[1] + b[1], a[2] + b[2])
