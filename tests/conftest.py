@@ -53,18 +53,18 @@ def colliding_vertices(X0, X1, F, eta):
     """Mask of the vertices of every vertex-triangle and edge-edge pair of triangles ``F`` (sharing no
     vertex) that meets while the vertices move from ``X0`` to ``X1``, each pair tested: the reference
     for the culled searches."""
-    from fracture.refine.collide import _edge_edge_hit, _vertex_triangle_hit
+    from fracture.refine.collide import edge_edge_hit, vertex_triangle_hit
     E = np.unique(np.sort(np.stack([F, np.roll(F, -1, 1)], 2).reshape(-1, 2), 1), axis=0)
     hit = np.zeros(len(X0), bool)
     times = np.empty(4)
     P = lambda i: (tuple(X0[i]), tuple(X1[i]))  # noqa: E731
     for v in np.unique(F):
         for a, b, c in F:
-            if v not in (a, b, c) and _vertex_triangle_hit(*P(v), *P(a), *P(b), *P(c), eta * eta, times):
+            if v not in (a, b, c) and vertex_triangle_hit(*P(v), *P(a), *P(b), *P(c), eta * eta, times):
                 hit[[v, a, b, c]] = True
     for i, (p, q) in enumerate(E):
         for r, s in E[i + 1:]:
-            if len({p, q, r, s}) == 4 and _edge_edge_hit(*P(p), *P(q), *P(r), *P(s), eta * eta, times):
+            if len({p, q, r, s}) == 4 and edge_edge_hit(*P(p), *P(q), *P(r), *P(s), eta * eta, times):
                 hit[[p, q, r, s]] = True
     return hit
 

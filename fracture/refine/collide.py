@@ -223,7 +223,7 @@ def _segments_cross_at(p, q, r, s, eps):
 
 
 @numba.njit(cache=True)
-def _vertex_triangle_hit(p0, p1, a0, a1, b0, b1, c0, c1, eta2, times):
+def vertex_triangle_hit(p0, p1, a0, a1, b0, b1, c0, c1, eta2, times):
     start = _point_triangle_distance2(p0, a0, b0, c0)
     # the distance shrinks by at most the largest move of p relative to a corner
     # (the triangle's points are convex combinations of its corners): a pair
@@ -245,7 +245,7 @@ def _vertex_triangle_hit(p0, p1, a0, a1, b0, b1, c0, c1, eta2, times):
 
 
 @numba.njit(cache=True)
-def _edge_edge_hit(p0, p1, q0, q1, r0, r1, s0, s1, eta2, times):
+def edge_edge_hit(p0, p1, q0, q1, r0, r1, s0, s1, eta2, times):
     start = _segment_segment_distance2(p0, q0, r0, s0)
     reach = max(_relative_move(p0, p1, r0, r1), _relative_move(p0, p1, s0, s1),
                 _relative_move(q0, q1, r0, r1), _relative_move(q0, q1, s0, s1))
@@ -391,7 +391,7 @@ def _feature_tests(X0, X1, F, B, lo, hi, rep, pairs, eta, every, on, sure, stop)
                 r, s = F[b, j], F[b, (j + 1) % 3]
                 if not near & (1 << (3 * k + j)) or not (every or on[p] or on[q] or on[r] or on[s]):
                     continue
-                if _edge_edge_hit(vec.point(X0, p), vec.point(X1, p), vec.point(X0, q), vec.point(X1, q),
+                if edge_edge_hit(vec.point(X0, p), vec.point(X1, p), vec.point(X0, q), vec.point(X1, q),
                                   vec.point(X0, r), vec.point(X1, r), vec.point(X0, s), vec.point(X1, s), eta2, times):
                     hits += 1
                     stop[p] = stop[q] = stop[r] = stop[s] = True
@@ -402,7 +402,7 @@ def _feature_tests(X0, X1, F, B, lo, hi, rep, pairs, eta, every, on, sure, stop)
 def _vertex_triangle_pair(X0, X1, F, v, f, eta2, times, stop):
     """Test vertex v against triangle f (not one of its corners); marks a colliding pair in ``stop``."""
     a, b, c = F[f, 0], F[f, 1], F[f, 2]
-    if not _vertex_triangle_hit(vec.point(X0, v), vec.point(X1, v), vec.point(X0, a), vec.point(X1, a),
+    if not vertex_triangle_hit(vec.point(X0, v), vec.point(X1, v), vec.point(X0, a), vec.point(X1, a),
                                 vec.point(X0, b), vec.point(X1, b), vec.point(X0, c), vec.point(X1, c), eta2, times):
         return 0
     stop[v] = stop[a] = stop[b] = stop[c] = True
