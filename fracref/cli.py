@@ -1,7 +1,8 @@
 """``fracref``: the command line.
 
 ``fracref run CONFIG [--out DIR] [--set key.path=value ...] [--until STAGE] [--force] [--no-cache]``
-``fracref config CONFIG [--set ...]`` prints the resolved config.
+``fracref config CONFIG [--set ...]`` prints the resolved config; ``fracref config --explain KEY`` what a key means.
+``fracref --log-level info ...`` shows the library's messages on stderr.
 ``fracref stages`` lists the stages.
 ``fracref export RUN_DIR --format usd [--out FILE]`` writes a finished run's animated pieces as USD.
 """
@@ -14,6 +15,10 @@ import sys
 from pathlib import Path
 
 from fracture.errors import ConfigError
+
+
+# commands that refine or load refinement results (the others only read configs)
+_COMPUTING = ("run", "sweep", "view", "render", "export")
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -144,7 +149,8 @@ def _main(argv: list[str] | None) -> int:
     from fracture.pipeline.config import dump_config, load_config
     from fracture.errors import InputError, ResultError, StageError
 
-    prepare_process()
+    if args.command in _COMPUTING:
+        prepare_process()  # only where kernels run: config, stages and explain need none of it
     logging.basicConfig(level=args.log_level.upper(), format="%(name)s: %(message)s", stream=sys.stderr)
     try:
         if args.command == "stages":

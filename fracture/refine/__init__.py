@@ -53,14 +53,23 @@ def clear_stale_numba_cache(packages: Path | list[Path] | None = None) -> bool:
 
 
 def kernels_cached(package: Path | None = None) -> bool:
-    """Whether numba's cache holds the compiled (not inlined) functions of ``package`` (default: this
-    one), i.e. whether a run starts at once rather than after a one-off compilation. A run compiles
-    only what it calls, so most of them (not every one) is enough."""
-    package = package or Path(__file__).parent
+    """Whether numba's cache holds the compiled (not inlined) functions of ``package`` (default: the
+    refinement's and the mesh queries', compiled together), i.e. whether a run starts at once rather
+    than after a one-off compilation. A run compiles only what it calls, so most of them (not every
+    one) is enough."""
+    packages = _compiled_packages() if package is None else [package]
+    want, have = set(), set()
+    for package in packages:
+        want |= _compiled_names(package)
+        have |= {f"{package.name}.{f.name.split('-')[0]}" for f in (package / "__pycache__").glob("*.nbi")}
+    return len(want & have) >= 0.5 * len(want)
+
+
+def _compiled_names(package: Path) -> set[str]:
+    """``package.module.function`` of the functions numba caches in ``package`` (not the inlined ones)."""
     want = set()
     for p in package.glob("*.py"):
         for m in re.finditer(r"@numba\.njit\(([^)]*)\)\s*\ndef (\w+)", p.read_text(encoding="utf-8")):
             if "cache=True" in m.group(1) and "inline" not in m.group(1):
-                want.add(f"{p.stem}.{m.group(2)}")
-    have = {f.name.split("-")[0] for f in (package / "__pycache__").glob("*.nbi")}
-    return len(want & have) >= 0.5 * len(want)
+                want.add(f"{package.name}.{p.stem}.{m.group(2)}")
+    return want
