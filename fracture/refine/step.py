@@ -12,7 +12,7 @@ at the end of the step (backward Euler), the gradient term at its start:
 
 one sparse symmetric positive definite solve per step (the three coordinates
 share the matrix and its factorisation; a step retried with a smaller ``tau``
-reuses the factorisation, :class:`ImplicitStep`).
+reuses its order and symbolic analysis, :class:`ImplicitStep`).
 It is unconditionally stable, agrees with the explicit step ``tau v`` to first
 order in ``tau`` and has the same fixed points (``d = 0`` exactly where
 ``v = 0``), so a vertex moves on the order of a grid cell per step at any mesh
@@ -43,8 +43,8 @@ from __future__ import annotations
 
 import numba
 import numpy as np
+import qdldl
 import scipy.sparse as sp
-import scipy.sparse.linalg as sla
 from fracture.tolerances import tol
 
 # compiled code reads tolerances as module constants (fracture/tolerances.py says why each)
@@ -52,8 +52,6 @@ _TINY = tol.tiny
 
 # Boundary vertices move at most this fraction of their shortest edge per step (module notes).
 BOUNDARY_MOVE = 0.3
-# Relative residual to which a step solved by conjugate gradients is solved (ImplicitStep).
-SOLVE_RTOL = 1e-6
 
 
 def weighted_cotangent_laplacian(V: np.ndarray, F: np.ndarray, w: np.ndarray) -> sp.csr_matrix:
@@ -84,23 +82,18 @@ class ImplicitStep:
     """Solves ``(M - tau L_w) d = tau M v`` (module notes) step after step, keeping its last
     factorisation.
 
-    A system is factorised by sparse LU (SuperLU, a symmetric fill-reducing order, no pivoting:
-    the matrix is symmetric positive definite); the three coordinates share the factors. A step
-    tried again with a smaller ``tau`` after a rejected one has the same matrix pattern and
-    nearly the same matrix, so it is solved instead by conjugate gradients preconditioned with
-    the factors at hand (for ``tau`` halved the preconditioned matrix's eigenvalues lie in
-    ``[1/2, 1]``: about seven iterations to a relative residual of ``rtol``, about half the cost
-    of a new factorisation). Should they not converge in ``REUSE_ITERATIONS`` (a matrix that has
-    drifted too far) the system is factorised afresh. Conjugate gradients with only a diagonal
-    preconditioner are no substitute for the factorisation: on freshly split triangles with a
-    large ``tau`` they take hundreds of iterations.
+    The matrix is symmetric positive definite (``M`` positive, ``L_w`` a sum
+    of negative semi-definite triangle terms with positive weights), so it is
+    factorised as ``L D L^T`` by QDLDL (an AMD fill-reducing order, then a
+    simplicial factorisation; the three coordinates share it). A step tried
+    again with a smaller ``tau`` after a rejected one, or any matrix of the
+    same sparsity pattern, keeps the order and the symbolic analysis and is
+    only factorised numerically again (a quarter of a fresh factorisation's
+    cost on the branch; ``benchmarks/README.md`` compares the solvers).
     """
 
-    REUSE_ITERATIONS = 15
-
-    def __init__(self, rtol: float = SOLVE_RTOL):
-        self.rtol = rtol
-        self._K = self._lu = None
+    def __init__(self):
+        self._K = self._ldl = None
         self.factorisations = self.reuses = 0
 
     def __call__(self, L: sp.csr_matrix, area: np.ndarray, v: np.ndarray, tau: float) -> np.ndarray:
@@ -108,18 +101,17 @@ class ImplicitStep:
         depend on ``tau``), ``area`` the barycentric vertex area ``A_i`` (the diagonal of ``M``),
         ``v`` the explicit velocity of Eq. 3."""
         M = np.maximum(area, _TINY)
-        K = (sp.diags(M) - tau * L).tocsc()
+        K = sp.triu(sp.diags(M) - tau * L, format="csc")  # QDLDL reads the upper triangle
         K.sort_indices()
-        b = np.ascontiguousarray(tau * M[:, None] * v)
-        if self._lu is not None and self._same_pattern(K):
-            d = _preconditioned_cg(K, b, self._lu.solve, b / K.diagonal()[:, None], self.rtol, self.REUSE_ITERATIONS)
-            if d is not None:
-                self.reuses += 1
-                return d
+        if self._ldl is not None and self._same_pattern(K):
+            self._ldl.update(K, upper=True)
+            self.reuses += 1
+        else:
+            self._ldl = qdldl.Solver(K, upper=True)
+            self.factorisations += 1
         self._K = K
-        self._lu = sla.splu(K, permc_spec="MMD_AT_PLUS_A", options=dict(SymmetricMode=True, DiagPivotThresh=0.0))
-        self.factorisations += 1
-        return self._lu.solve(b)
+        b = tau * M[:, None] * v
+        return np.column_stack([self._ldl.solve(np.ascontiguousarray(b[:, k])) for k in range(3)])
 
     def _same_pattern(self, K: sp.csc_matrix) -> bool:
         old = self._K
@@ -131,30 +123,6 @@ def implicit_step(L: sp.csr_matrix, area: np.ndarray, v: np.ndarray, tau: float)
     """The displacement ``d`` of ``(M - tau L_w) d = tau M v`` (module notes), ``(n, 3)``, by a
     factorisation of its own (:class:`ImplicitStep` keeps one across steps)."""
     return ImplicitStep()(L, area, v, tau)
-
-
-def _preconditioned_cg(K, B, precondition, X, rtol: float, most: int):
-    """Conjugate gradients on ``K X = B`` (three columns side by side) from ``X`` with the preconditioner
-    ``precondition(R)``; the solution once every column has ``|r| <= rtol |b|``, None if that takes
-    more than ``most`` iterations."""
-    R = B - K @ X
-    Z = precondition(R)
-    P = Z.copy()
-    rz = np.einsum("ij,ij->j", R, Z)
-    goal = rtol * rtol * np.einsum("ij,ij->j", B, B)
-    for _ in range(most + 1):
-        if (np.einsum("ij,ij->j", R, R) <= goal).all():
-            return X
-        KP = K @ P
-        pkp = np.einsum("ij,ij->j", P, KP)
-        alpha = np.divide(rz, pkp, out=np.zeros(3), where=pkp > 0.0)
-        X = X + alpha * P
-        R = R - alpha * KP
-        Z = precondition(R)
-        rz_new = np.einsum("ij,ij->j", R, Z)
-        P = Z + np.divide(rz_new, rz, out=np.zeros(3), where=rz > 0.0) * P
-        rz = rz_new
-    return None
 
 
 @numba.njit(cache=True)
