@@ -229,7 +229,8 @@ def test_chord_splits_take_every_boundary_edge_far_from_b_and_only_those():
 
 def test_inner_vertices_that_would_leave_b_are_found_and_only_near_ones_are_asked_about():
     """leaving_b: an inner vertex moved out of the box (or onto it) is reported, one moved inside is not,
-    and B is asked only about vertices within a move of it."""
+    B is asked only about vertices that its last answers do not prove inside, and an answer outside B
+    proves nothing."""
     pyramid = two_weak_sheets()
     BV, BF = box([0, 0, 0], [1, 1, 1], (8, 8, 8))
     mesh = flat_cut()  # the plane x = 0.52; inner vertices from 1/6 to 5/6 in y and z
@@ -243,10 +244,16 @@ def test_inner_vertices_that_would_leave_b_are_found_and_only_near_ones_are_aske
     asked = []
     closest = r.B.closest
     r.B.closest = lambda P: (asked.append(len(P)), closest(P))[1]
-    reach = 0.25
-    out = r.leaving_b(X1, np.array([edge, middle]), reach)
+    out = r.leaving_b(X1, np.array([edge, middle]))
     assert out.tolist() == [edge] and asked == [1]  # the middle vertex is farther than its move from B
+    X1[edge, 1] = -0.3  # far out: 0.3 from B
+    assert r.leaving_b(X1, np.array([edge])).tolist() == [edge]
+    X1[edge, 1] = -0.25  # still out, though within 0.3 of where B was last asked about it
+    assert r.leaving_b(X1, np.array([edge])).tolist() == [edge]
     X1[edge, 1] = 0.0  # onto B: closer than the thickness
-    assert r.leaving_b(X1, np.array([edge]), reach).tolist() == [edge]
+    assert r.leaving_b(X1, np.array([edge])).tolist() == [edge]
     X1[edge, 1] = 0.02  # back inside
-    assert r.leaving_b(X1, np.array([edge]), reach).size == 0
+    assert r.leaving_b(X1, np.array([edge])).size == 0
+    asked.clear()
+    X1[edge, 1] = 0.015  # inside, nearer than its distance at the last answer: not asked
+    assert r.leaving_b(X1, np.array([edge])).size == 0 and asked == []

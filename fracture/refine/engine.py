@@ -290,28 +290,31 @@ class Refiner:
             kept += len(ids)
         return kept
 
-    def leaving_b(self, X1: np.ndarray, ids: np.ndarray, reach: float) -> np.ndarray:
-        """Of the inner vertices ``ids``, moved to ``X1`` by at most ``reach``, those that would leave the
-        object: outside B there, or closer to it than the collision thickness.
+    def leaving_b(self, X1: np.ndarray, ids: np.ndarray) -> np.ndarray:
+        """Of the inner vertices ``ids``, moved to ``X1``, those that would leave the object: outside B
+        there, or closer to it than the collision thickness.
 
         The paper stops colliding vertices (Sec. 4.4); B is one more obstacle:
         a piece is the region of B on one side of the sheets, and an inner
-        vertex outside B makes the piece cross itself. A vertex's distance to
-        B changes by at most how far it moved, so B is asked only about
-        vertices whose last known distance, less their move since, is within
-        ``reach`` (:meth:`closest_on_b` keeps the answers); a vertex farther
-        than its move from B cannot have crossed it.
+        vertex outside B makes the piece cross itself. B is asked only about
+        vertices that may be: a point closer to an inside point ``r`` than
+        ``r``'s distance to B is inside, and farther from B than that distance
+        less how far apart they are. So a vertex whose last known distance
+        (at an inside position, kept by :meth:`closest_on_b`), less its move
+        since, exceeds the thickness is inside and clear of B; only the rest
+        are asked about. An answer at a position outside B is forgotten: it
+        bounds nothing.
         """
         s = self.state
+        thin = self.params.thickness * self.h
         bound = np.sqrt(s.near_d2[ids]) - np.linalg.norm(X1[ids] - s.near_at[ids], axis=1)
-        near = ids[~(bound > reach)]  # NaN (never asked) counts as near
+        near = ids[~(bound > thin)]  # NaN (never asked, or last asked outside B) counts as near
         if not len(near):
             return near
         d2 = self.closest_on_b(near, X1)[0]
-        close = d2 < reach * reach
-        near, d2 = near[close], d2[close]
-        thin = self.params.thickness * self.h
-        return near[(d2 < thin * thin) | ~self.B.inside(X1[near])]
+        out = near[(d2 < thin * thin) | ~self.B.inside(X1[near])]
+        s.near_at[out] = np.nan
+        return out
 
     def project_to_exterior(self, ids: np.ndarray, V: np.ndarray) -> None:
         """Put vertices ``ids`` of positions ``V`` on B (in place)."""
@@ -448,7 +451,7 @@ class Refiner:
             self.project_to_exterior(boundary, trial)
             inner = np.flatnonzero((d != 0.0).any(axis=1))
             inner = inner[~np.isin(inner, boundary)]
-            out = self.leaving_b(trial, inner, p.max_move * self.h)
+            out = self.leaving_b(trial, inner)
             trial[out] = m.V[out]  # stopped, as a collision stops a vertex
             self.stop_crossings_on_b(trial, table)
             # the functional before the collisions are looked for: a step that raises it is
