@@ -8,7 +8,8 @@ import pytest
 from test_flow import bumpy_sheet, icosphere
 
 from fracture.refine.flow import energy_gradient, velocity
-from fracture.refine.step import ImplicitStep, StepSize, implicit_step, limit_moves, weighted_cotangent_laplacian
+from fracture.refine.step import (ImplicitStep, StepSize, cotangent_weights, implicit_step, limit_moves,
+                                  weighted_cotangent_laplacian)
 
 
 def test_weighted_laplacian_is_the_area_term_of_eq_3():
@@ -45,7 +46,7 @@ def test_implicit_step_agrees_with_the_explicit_one_for_small_steps(mesh):
     errors = []
     h2 = igl.avg_edge_length(V, F) ** 2  # the explicit step's stability limit scales with it
     for tau in (1e-2 * h2, 1e-3 * h2):
-        d = implicit_step(weighted_cotangent_laplacian(V, F, w), area, v, tau)
+        d = implicit_step(cotangent_weights(V, F, w), area, v, tau)
         errors.append(np.abs(d - tau * v).max() / np.abs(tau * v).max())
     assert errors[1] < 1e-2
     assert errors[1] < 0.2 * errors[0]  # first order: the difference shrinks like tau
@@ -60,7 +61,7 @@ def test_implicit_step_is_stable_where_the_explicit_one_explodes():
     v = -dE / area[:, None]
     h = igl.avg_edge_length(V, F)
     tau = 100 * h * h
-    d = implicit_step(weighted_cotangent_laplacian(V, F, np.ones(len(F))), area, v, tau)
+    d = implicit_step(cotangent_weights(V, F, np.ones(len(F))), area, v, tau)
     r = np.linalg.norm(V + d, axis=1)
     assert r.max() < 1.0 and r.std() < 0.02 * r.mean()
     r_explicit = np.linalg.norm(V + tau * v, axis=1)
@@ -77,8 +78,26 @@ def test_implicit_step_has_the_fixed_points_of_the_flow():
     v = velocity(V, F, psi, np.tile(g, (len(V), 1)))
     v[~inner] = 0.0  # the sheet's rim is held (the engine's boundary constraint)
     _, area = energy_gradient(V, F, psi, np.tile(g, (len(V), 1)))
-    d = implicit_step(weighted_cotangent_laplacian(V, F, psi[F].mean(axis=1)), area, v, 10.0)
+    d = implicit_step(cotangent_weights(V, F, psi[F].mean(axis=1)), area, v, 10.0)
     assert np.abs(d).max() < 1e-10
+
+
+def test_the_implicit_system_is_solved_exactly_on_a_non_manifold_surface():
+    """The system written straight into the factorisation's form (upper triangle by columns) is the
+    matrix M - tau L_w: the displacement solves it, on a surface with three triangles on an edge."""
+    V, F = bumpy_sheet()
+    fin = np.array([[0, 1, len(V)]])  # a third triangle on the sheet's first edge
+    V = np.vstack([V, V[[0, 1]].mean(axis=0) + [0.0, 0.0, 0.3]])
+    F = np.vstack([F, fin])
+    rng = np.random.default_rng(7)
+    w = 0.5 + rng.random(len(F))
+    area = 0.1 + rng.random(len(V))
+    v = rng.standard_normal((len(V), 3))
+    tau = 3.0
+    d = implicit_step(cotangent_weights(V, F, w), area, v, tau)
+    K = np.diag(area) - tau * weighted_cotangent_laplacian(V, F, w).toarray()
+    assert np.allclose(K @ d, tau * area[:, None] * v, atol=1e-10)
+    assert np.allclose(d, np.linalg.solve(K, tau * area[:, None] * v), atol=1e-10)
 
 
 def test_a_retried_step_reuses_the_factorisation_and_solves_the_new_system():
@@ -89,7 +108,7 @@ def test_a_retried_step_reuses_the_factorisation_and_solves_the_new_system():
     psi = 0.5 + rng.random(len(V))
     dE, area = energy_gradient(V, F, psi, rng.standard_normal((len(V), 3)))
     v = -dE / area[:, None]
-    L = weighted_cotangent_laplacian(V, F, psi[F].mean(axis=1))
+    L = cotangent_weights(V, F, psi[F].mean(axis=1))
     tau = 50 * igl.avg_edge_length(V, F) ** 2
     solve = ImplicitStep()
     solve(L, area, v, tau)
@@ -100,7 +119,7 @@ def test_a_retried_step_reuses_the_factorisation_and_solves_the_new_system():
     assert (solve.factorisations, solve.reuses) == (1, 3)
     V2, F2 = icosphere(2)
     _, area2 = energy_gradient(V2, F2, np.ones(len(V2)), np.zeros((len(V2), 3)))
-    solve(weighted_cotangent_laplacian(V2, F2, np.ones(len(F2))), area2, np.zeros((len(V2), 3)), tau)
+    solve(cotangent_weights(V2, F2, np.ones(len(F2))), area2, np.zeros((len(V2), 3)), tau)
     assert solve.factorisations == 2
 
 

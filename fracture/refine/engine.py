@@ -82,8 +82,8 @@ from fracture.refine.mesh import RefineMesh
 from fracture.refine.params import RefineParams
 from fracture.refine.remesh import plan_chord_splits, plan_splits
 from fracture.refine.state import VertexState
-from fracture.refine.step import (BOUNDARY_MOVE, ImplicitStep, StepSize, limit_by_shortest_edge, limit_moves,
-                                  weighted_cotangent_laplacian)
+from fracture.refine.step import (BOUNDARY_MOVE, ImplicitStep, StepSize, cotangent_weights, limit_by_shortest_edge,
+                                  limit_moves)
 from fracture.tolerances import tol
 from fracture.mesh.topology import boundary_conormals
 
@@ -439,7 +439,7 @@ class Refiner:
         s.hold = np.maximum(s.hold - 1, 0)
         closed = closed_vertices(m.F, len(m.V), table)  # for the collision step and the flips
         X1, grid, after, retries, stopped = m.V, None, before, 0, np.zeros(len(m.V), bool)
-        L = weighted_cotangent_laplacian(m.V, m.F, wf)
+        L = cotangent_weights(m.V, m.F, wf, table)
         for attempt in range(_ATTEMPTS):
             tau = self.step.tau
             d = self.solve(L, area, v, tau)

@@ -41,10 +41,15 @@ the surface is at a minimum of the discrete functional.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba
 import numpy as np
 import qdldl
 import scipy.sparse as sp
+
+from fracture.mesh import vec
+from fracture.mesh.edges import EdgeTable, edge_table
 from fracture.tolerances import tol
 
 # compiled code reads tolerances as module constants (fracture/tolerances.py says why each)
@@ -54,28 +59,92 @@ _TINY = tol.tiny
 BOUNDARY_MOVE = 0.3
 
 
-def weighted_cotangent_laplacian(V: np.ndarray, F: np.ndarray, w: np.ndarray) -> sp.csr_matrix:
-    """``L_w = sum_j w_j L_j``: the cotangent Laplacian (negative semi-definite, libigl's sign) with
-    triangle ``j`` weighted by ``w_j``; ``(L_w x)_i = -sum_j w_j dA_j/dx_i``.
+class CotangentWeights(NamedTuple):
+    """The weighted cotangent Laplacian ``L_w`` of a surface by its edges: edge ``e`` joins vertices
+    ``lo[e] < hi[e]``, ``L_w[lo, hi] = L_w[hi, lo] = weight[e]``, and each row sums to zero (libigl's
+    sign: negative semi-definite)."""
+
+    lo: np.ndarray
+    hi: np.ndarray
+    weight: np.ndarray
+    n: int
+
+    def matrix(self) -> sp.csr_matrix:
+        """``L_w`` as a sparse matrix ``(n, n)``."""
+        i, j, c = self.lo, self.hi, self.weight
+        off = sp.coo_matrix((np.r_[c, c], (np.r_[i, j], np.r_[j, i])), shape=(self.n, self.n)).tocsr()
+        return off - sp.diags(np.asarray(off.sum(axis=1)).ravel())
+
+
+def cotangent_weights(V: np.ndarray, F: np.ndarray, w: np.ndarray, table: EdgeTable | None = None) -> CotangentWeights:
+    """``L_w = sum_j w_j L_j``: the cotangent Laplacian with triangle ``j`` weighted by ``w_j``;
+    ``(L_w x)_i = -sum_j w_j dA_j/dx_i``. ``table`` is the edge table of ``F``, if known.
 
     Written out rather than taken from ``igl.cotmatrix`` because of the
     per-triangle weights and because the surface is non-manifold (every
     triangle on an edge adds its cotangent, however many there are).
     """
-    n = len(V)
-    T = V[F]
-    cots = np.empty((len(F), 3))
-    for k in range(3):  # the angle at corner k is opposite edge (k+1, k+2)
-        a = T[:, (k + 1) % 3] - T[:, k]
-        b = T[:, (k + 2) % 3] - T[:, k]
-        cross = np.linalg.norm(np.cross(a, b), axis=1)
-        cots[:, k] = np.einsum("ij,ij->i", a, b) / np.maximum(cross, _TINY)
-    c = 0.5 * cots * w[:, None]
-    i = np.concatenate([F[:, 1], F[:, 2], F[:, 0]])
-    j = np.concatenate([F[:, 2], F[:, 0], F[:, 1]])
-    c = np.concatenate([c[:, 0], c[:, 1], c[:, 2]])
-    off = sp.coo_matrix((np.r_[c, c], (np.r_[i, j], np.r_[j, i])), shape=(n, n)).tocsr()
-    return off - sp.diags(np.asarray(off.sum(axis=1)).ravel())
+    V = np.ascontiguousarray(V, np.float64)
+    F = np.ascontiguousarray(F, np.int64)
+    table = edge_table(F, len(V)) if table is None else table
+    lo, hi, c = _edge_weights(V, F, np.ascontiguousarray(w, np.float64), table.eid, table.first)
+    return CotangentWeights(lo, hi, c, len(V))
+
+
+def weighted_cotangent_laplacian(V: np.ndarray, F: np.ndarray, w: np.ndarray) -> sp.csr_matrix:
+    """:func:`cotangent_weights` as a sparse matrix."""
+    return cotangent_weights(V, F, w).matrix()
+
+
+@numba.njit(cache=True)
+def _edge_weights(V, F, w, eid, first):
+    """Per edge its two vertices (the lower first) and ``sum_j w_j cot(angle opposite it in j) / 2``."""
+    ne = first.shape[0]
+    lo = np.empty(ne, np.int64)
+    hi = np.empty(ne, np.int64)
+    for e in range(ne):
+        f, k = first[e] // 3, first[e] % 3
+        a, b = F[f, k], F[f, (k + 1) % 3]
+        lo[e], hi[e] = min(a, b), max(a, b)
+    c = np.zeros(ne)
+    for f in range(F.shape[0]):
+        for k in range(3):  # the angle at corner k is opposite edge (k+1, k+2), the directed edge 3 f + k + 1
+            o = vec.point(V, F[f, k])
+            a = vec.sub(vec.point(V, F[f, (k + 1) % 3]), o)
+            b = vec.sub(vec.point(V, F[f, (k + 2) % 3]), o)
+            c[eid[3 * f + (k + 1) % 3]] += 0.5 * w[f] * vec.dot(a, b) / max(vec.norm(vec.cross(a, b)), _TINY)
+    return lo, hi, c
+
+
+class _UpperPattern(NamedTuple):
+    """The upper triangle of ``M - tau L_w`` by compressed columns (what QDLDL reads): per column its
+    rows, ascending, the diagonal last; and where each edge's and each vertex's entry goes."""
+
+    indptr: np.ndarray
+    indices: np.ndarray
+    edge_slot: np.ndarray
+    diagonal_slot: np.ndarray
+
+
+@numba.njit(cache=True)
+def _upper_pattern(lo, hi, n):
+    indptr = np.zeros(n + 1, np.int64)
+    for e in range(lo.shape[0]):
+        indptr[hi[e] + 1] += 1
+    for j in range(n):
+        indptr[j + 1] += indptr[j] + 1  # + 1: the diagonal
+    fill = indptr[:-1].copy()
+    indices = np.empty(indptr[n], np.int64)
+    edge_slot = np.empty(lo.shape[0], np.int64)
+    for e in np.argsort(lo, kind="mergesort"):  # each column's rows come in ascending
+        p = fill[hi[e]]
+        fill[hi[e]] += 1
+        indices[p] = lo[e]
+        edge_slot[e] = p
+    diagonal_slot = indptr[1:] - 1
+    for j in range(n):
+        indices[diagonal_slot[j]] = j
+    return _UpperPattern(indptr, indices, edge_slot, diagonal_slot)
 
 
 class ImplicitStep:
@@ -93,33 +162,34 @@ class ImplicitStep:
     """
 
     def __init__(self):
-        self._K = self._ldl = None
+        self._edges = self._pattern = self._ldl = None
         self.factorisations = self.reuses = 0
 
-    def __call__(self, L: sp.csr_matrix, area: np.ndarray, v: np.ndarray, tau: float) -> np.ndarray:
-        """The displacement ``d``, ``(n, 3)``: ``L`` is :func:`weighted_cotangent_laplacian` (it does not
-        depend on ``tau``), ``area`` the barycentric vertex area ``A_i`` (the diagonal of ``M``),
-        ``v`` the explicit velocity of Eq. 3."""
+    def __call__(self, L: CotangentWeights, area: np.ndarray, v: np.ndarray, tau: float) -> np.ndarray:
+        """The displacement ``d``, ``(n, 3)``: ``L`` is :func:`cotangent_weights` (it does not depend on
+        ``tau``), ``area`` the barycentric vertex area ``A_i`` (the diagonal of ``M``), ``v`` the
+        explicit velocity of Eq. 3. The matrix is written straight into QDLDL's form, the upper
+        triangle by columns, whose pattern is kept while the edges stay the same."""
+        old = self._edges
+        if old is None or not (old[2] == L.n and np.array_equal(old[0], L.lo) and np.array_equal(old[1], L.hi)):
+            self._edges, self._pattern, self._ldl = (L.lo, L.hi, L.n), _upper_pattern(L.lo, L.hi, L.n), None
+        pattern = self._pattern
         M = np.maximum(area, _TINY)
-        K = sp.triu(sp.diags(M) - tau * L, format="csc")  # QDLDL reads the upper triangle
-        K.sort_indices()
-        if self._ldl is not None and self._same_pattern(K):
-            self._ldl.update(K, upper=True)
-            self.reuses += 1
-        else:
+        data = np.empty(len(pattern.indices))
+        data[pattern.edge_slot] = -tau * L.weight
+        data[pattern.diagonal_slot] = M + tau * (np.bincount(L.lo, L.weight, L.n) + np.bincount(L.hi, L.weight, L.n))
+        K = sp.csc_matrix((data, pattern.indices, pattern.indptr), shape=(L.n, L.n))
+        if self._ldl is None:
             self._ldl = qdldl.Solver(K, upper=True)
             self.factorisations += 1
-        self._K = K
+        else:
+            self._ldl.update(K, upper=True)
+            self.reuses += 1
         b = tau * M[:, None] * v
         return np.column_stack([self._ldl.solve(np.ascontiguousarray(b[:, k])) for k in range(3)])
 
-    def _same_pattern(self, K: sp.csc_matrix) -> bool:
-        old = self._K
-        return (old.shape == K.shape and old.nnz == K.nnz and np.array_equal(old.indptr, K.indptr)
-                and np.array_equal(old.indices, K.indices))
 
-
-def implicit_step(L: sp.csr_matrix, area: np.ndarray, v: np.ndarray, tau: float) -> np.ndarray:
+def implicit_step(L: CotangentWeights, area: np.ndarray, v: np.ndarray, tau: float) -> np.ndarray:
     """The displacement ``d`` of ``(M - tau L_w) d = tau M v`` (module notes), ``(n, 3)``, by a
     factorisation of its own (:class:`ImplicitStep` keeps one across steps)."""
     return ImplicitStep()(L, area, v, tau)
