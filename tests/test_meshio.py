@@ -121,3 +121,37 @@ def test_an_unreadable_ply_names_its_file(tmp_path):
     (tmp_path / "bad.ply").write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nend_header\n\x00")
     with pytest.raises(InputError, match="bad.ply"):
         read_mesh(tmp_path / "bad.ply", "input.exterior")
+
+
+def test_ply_written_in_one_piece_is_what_plyfile_writes_and_reads_back(tmp_path):
+    """write_ply packs the face rows itself: the bytes are plyfile's own, and plyfile, Open3D and
+    read_ply read the file back with every property."""
+    import open3d as o3d
+    from plyfile import PlyData, PlyElement
+
+    from fracture.io.ply import read_ply, write_ply
+
+    rng = np.random.default_rng(3)
+    V = rng.random((40, 3))
+    F = rng.integers(0, 40, (70, 3))
+    vdata = {"psi": rng.random(40).astype(np.float32), "tag": rng.integers(0, 9, 40)}
+    fdata = {"side_a": rng.integers(-1, 5, 70), "side_b": rng.integers(0, 250, 70).astype(np.uint8)}
+    write_ply(tmp_path / "ours.ply", V, F, vdata, fdata)
+
+    vrec = np.empty(40, [("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("psi", "<f4"), ("tag", "<i4")])
+    for c, name in enumerate("xyz"):
+        vrec[name] = V[:, c]
+    vrec["psi"], vrec["tag"] = vdata["psi"], vdata["tag"]
+    frec = np.empty(70, [("vertex_indices", "<i4", (3,)), ("side_a", "<i4"), ("side_b", "u1")])
+    frec["vertex_indices"], frec["side_a"], frec["side_b"] = F, fdata["side_a"], fdata["side_b"]
+    faces = PlyElement.describe(frec, "face", len_types={"vertex_indices": "u1"}, val_types={"vertex_indices": "i4"})
+    with open(tmp_path / "plyfile.ply", "wb") as f:
+        PlyData([PlyElement.describe(vrec, "vertex"), faces], text=False, byte_order="<").write(f)
+    assert (tmp_path / "ours.ply").read_bytes() == (tmp_path / "plyfile.ply").read_bytes()
+
+    V2, F2, vd, fd = read_ply(tmp_path / "ours.ply")
+    assert np.array_equal(V2, V) and np.array_equal(F2, F)
+    assert np.array_equal(vd["psi"], vdata["psi"]) and np.array_equal(vd["tag"], vdata["tag"])
+    assert np.array_equal(fd["side_a"], fdata["side_a"]) and np.array_equal(fd["side_b"], fdata["side_b"])
+    mesh = o3d.io.read_triangle_mesh(str(tmp_path / "ours.ply"))
+    assert np.allclose(np.asarray(mesh.vertices), V) and np.array_equal(np.asarray(mesh.triangles), F)
