@@ -79,7 +79,7 @@ def _brute_force_pairs(V, F):
 
 def test_the_square_root_free_side_test_rejects_only_segments_the_full_test_rejects():
     from fracture.mesh import vec
-    from fracture.mesh.intersect import _clearly_one_side, _segment_hits_triangle
+    from fracture.mesh.intersect import clearly_one_side, segment_hits_triangle
     from fracture.tolerances import tol
     rng = np.random.default_rng(11)
     rejected = 0
@@ -93,9 +93,9 @@ def test_the_square_root_free_side_test_rejects_only_segments_the_full_test_reje
             nn2 = vec.dot(n, n)
             P, Q, A = tuple(p), tuple(q), tuple(a)
             for eps in (tol.static_test, 1e-3):
-                if _clearly_one_side(P, Q, A, n, nn2, eps):
+                if clearly_one_side(P, Q, A, n, nn2, eps):
                     rejected += 1
-                    assert not _segment_hits_triangle(P, Q, A, e1, e2, n, np.sqrt(nn2), eps)
+                    assert not segment_hits_triangle(P, Q, A, e1, e2, n, np.sqrt(nn2), eps)
     assert rejected > 4000  # most segments well off the plane are decided without square roots
 
 
@@ -125,11 +125,11 @@ def _two_sheets_with_a_fin(seed):
 
 
 def test_every_vertex_and_edge_is_represented_once_by_a_triangle_on_it():
-    from fracture.refine.collide import _represented
+    from fracture.refine.collide import represented_features
     from fracture.mesh.edges import edge_table
     V, F, _ = _two_sheets_with_a_fin(0)
     table = edge_table(F, len(V))
-    rep = _represented(F, len(V), table.eid)
+    rep = represented_features(F, len(V), table.eid)
     edges = np.zeros(len(table.count), int)
     vertices = np.zeros(len(V), int)
     for f, k in zip(*np.nonzero(rep[:, None] & (8 << np.arange(3)))):
@@ -143,7 +143,7 @@ def test_every_vertex_and_edge_is_represented_once_by_a_triangle_on_it():
 def test_the_representatives_find_the_colliding_features_that_testing_all_of_them_finds():
     from fracture.mesh import hashgrid
     from fracture.mesh.intersect import box_grid, swept_boxes
-    from fracture.refine.collide import _feature_tests, _path_boxes, _represented
+    from fracture.refine.collide import feature_tests, path_boxes, represented_features
     from fracture.mesh.edges import edge_table
     eta = 1e-3
     for seed in range(3):
@@ -152,7 +152,7 @@ def test_the_representatives_find_the_colliding_features_that_testing_all_of_the
         expect = colliding_vertices(X0, X1, F, eta)
         lo, hi = swept_boxes(X0, X1, F, eta)
         stop = np.zeros(len(X0), bool)
-        _feature_tests(X0, X1, F, _path_boxes(X0, X1), lo, hi, _represented(F, len(X0), table.eid),
+        feature_tests(X0, X1, F, path_boxes(X0, X1), lo, hi, represented_features(F, len(X0), table.eid),
                        hashgrid.pairs(box_grid(lo, hi, X0, F)), eta, True, np.zeros(len(X0), bool),
                        np.zeros(len(X0), bool), stop)
         assert expect.sum() > 20 and np.array_equal(stop, expect)

@@ -104,11 +104,11 @@ def _two_sheets(seed, n=300):
 
 
 def _plain_passes(V, F, sides, passes):
-    from fracture.refine.flips import _flip, _pair_buffer
+    from fracture.refine.flips import flip_passes, pair_buffer
     from fracture.mesh.edges import edge_table
     t = edge_table(F, len(V))
-    pairs = _pair_buffer(len(F), passes)
-    flipped = _flip(V, F, sides, passes, pairs, t.arrays())
+    pairs = pair_buffer(len(F), passes)
+    flipped = flip_passes(V, F, sides, passes, pairs, t.arrays())
     return pairs[:flipped].copy()
 
 
@@ -118,34 +118,34 @@ def test_testing_the_flipped_triangles_at_once_or_one_by_one_agrees(seed):
     triangles' boxes need not contain)."""
     from fracture.mesh.intersect import triangle_grid
     from fracture.refine.fans import certified_fans, closed_vertices
-    from fracture.refine.flips import _regions, _unsafe, _unsafe_all
+    from fracture.refine.flips import flip_regions, unsafe_flips, unsafe_flips_all
     from fracture.mesh.edges import edge_table
     V, F, sides = _two_sheets(seed)
     start = F.copy()
     closed = closed_vertices(F, len(V), edge_table(F, len(V)))
     grid = triangle_grid(V, start)
-    group = _regions(len(F), _plain_passes(V, F, sides, 3))
+    group = flip_regions(len(F), _plain_passes(V, F, sides, 3))
     is_changed = group >= 0
     none = np.zeros(len(V), bool)
-    one_by_one = _unsafe(V, F, grid, group, none)
+    one_by_one = unsafe_flips(V, F, grid, group, none)
     assert 0 < one_by_one.sum() < is_changed.sum()
-    assert np.array_equal(_unsafe_all(V, F, is_changed, none), one_by_one)
+    assert np.array_equal(unsafe_flips_all(V, F, is_changed, none), one_by_one)
     # the fans that do not fold after the flips (closed before them stay closed) skip
     # most pairs and hide no meeting
     sure = certified_fans(V, V, F, closed)
     assert sure.mean() > 0.5
-    assert np.array_equal(_unsafe(V, F, grid, group, sure), one_by_one)
-    assert np.array_equal(_unsafe_all(V, F, is_changed, sure), one_by_one)
+    assert np.array_equal(unsafe_flips(V, F, grid, group, sure), one_by_one)
+    assert np.array_equal(unsafe_flips_all(V, F, is_changed, sure), one_by_one)
     assert np.array_equal(closed_vertices(F, len(V), edge_table(F, len(V))), closed)
 
 
 @pytest.mark.parametrize("seed", [3, 4])
 def test_triangles_joined_by_flips_cover_the_same_polygon_before_and_after(seed):
     """What makes undoing a group of flips sound: its triangles' boundary edges never change."""
-    from fracture.refine.flips import _regions
+    from fracture.refine.flips import flip_regions
     V, F, sides = _two_sheets(seed)
     start = F.copy()
-    group = _regions(len(F), _plain_passes(V, F, sides, 3))
+    group = flip_regions(len(F), _plain_passes(V, F, sides, 3))
     roots, sizes = np.unique(group[group >= 0], return_counts=True)
     assert sizes.max() > 2  # chains of flips over several passes
 
@@ -201,13 +201,13 @@ def test_safe_flips_between_two_close_sheets_leave_nothing_crossing():
 def test_an_edge_is_flipped_only_if_an_angle_opposite_it_is_obtuse():
     # the dot-product shortcut skips the cotangents where neither opposite angle is obtuse:
     # the angles then add up to at most pi, so the cotangent test would not flip either
-    from fracture.refine.flips import _cot, _obtuse
+    from fracture.refine.flips import corner_cot, corner_obtuse
     rng = np.random.default_rng(4)
     flips = 0
     for _ in range(20000):
         V = rng.normal(size=(4, 3)) * [1.0, 1.0, rng.choice([1.0, 0.05, 0.0])]
-        wants = _cot(V, 2, 0, 1) + _cot(V, 3, 1, 0) < -1e-12
+        wants = corner_cot(V, 2, 0, 1) + corner_cot(V, 3, 1, 0) < -1e-12
         flips += wants
-        assert not wants or _obtuse(V, 2, 0, 1) or _obtuse(V, 3, 1, 0)
-        assert _obtuse(V, 2, 0, 1) == (np.dot(V[0] - V[2], V[1] - V[2]) < 0.0)
+        assert not wants or corner_obtuse(V, 2, 0, 1) or corner_obtuse(V, 3, 1, 0)
+        assert corner_obtuse(V, 2, 0, 1) == (np.dot(V[0] - V[2], V[1] - V[2]) < 0.0)
     assert flips > 2000

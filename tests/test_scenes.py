@@ -8,7 +8,7 @@ import pytest
 
 from fracture.coarse.components import label_components
 from fracture.errors import InputError
-from fracture.coarse.scenes import PAPER_TRIANGLES, SCENES, _half_disk, build_scene
+from fracture.coarse.scenes import PAPER_TRIANGLES, SCENES, half_disk, build_scene
 from fracture.mesh.primitives import cylinder
 from fracture.mesh.topology import unique_edges
 
@@ -108,7 +108,7 @@ def test_virtual_fracture_separates_the_branch(scenes):
 def test_the_incomplete_cut_alone_does_not_separate_the_branch():
     BV, BF = cylinder(0.5, 2.0, segments=48, rings=33)
     BV[:, 2] -= 1.0
-    V, F = _half_disk(0.5, 0.16)
+    V, F = half_disk(0.5, 0.16)
     with pytest.raises(InputError, match="does not split the object"):
         label_components(BV, BF, V, F)
 

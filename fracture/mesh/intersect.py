@@ -53,7 +53,7 @@ def swept_boxes(X0, X1, elems, pad):
 
 
 @numba.njit(cache=True, inline="always")
-def _segment_hits_triangle(p, q, a, e1, e2, n, nn, eps):
+def segment_hits_triangle(p, q, a, e1, e2, n, nn, eps):
     """Segment pq meets the triangle at ``a`` with edges ``e1, e2`` from it (normal ``n = e1 x e2`` of
     length ``nn``), edges included, crossing its plane.
 
@@ -82,9 +82,9 @@ def _segment_hits_triangle(p, q, a, e1, e2, n, nn, eps):
 
 
 @numba.njit(cache=True, inline="always")
-def _clearly_one_side(p, q, a, n, nn2, eps):
+def clearly_one_side(p, q, a, n, nn2, eps):
     """Both ends of segment pq lie on one side of the plane through ``a`` with normal ``n``
-    (``n . n = nn2``), each further from it than :func:`_segment_hits_triangle`'s tolerance by a
+    (``n . n = nn2``), each further from it than :func:`segment_hits_triangle`'s tolerance by a
     factor of sqrt 2, far beyond rounding: that test would reject the segment too. Squares, so no
     square roots (most pairs the static tests see are neighbours whose far edges lie off the
     other's plane)."""
@@ -123,11 +123,11 @@ def triangles_intersect(X, F, f, g, eps):
             if u == shared or v == shared:
                 continue
             p, q = vec.point(X, u), vec.point(X, v)
-            if _clearly_one_side(p, q, a, n, nn2, eps):
+            if clearly_one_side(p, q, a, n, nn2, eps):
                 continue
             if nn < 0.0:
                 nn = np.sqrt(nn2)
-            if _segment_hits_triangle(p, q, a, e1, e2, n, nn, eps):
+            if segment_hits_triangle(p, q, a, e1, e2, n, nn, eps):
                 return True
     return False
 

@@ -45,7 +45,7 @@ _PARALLEL_EDGES = tol.parallel_edges
 _CONTACT_SLACK = tol.contact_slack
 
 _EPS = tol.static_test
-# The features a triangle represents (_represented), as bits of one integer: bit k its vertex k,
+# The features a triangle represents (represented_features), as bits of one integer: bit k its vertex k,
 # bit _EDGE_SHIFT + k its edge k (F[f, k] -> F[f, k + 1]).
 _VERTEX_0 = 1
 _ALL_VERTICES = 0b000111
@@ -261,7 +261,7 @@ def edge_edge_hit(p0, p1, q0, q1, r0, r1, s0, s1, eta2, times):
 
 
 @numba.njit(cache=True)
-def _represented(F, n, eid):
+def represented_features(F, n, eid):
     """Which features every triangle represents (Curtis et al. 2008): bit ``k`` its vertex ``k``,
     bit ``3 + k`` its edge ``k`` (``F[f, k] -> F[f, k + 1]``, edge id ``eid[3 f + k]``); each
     vertex and each edge has one representative.
@@ -314,7 +314,7 @@ def _represented(F, n, eid):
     return rep
 
 
-def _path_boxes(X0: np.ndarray, X1: np.ndarray) -> np.ndarray:
+def path_boxes(X0: np.ndarray, X1: np.ndarray) -> np.ndarray:
     """Per vertex the box of its path, ``(n, 6)``: lower corner, then upper corner."""
     return np.hstack([np.minimum(X0, X1), np.maximum(X0, X1)])
 
@@ -334,10 +334,10 @@ def _any_on(on, F, f):
 
 
 @numba.njit(cache=True)
-def _feature_tests(X0, X1, F, B, lo, hi, rep, pairs, eta, every, on, sure, stop):
+def feature_tests(X0, X1, F, B, lo, hi, rep, pairs, eta, every, on, sure, stop):
     """Test the features that the triangles of each overlapping pair represent against each other:
     the vertices of each against the other triangle, and the edges of one against the edges of the
-    other. ``B`` holds the vertices' path boxes (:func:`_path_boxes`), ``lo, hi`` the triangles'
+    other. ``B`` holds the vertices' path boxes (:func:`path_boxes`), ``lo, hi`` the triangles'
     swept boxes grown by ``eta``. Unless ``every``, only the features with a vertex in ``on`` are
     tested (the pairs are those with such a vertex). Pairs of triangles that share a vertex in
     ``sure`` (:func:`~fracture.refine.fans.certified_fans`) are skipped. Marks the vertices of
@@ -485,8 +485,8 @@ def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, eta: float, t
     lo, hi = swept_boxes(X0, X1, F, eta)
     grid = box_grid(lo, hi, X0, F)
     overlapping = hashgrid.pairs(grid)
-    rep = _represented(F, n, np.ascontiguousarray(table.eid, np.int64))
-    B = _path_boxes(X0, X1)
+    rep = represented_features(F, n, np.ascontiguousarray(table.eid, np.int64))
+    B = path_boxes(X0, X1)
 
     # a later round (or, with ``moving``, the first) tests only the triangle pairs with a vertex in ``on``
     every = moving is None
@@ -502,7 +502,7 @@ def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, eta: float, t
     first = None
     for _ in range(max_rounds):
         stop = np.zeros(n, bool)
-        pairs = _feature_tests(X0, X1, F, B, lo, hi, rep, todo, eta, every, on, sure, stop)
+        pairs = feature_tests(X0, X1, F, B, lo, hi, rep, todo, eta, every, on, sure, stop)
         first = pairs if first is None else first
         stop &= ~stopped  # pairs of stopped vertices only are at rest: contact they had at X0
         if not stop.any():

@@ -26,7 +26,7 @@ _DELAUNAY = tol.delaunay
 
 
 @numba.njit(cache=True, inline="always")
-def _cot(V, a, b, c):
+def corner_cot(V, a, b, c):
     """Cotangent of the angle at vertex ``a`` of triangle (a, b, c), +inf for a degenerate triangle."""
     ux, uy, uz = V[b, 0] - V[a, 0], V[b, 1] - V[a, 1], V[b, 2] - V[a, 2]
     vx, vy, vz = V[c, 0] - V[a, 0], V[c, 1] - V[a, 1], V[c, 2] - V[a, 2]
@@ -36,7 +36,7 @@ def _cot(V, a, b, c):
 
 
 @numba.njit(cache=True, inline="always")
-def _obtuse(V, a, b, c):
+def corner_obtuse(V, a, b, c):
     """The angle at vertex ``a`` of triangle (a, b, c) is over pi / 2 (its cotangent is negative)."""
     return ((V[b, 0] - V[a, 0]) * (V[c, 0] - V[a, 0]) + (V[b, 1] - V[a, 1]) * (V[c, 1] - V[a, 1])
             + (V[b, 2] - V[a, 2]) * (V[c, 2] - V[a, 2])) < 0.0
@@ -81,7 +81,7 @@ def _try_flip(V, F, sides, r, twin, busy, made, table):
     # the angles opposite the edge add up to more than pi: cot a + cot b < 0
     # (sin(a + b) = sin a sin b (cot a + cot b), with both angles in (0, pi));
     # only if one of them is obtuse, which two dot products tell (most edges)
-    if not (_obtuse(V, w, u, v) or _obtuse(V, x, v, u)) or _cot(V, w, u, v) + _cot(V, x, v, u) >= -_DELAUNAY:
+    if not (corner_obtuse(V, w, u, v) or corner_obtuse(V, x, v, u)) or corner_cot(V, w, u, v) + corner_cot(V, x, v, u) >= -_DELAUNAY:
         return -1
     # the tests that read only the quad's corners before those that look up
     # memory far away (the made set and the edge table)
@@ -109,7 +109,7 @@ def _try_flip(V, F, sides, r, twin, busy, made, table):
 
 
 @numba.njit(cache=True)
-def _flip(V, F, sides, max_passes, pairs, table):
+def flip_passes(V, F, sides, max_passes, pairs, table):
     """Up to ``max_passes`` passes, each flipping a set of edges that share no triangle; the flipped
     triangle pairs go to ``pairs`` (room for m // 2 + 1 per pass). ``table`` is the edge table of
     ``F`` as given (:meth:`~fracture.mesh.edges.EdgeTable.arrays`).
@@ -151,13 +151,13 @@ def _flip(V, F, sides, max_passes, pairs, table):
     return total
 
 
-def _pair_buffer(m: int, passes: int) -> np.ndarray:
+def pair_buffer(m: int, passes: int) -> np.ndarray:
     # a pass flips triangles that share none: at most m // 2 pairs
     return np.empty((passes * (m // 2 + 1), 2), np.int64)
 
 
 @numba.njit(cache=True)
-def _regions(m, done):
+def flip_regions(m, done):
     """The triangles that flips ``done (k, 2)`` joined: per triangle the root of its group (a triangle
     of it), -1 for triangles no flip touched. The triangles of a group always cover the same
     polygon (a flip re-triangulates its two triangles' quad), so a group can go back to its first
@@ -243,8 +243,8 @@ def _grid_of(V: np.ndarray, F: np.ndarray, ids: np.ndarray) -> tuple:
     return triangle_grid(V, np.ascontiguousarray(F[ids]))
 
 
-def _unsafe(V: np.ndarray, F: np.ndarray, grid: tuple, group: np.ndarray, sure: np.ndarray) -> np.ndarray:
-    """Which of the triangles changed by flips (those in a ``group``, :func:`_regions`) meet another
+def unsafe_flips(V: np.ndarray, F: np.ndarray, grid: tuple, group: np.ndarray, sure: np.ndarray) -> np.ndarray:
+    """Which of the triangles changed by flips (those in a ``group``, :func:`flip_regions`) meet another
     triangle of the surface, in the order of their ids. Pairs that share a vertex in ``sure`` (whose
     fan does not fold, :func:`~fracture.refine.fans.certified_fans`) are not tested.
 
@@ -278,8 +278,8 @@ def _meeting(V, F, pairs, changed, sure, eps, out):
             out[b] |= changed[b]
 
 
-def _unsafe_all(V: np.ndarray, F: np.ndarray, is_changed: np.ndarray, sure: np.ndarray) -> np.ndarray:
-    """:func:`_unsafe` at once: one hash of all the triangles as they are now lists the overlapping
+def unsafe_flips_all(V: np.ndarray, F: np.ndarray, is_changed: np.ndarray, sure: np.ndarray) -> np.ndarray:
+    """:func:`unsafe_flips` at once: one hash of all the triangles as they are now lists the overlapping
     pairs, and those with a changed triangle are tested. When many triangles changed this costs
     less than a look-up in the grid per triangle."""
     out = np.zeros(len(F), bool)
@@ -314,23 +314,23 @@ def flip_edges(V: np.ndarray, F: np.ndarray, sides: np.ndarray, max_passes: int 
     V = np.ascontiguousarray(V, np.float64)
     sides = np.ascontiguousarray(sides, np.int64)
     table = table if table is not None else edge_table(F, len(V))
-    pairs = _pair_buffer(len(F), max_passes)
+    pairs = pair_buffer(len(F), max_passes)
     start = F.copy() if safe else None
     if safe and closed is None:
         closed = closed_vertices(F, len(V), table)
-    total = int(_flip(V, F, sides, int(max_passes), pairs, table.arrays()))
+    total = int(flip_passes(V, F, sides, int(max_passes), pairs, table.arrays()))
     if not safe or not total:
         return total
     sure = certified_fans(V, V, F, closed)  # flips keep the closed vertices closed
     done = pairs[:total]
-    group = _regions(len(F), done)
+    group = flip_regions(len(F), done)
     is_changed = group >= 0
     changed = np.flatnonzero(is_changed)
     # many: all at once (about 0.5 us per triangle, against 1.6 to 1.8 per changed one)
     if len(changed) > 0.3 * len(F):
-        meets = _unsafe_all(V, F, is_changed, sure)
+        meets = unsafe_flips_all(V, F, is_changed, sure)
     else:
-        meets = _unsafe(V, F, grid if grid is not None else triangle_grid(V, start), group, sure)
+        meets = unsafe_flips(V, F, grid if grid is not None else triangle_grid(V, start), group, sure)
     while meets.any():
         bad = np.zeros(len(F), bool)
         bad[group[changed[meets]]] = True

@@ -210,7 +210,7 @@ def jello(rng: np.random.Generator, frames: int, separation: float) -> CoarseFra
     return _finish("jello", BV, BF, ext, vf, anim, separation)
 
 
-def _half_disk(radius: float, h: float) -> tuple[np.ndarray, np.ndarray]:
+def half_disk(radius: float, h: float) -> tuple[np.ndarray, np.ndarray]:
     """Triangulated half disk ``y >= 0`` in the plane ``z = 0``."""
     k = max(4, int(np.ceil(np.pi * radius / h)))
     th = np.linspace(0.0, np.pi, k + 1)
@@ -243,7 +243,7 @@ def branch(rng: np.random.Generator, frames: int, separation: float) -> CoarseFr
     radius, length = 0.5, 2.0
     BV, BF = cylinder(radius, length, segments=96, rings=129)
     BV[:, 2] -= length / 2
-    V, F = _half_disk(radius, 0.16)
+    V, F = half_disk(radius, 0.16)
     # the cut runs obliquely across the grain, as a bent branch breaks: z = y tan(35 degrees) (its rim stays
     # on the bark); a cut square to the axis would feel only the grain's slow change along the axis
     V[:, 2] = V[:, 1] * np.tan(np.radians(_BRANCH_CUT_TILT))
