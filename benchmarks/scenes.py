@@ -29,7 +29,7 @@ def refine(cfg, cf, fs):
 
     from fracture.refine.engine import Refiner
     from fracture.refine.mesh import RefineMesh
-    from fracture.pipeline.stages.refine import refine_params
+    from fracture.pipeline.typed import refine_params
 
     mesh = RefineMesh.from_coarse(cf.V, cf.F, cf.sides)
     log = Refiner(mesh, fs.pyramid, cf.exterior_V, cf.exterior_F, refine_params(cfg),

@@ -10,14 +10,16 @@ High values are strong material, low values weak. ``rng`` is a
 and random placements, so a seed reproduces a field exactly.
 
 :data:`KINDS` registers each kind with its parameter specs, which the config
-loader uses to validate ``strength.layers``.
+loader uses to validate ``strength.layers``; :data:`LAYER_TYPES` makes of each
+kind's specs a frozen dataclass (a layer of that kind, what
+:func:`strength_field` takes), so a layer is one of a union chosen by ``kind``.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
-from dataclasses import dataclass
-from typing import Callable
+from dataclasses import dataclass, field, fields, is_dataclass, make_dataclass
+from typing import Any, Callable, Mapping
 
 import noise
 import numpy as np
@@ -25,7 +27,7 @@ import numpy as np
 from fields.grid import Grid
 from fields.interpolate import trilinear
 from fields.errors import InputError
-from fields.spec import Spec
+from fields.spec import Spec, python_type, spec_field
 from fields.tolerances import tol
 
 _AXES = ("x", "y", "z")
@@ -319,7 +321,32 @@ KINDS: dict[str, tuple[Callable, dict[str, Spec]]] = {
 LAYER_COMMON = {"weight": _p(1.0, lo=-100.0, hi=100.0, doc="factor of this layer in the sum")}
 
 
-def strength_field(X: np.ndarray, bounds, layers: list[dict], seed: int, normalize: bool = True) -> np.ndarray:
+
+def _layer_type(kind: str, specs: dict[str, Spec]) -> type:
+    name = "".join(part.title() for part in kind.split("_")) + "Layer"
+    body = [("kind", str, field(default=kind, metadata=dict(doc="the kind of this layer")))]
+    for key, spec in {**LAYER_COMMON, **specs}.items():
+        body.append((key, python_type(spec), spec_field(spec)))
+    cls = make_dataclass(name, body, frozen=True)
+    cls.__module__ = __name__
+    cls.__doc__ = f"A {kind} layer of zeta: ``weight`` times :func:`{KINDS[kind][0].__name__}` of its parameters."
+    return cls
+
+
+#: A frozen dataclass per kind, chosen by a layer's ``kind``.
+LAYER_TYPES: dict[str, type] = {kind: _layer_type(kind, specs) for kind, (_, specs) in KINDS.items()}
+
+
+def as_layer(layer: Any):
+    """A layer as its kind's dataclass (:data:`LAYER_TYPES`), from a mapping as the config holds it."""
+    if is_dataclass(layer):
+        return layer
+    if not isinstance(layer, Mapping) or layer.get("kind") not in LAYER_TYPES:
+        raise InputError(f"a strength layer must name its kind, one of {', '.join(LAYER_TYPES)}; got {layer!r}")
+    return LAYER_TYPES[layer["kind"]](**layer)
+
+
+def strength_field(X: np.ndarray, bounds, layers: list, seed: int, normalize: bool = True) -> np.ndarray:
     """zeta at points: the weighted sum of the configured layers.
 
     Parameters
@@ -328,8 +355,9 @@ def strength_field(X: np.ndarray, bounds, layers: list[dict], seed: int, normali
         Material-space points.
     bounds : ((3,), (3,)) float
         The object's bounding box, which defines the unit coordinates.
-    layers : list of dict
-        ``{"kind": name, "weight": w, **params}`` as validated by the config.
+    layers : list
+        Layers of :data:`LAYER_TYPES`, or mappings ``{"kind": name, "weight": w, **params}`` as the
+        config holds them (:func:`as_layer`).
     seed : int
         Run seed; layer ``i`` draws from ``default_rng([seed, i])``.
     normalize : bool
@@ -342,10 +370,9 @@ def strength_field(X: np.ndarray, bounds, layers: list[dict], seed: int, normali
     frame = UnitFrame(*(np.asarray(b, np.float64) for b in bounds))
     U = frame.to_unit(X)
     zeta = np.zeros(U.shape[0])
-    for i, layer in enumerate(layers):
-        func = KINDS[layer["kind"]][0]
-        params = {k: v for k, v in layer.items() if k not in ("kind", "weight")}
-        zeta += layer.get("weight", 1.0) * func(U, frame, np.random.default_rng([seed, i]), **params)
+    for i, layer in enumerate(map(as_layer, layers)):
+        params = {f.name: getattr(layer, f.name) for f in fields(layer) if f.name not in ("kind", "weight")}
+        zeta += layer.weight * KINDS[layer.kind][0](U, frame, np.random.default_rng([seed, i]), **params)
     if normalize:
         zeta = normalize01(zeta)
     return zeta

@@ -188,7 +188,7 @@ def test_explain_says_what_a_key_means_from_the_same_declarations_the_code_uses(
 def test_every_key_of_the_refine_section_reaches_the_refinement():
     """No key of the config's refine section is dropped on the way to the code: every one but the
     pipeline's own (snapshots) is a RefineParams field, and a key RefineParams lacks is an error."""
-    from fracture.pipeline.stages.refine import refine_params
+    from fracture.pipeline.typed import refine_params
 
     cfg = load_config(CONFIGS / "example.yaml", ["refine.step=0.31", "refine.hold=5"])
     params = refine_params(cfg)
@@ -196,3 +196,63 @@ def test_every_key_of_the_refine_section_reaches_the_refinement():
     cfg["refine"]["not_a_parameter"] = 1
     with pytest.raises(TypeError, match="not_a_parameter"):
         refine_params(cfg)
+
+
+def test_the_typed_config_holds_every_key_of_the_schema_with_its_value_and_description():
+    """Config: one frozen dataclass per section, generated from the schema; each field has the value the
+    validated tree has, and the schema entry's description in its metadata."""
+    import dataclasses
+
+    from fracture.pipeline.config import SCHEMA
+    from fracture.pipeline.schema import Param
+    from fracture.pipeline.typed import Config, typed_config
+
+    cfg = load_config(CONFIGS / "wall.yaml", ["psi.stress_weight=0.7", "view.cameras.material.fov=40"])
+    typed = typed_config(cfg)
+
+    def walk(node, spec, values, where):
+        for key, entry in spec.items():
+            value = getattr(node, key)
+            if isinstance(entry, dict):
+                assert dataclasses.is_dataclass(value), where + key
+                walk(value, entry, values[key], where + key + ".")
+            elif isinstance(entry, Param):
+                assert value == values[key], where + key
+                assert {f.name: f for f in dataclasses.fields(node)}[key].metadata["doc"] == entry.doc
+        assert {f.name for f in dataclasses.fields(node)} == set(spec)
+
+    walk(typed, SCHEMA, cfg, "")
+    assert (typed.psi.stress_weight, typed.view.cameras.material.fov) == (0.7, 40.0)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        typed.psi.stress_weight = 1.0
+    assert Config().psi.stress_weight == SCHEMA["psi"]["stress_weight"].default
+
+
+def test_strength_layers_are_typed_by_their_kind_and_give_the_same_field():
+    """strength.layers is a tuple of the kinds' dataclasses (a union chosen by kind); the field of typed
+    layers is the field of the mappings the config file gives."""
+    import numpy as np
+
+    from fields.errors import InputError
+    from fields.strength import LAYER_TYPES, as_layer, strength_field
+    from fracture.pipeline.typed import typed_config
+
+    cfg = load_config(CONFIGS / "wall.yaml")
+    layers = typed_config(cfg).strength.layers
+    assert [type(layer) for layer in layers] == [LAYER_TYPES[layer["kind"]] for layer in cfg["strength"]["layers"]]
+    assert layers[0].mortar == cfg["strength"]["layers"][0]["mortar"]
+    X = np.random.default_rng(0).random((500, 3))
+    bounds = ([0.0, 0.0, 0.0], [1.0, 1.0, 1.0])
+    assert np.array_equal(strength_field(X, bounds, layers, 3), strength_field(X, bounds, cfg["strength"]["layers"], 3))
+    assert LAYER_TYPES["radial"]().inner == 0.2
+    with pytest.raises(InputError, match="kind"):
+        as_layer({"kind": "granite"})
+
+
+def test_a_tree_edited_after_validation_loses_no_key_on_the_way_to_the_typed_config():
+    from fracture.pipeline.typed import typed_config
+
+    cfg = load_config(CONFIGS / "example.yaml")
+    cfg["psi"]["stres_weight"] = 2.0
+    with pytest.raises(TypeError, match="stres_weight"):
+        typed_config(cfg)

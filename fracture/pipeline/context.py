@@ -13,6 +13,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from fracture.io.atomic import png_bytes
+from fracture.pipeline.typed import Config, typed_config
 
 log = logging.getLogger(__name__)
 
@@ -64,6 +65,11 @@ class RunContext:
     # the stage cache (fracture.pipeline.cache.StageCache) or None, and the keys of the stages run so far
     cache: Any = None
     keys: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def config(self) -> Config:
+        """The config as typed records (:func:`~fracture.pipeline.typed.typed_config`)."""
+        return typed_config(self.cfg)
 
     def tell(self, event: str, **data) -> None:
         if self.listener is not None:

@@ -44,7 +44,7 @@ from fracture.io.usd import write_pieces_usd
 def animate_stage(ctx: RunContext) -> None:
     cf = ctx.products.coarse
     BV, BF = ctx.products.exterior
-    opts = ctx.cfg["animate"]
+    opts = ctx.config.animate
     mesh = copy.deepcopy(ctx.products.refined)
     with ctx.bar(cf.n_frames + 3, "animate") as bar:
         im = imprint_boundary(BV, BF, mesh, where="animate")
@@ -58,7 +58,7 @@ def animate_stage(ctx: RunContext) -> None:
         pieces = build_pieces(im, mesh, cf.n_components, fallback)
         transfer = build_transfer(cf, pieces, mesh.tree_matrix())
         bar.update()
-        checks = piece_checks(pieces, BV, BF, opts["check_samples"], np.random.default_rng(ctx.cfg["seed"]))
+        checks = piece_checks(pieces, BV, BF, opts.check_samples, np.random.default_rng(ctx.config.seed))
         verify_pieces(checks, cf.names)
         bar.update()
 
@@ -71,9 +71,9 @@ def animate_stage(ctx: RunContext) -> None:
         _save_transfer(ctx, transfer)
         writer = ObjFrames(cf.names, [F for _, _, F in local], [len(ids) for ids, _, _ in local],
                            exterior=pieces.exterior)
-        if opts["obj_frames"]:
+        if opts.obj_frames:
             writer.write_materials(ctx.path(f"frames/{writer.materials}"))
-        if opts["ply_frames"]:  # rows of piece c start at transfer.offsets[c]
+        if opts.ply_frames:  # rows of piece c start at transfer.offsets[c]
             all_F = np.concatenate([F + transfer.offsets[c] for c, (_, _, F) in enumerate(local)])
             piece_of = np.repeat(np.arange(pieces.n_pieces, dtype=np.int32), [len(F) for _, _, F in local])
         gap = EarlyGap(transfer)
@@ -82,22 +82,22 @@ def animate_stage(ctx: RunContext) -> None:
             if t == 0:
                 checks["hausdorff_first_frame_relative"] = hausdorff_to_b(pieces, transfer, X, BV, BF)
             gap.add(t, X)
-            if opts["obj_frames"]:
+            if opts.obj_frames:
                 writer.write(ctx.path(f"frames/frame_{t + 1:04d}.obj"),
                              [transfer.piece(X, c) for c in range(pieces.n_pieces)], header=f"frame {t + 1}")
-            if opts["ply_frames"]:
+            if opts.ply_frames:
                 write_ply(ctx.path(f"frames/frame_{t + 1:04d}.ply"), X, all_F, face_data={"piece": piece_of})
             bar.update()
         checks["early_gap_max"] = gap.worst
-        if opts["usd"]:
+        if opts.usd:
             write_pieces_usd(ctx.path("animation/pieces.usdc"), cf.names,
-                             [F for _, _, F in local], pieces.exterior, frame_points(transfer), fps=opts["fps"],
+                             [F for _, _, F in local], pieces.exterior, frame_points(transfer), fps=opts.fps,
                              up_axis="Y" if cf.up_axis == "y" else "Z")
 
     ctx.products.pieces = pieces
     ctx.products.transfer = transfer
     ctx.counts.update(pieces=pieces.n_pieces, piece_triangles=int(sum(len(f) for f in pieces.faces)),
-                      frames_written=transfer.n_frames if opts["obj_frames"] else 0)
+                      frames_written=transfer.n_frames if opts.obj_frames else 0)
     ctx.stats["animate"] = checks
 
 

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+from typing import Mapping
+
 import numpy as np
 
 from fracture.coarse.surface import CoarseFracture, make_coarse
@@ -9,9 +12,10 @@ from fracture.coarse.mesh_sequence import load_coarse_sequence
 from fracture.io.meshes import read_mesh
 from fracture.io.ply import write_ply
 from fracture.pipeline.context import RunContext
+from fracture.pipeline.typed import ConfigInput
 
 
-def coarse_from_meshes(inp: dict) -> CoarseFracture:
+def coarse_from_meshes(inp: ConfigInput | Mapping) -> CoarseFracture:
     """A still object from an exterior and a coarse fracture surface (``input.kind: meshes``).
 
     Incomplete cuts are extended (virtual fracture) and the components found
@@ -24,13 +28,15 @@ def coarse_from_meshes(inp: dict) -> CoarseFracture:
     from fracture.coarse.trim import trim_to_object
     from fracture.coarse.virtual import extend_cuts
 
-    missing = [k for k in ("exterior", "fracture") if not inp.get(k)]
+    if isinstance(inp, Mapping):  # the section as a plain mapping; the keys it lacks take their defaults
+        inp = replace(ConfigInput(), **inp)
+    missing = [k for k in ("exterior", "fracture") if not getattr(inp, k)]
     if missing:
         raise InputError("coarse: input.kind 'meshes' needs the object's exterior and coarse fracture surface; set "
                          + " and ".join(f"input.{k}" for k in missing) + " to mesh files (OBJ, PLY, OFF or STL)")
-    BV, BF, notes = read_exterior(inp["exterior"])
-    what = f"input.fracture ({inp['fracture']})"
-    V, F = read_mesh(inp["fracture"], "input.fracture")
+    BV, BF, notes = read_exterior(inp.exterior)
+    what = f"input.fracture ({inp.fracture})"
+    V, F = read_mesh(inp.fracture, "input.fracture")
     # the pieces follow the sides of each triangle, so a sheet's triangles must agree (any one way)
     F, turned, conflict = orient_sheets(F)
     if conflict is not None:
@@ -42,7 +48,7 @@ def coarse_from_meshes(inp: dict) -> CoarseFracture:
     V, F, outside = trim_to_object(V, F, BV, BF)
     if not len(F):
         raise InputError(f"{what}: no part of the fracture surface lies inside the object (input.exterior, "
-                         f"{inp['exterior']}); expected a cut through it")
+                         f"{inp.exterior}); expected a cut through it")
     if outside:
         notes.append(f"input.fracture: trimmed to the object ({100 * outside:.1f} % of its area was outside)")
     V, F, virtual = extend_cuts(V, F, BV, BF)
@@ -63,7 +69,7 @@ def coarse_from_meshes(inp: dict) -> CoarseFracture:
     still = lattice_animation(exterior_points(BV, BF, ext, n), lambda c, t, X: X, 1)
     if virtual.any():
         notes.append(f"virtual fracture: {int(virtual.sum())} triangles extend incomplete cuts")
-    return make_coarse(BV, BF, ext, V, F, sides, [f"piece_{c:03d}" for c in range(n)], still, inp["separation"],
+    return make_coarse(BV, BF, ext, V, F, sides, [f"piece_{c:03d}" for c in range(n)], still, inp.separation,
                        virtual=virtual, notes=notes)
 
 
@@ -81,30 +87,30 @@ def read_exterior(path) -> tuple[np.ndarray, np.ndarray, list[str]]:
 
 
 def coarse_stage(ctx: RunContext) -> None:
-    inp = ctx.cfg["input"]
+    inp = ctx.config.input
     extra = {}
-    with ctx.bar(1, f"coarse: {inp['kind']}") as bar:
-        if inp["kind"] == "mesh_sequence":
-            cf, extra = load_coarse_sequence(inp["path"], inp["glob"], inp["lattice"], inp["separation"],
-                                             inp["up_axis"])
-        elif inp["kind"] == "usd":
+    with ctx.bar(1, f"coarse: {inp.kind}") as bar:
+        if inp.kind == "mesh_sequence":
+            cf, extra = load_coarse_sequence(inp.path, inp.glob, inp.lattice, inp.separation,
+                                             inp.up_axis)
+        elif inp.kind == "usd":
             from fracture.coarse.mesh_sequence import coarse_from_frames
             from fracture.coarse.usd_input import read_usd_frames
 
-            frames, stage_up = read_usd_frames(inp["usd"])
-            up = stage_up if inp["up_axis"] == "auto" else inp["up_axis"]
-            cf, extra = coarse_from_frames(frames, inp["lattice"], inp["separation"], up)
-        elif inp["kind"] == "scene":
+            frames, stage_up = read_usd_frames(inp.usd)
+            up = stage_up if inp.up_axis == "auto" else inp.up_axis
+            cf, extra = coarse_from_frames(frames, inp.lattice, inp.separation, up)
+        elif inp.kind == "scene":
             from fracture.coarse.scenes import build_scene
 
-            cf = build_scene(inp["scene"], ctx.cfg["seed"], inp["frames"], inp["separation"])
+            cf = build_scene(inp.scene, ctx.config.seed, inp.frames, inp.separation)
         else:
             cf = coarse_from_meshes(inp)
-            cf.up_axis = "z" if inp["up_axis"] == "auto" else inp["up_axis"]  # a still object: nothing falls
+            cf.up_axis = "z" if inp.up_axis == "auto" else inp.up_axis  # a still object: nothing falls
         bar.update()
-    if inp["kind"] in ("mesh_sequence", "usd") and inp["exterior"] is not None:
+    if inp.kind in ("mesh_sequence", "usd") and inp.exterior is not None:
         # a user's high-resolution exterior replaces the pieces' outer faces
-        BV, BF, notes = read_exterior(inp["exterior"])
+        BV, BF, notes = read_exterior(inp.exterior)
         cf.notes.extend(notes)
     else:
         BV, BF = cf.exterior_V, cf.exterior_F

@@ -9,6 +9,7 @@ from fields.pyramid import StrengthPyramid
 from fields.slices import axis_slice, slice_image
 from fracture.errors import ConfigError
 from fracture.pipeline.context import RunContext
+from fracture.pipeline.typed import Config, typed_config
 
 PREVIEW_FIELDS = ("zeta", "xi", "psi")
 # Target width in pixels of one preview slice (pixels are repeated up to it).
@@ -16,22 +17,23 @@ _PREVIEW_WIDTH = 400
 _PREVIEW_GAP = 8
 
 
-def fields_from_config(cfg: dict, BV: np.ndarray, SV: np.ndarray, SF: np.ndarray, step=None, zeta=None,
+def fields_from_config(cfg: Config | dict, BV: np.ndarray, SV: np.ndarray, SF: np.ndarray, step=None, zeta=None,
                        distance=None, pyramids=None):
     """:func:`fields.build.build_fields` with the parameters of a resolved config (``zeta``, ``distance`` and
     ``pyramids``: parts known already, see there)."""
+    c = typed_config(cfg)
     return build_fields(
         BV, SV, SF,
-        resolution=cfg["grid"]["resolution"],
-        padding=cfg["grid"]["padding"],
-        layers=cfg["strength"]["layers"],
-        seed=cfg["seed"],
-        normalize=cfg["strength"]["normalize"],
-        stress_length=cfg["stress"]["length"],
-        strength_weight=cfg["psi"]["strength_weight"],
-        stress_weight=cfg["psi"]["stress_weight"],
-        levels=cfg["pyramid"]["levels"],
-        sigma=cfg["pyramid"]["sigma"],
+        resolution=c.grid.resolution,
+        padding=c.grid.padding,
+        layers=c.strength.layers,
+        seed=c.seed,
+        normalize=c.strength.normalize,
+        stress_length=c.stress.length,
+        strength_weight=c.psi.strength_weight,
+        stress_weight=c.psi.stress_weight,
+        levels=c.pyramid.levels,
+        sigma=c.pyramid.sigma,
         step=step,
         zeta=zeta,
         distance=distance,
@@ -39,15 +41,16 @@ def fields_from_config(cfg: dict, BV: np.ndarray, SV: np.ndarray, SF: np.ndarray
     )
 
 
-def check_grid_memory(cfg: dict, BV: np.ndarray) -> None:
+def check_grid_memory(cfg: Config | dict, BV: np.ndarray) -> None:
     """Refuse, before allocating, a grid whose fields need more than ``grid.max_memory_gb``."""
-    grid = grid_for(BV, cfg["grid"]["resolution"], cfg["grid"]["padding"])
-    need = fields_memory(grid.size, cfg["pyramid"]["levels"]) / 1e9
-    if need > cfg["grid"]["max_memory_gb"]:
+    c = typed_config(cfg)
+    grid = grid_for(BV, c.grid.resolution, c.grid.padding)
+    need = fields_memory(grid.size, c.pyramid.levels) / 1e9
+    if need > c.grid.max_memory_gb:
         shape = "x".join(str(n) for n in grid.shape)
         raise ConfigError("config", "grid.resolution",
-                          f"{cfg['grid']['resolution']} gives a {shape} grid ({grid.size:,} nodes) whose fields need "
-                          f"about {need:.1f} GB, more than grid.max_memory_gb ({cfg['grid']['max_memory_gb']:g} GB); "
+                          f"{c.grid.resolution} gives a {shape} grid ({grid.size:,} nodes) whose fields need "
+                          f"about {need:.1f} GB, more than grid.max_memory_gb ({c.grid.max_memory_gb:g} GB); "
                           "expected a lower resolution, or raise the limit if this machine has the memory")
 
 
@@ -68,7 +71,7 @@ def fields_stage(ctx: RunContext) -> None:
     for name in PREVIEW_FIELDS:
         ctx.save_array(f"fields/{name}.npy", fs.field(name).astype(np.float32))
     ctx.save_array("fields/pyramid.npy", fs.pyramid.levels.astype(np.float32))
-    ctx.save_png("fields/preview.png", preview_image(fs, cfg["preview"]))
+    ctx.save_png("fields/preview.png", preview_image(fs, ctx.config.preview))
 
     ctx.counts.update(
         grid_nodes=fs.grid.size,
@@ -100,29 +103,29 @@ def cached_parts(ctx: RunContext) -> dict:
     made them; a pyramid the cache does not have is built and kept)."""
     values = {name: ctx.cache.value(name, known_key(ctx, name)) for name in ("zeta", "distance")}
     known = {name: v for name, v in values.items() if v is not None}
-    cfg = ctx.cfg
+    config = ctx.config
 
     def pyramid(name: str, grid, field: np.ndarray) -> StrengthPyramid:
         key = known_key(ctx, f"{name} pyramid")
         made = ctx.cache.value("pyramid", key)
         if made is None:
-            made = StrengthPyramid(grid, field, levels=cfg["pyramid"]["levels"], sigma=cfg["pyramid"]["sigma"])
+            made = StrengthPyramid(grid, field, levels=config.pyramid.levels, sigma=config.pyramid.sigma)
             ctx.cache.keep("pyramid", key, made)
         return made
 
     return {**known, "pyramids": pyramid}
 
 
-def preview_image(fs, preview: dict) -> np.ndarray:
+def preview_image(fs, preview) -> np.ndarray:
     """zeta, xi and psi side by side on one slice plane, as an RGB image."""
-    axis = preview["axis"]
+    axis = preview.axis
     if axis is None:
         axis = int(np.argmin(fs.grid.shape))
     panels = []
     for name in PREVIEW_FIELDS:
-        plane, _ = axis_slice(fs.grid, fs.field(name), axis, preview["offset"])
+        plane, _ = axis_slice(fs.grid, fs.field(name), axis, preview.offset)
         scale = max(1, _PREVIEW_WIDTH // plane.shape[0])
-        panels.append(slice_image(plane, preview["colormap"], scale=scale))
+        panels.append(slice_image(plane, preview.colormap, scale=scale))
     height = panels[0].shape[0]
     gap = np.full((height, _PREVIEW_GAP, 3), 255, np.uint8)
     row = [panels[0]]

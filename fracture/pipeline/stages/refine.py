@@ -27,29 +27,21 @@ from fracture.mesh.intersect import self_intersections
 from fracture.refine.engine import RefineParams, Refiner
 from fracture.refine.mesh import RefineMesh
 from fracture.pipeline.context import RunContext
+from fracture.pipeline.typed import refine_params
 
 _log = logging.getLogger(__name__)
-
-
-# keys of the config's refine section that are the pipeline's, not the refinement's
-_PIPELINE_KEYS = ("snapshots",)
-
-
-def refine_params(cfg: dict) -> RefineParams:
-    """The refinement's parameters from a resolved config (every key of its ``refine`` section but the
-    pipeline's own; an unknown key is an error, not dropped)."""
-    return RefineParams(**{k: v for k, v in cfg["refine"].items() if k not in _PIPELINE_KEYS})
 
 
 def refine_stage(ctx: RunContext) -> None:
     cf = ctx.products.coarse
     fs = ctx.products.fields
-    params = refine_params(ctx.cfg)
+    config = ctx.config
+    params = refine_params(config)
     mesh = RefineMesh.from_coarse(cf.V, cf.F, cf.sides)
     BV, BF = ctx.products.exterior
     refiner = Refiner(mesh, fs.pyramid, BV, BF, params,
-                      np.random.default_rng(ctx.cfg["seed"]))
-    snaps = Snapshots() if ctx.cfg["refine"]["snapshots"] else None
+                      np.random.default_rng(config.seed))
+    snaps = Snapshots() if config.refine.snapshots else None
     if snaps is not None:
         snaps.add(refiner)
     if not kernels_cached():
