@@ -79,3 +79,14 @@ tol.side_test_floor = 1e-200
 # Imprint: a closest point within this fraction of its size of a surface
 # vertex is that vertex.
 tol.coincide = 1e-12
+
+# Positions this close (relative to the diagonal) are one: a file's corners written twice.
+tol.same_position = 1e-9
+
+# Least-squares fits of the coarse motion (the lattice of a deforming piece) are solved to this relative
+# accuracy: far below any motion a frame shows.
+tol.lsqr = 1e-14
+
+# Pieces' exact volumes and the Monte Carlo estimate may differ by five standard errors of the estimate
+# and this share of B's volume (the estimate's own bias at few samples).
+tol.volume_check = 1e-3

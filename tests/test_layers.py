@@ -62,3 +62,32 @@ def test_no_module_imports_itself_through_others():
     _, label = connected_components(graph, directed=True, connection="strong")
     circles = [[n for n, k in zip(names, label) if k == c] for c in np.unique(label) if (label == c).sum() > 1]
     assert circles == []
+
+
+def test_no_epsilon_is_typed_inline_in_an_expression():
+    """Tolerances are named: in tol (fracture/tolerances.py, fields/tolerances.py), in view_tol
+    (viewer/tolerances.py) or as a module constant with its reason; no expression of the code types a
+    small number in scientific notation (declared ranges and defaults of parameters excepted)."""
+    import re
+
+    small = re.compile(r"(?<![\w.])\d+(\.\d+)?e-\d+")
+    declared = [re.compile(p) for p in (
+        r"^\s*[A-Z_][A-Z0-9_]*\s*(:[^=]*)?=",  # a module constant (its reason on the lines above)
+        r"\b(lo|hi)=|_p\(|Param\(",  # a parameter's declared range or default
+        r"\w+\s*(:\s*[\w\[\], |]+)?=\s*\d+(\.\d+)?e-\d+\s*[,)]",  # a keyword argument's default
+    )]
+    found = []
+    for package in ("fracture", "fields", "viewer"):
+        for path in sorted((REPO / package).rglob("*.py")):
+            if path.name == "tolerances.py":
+                continue
+            in_doc = False
+            for number, line in enumerate(path.read_text().splitlines(), 1):
+                if line.count('"""') % 2:
+                    in_doc = not in_doc
+                    continue
+                code = line.split("#", 1)[0]
+                if in_doc or not small.search(code) or any(d.search(line) for d in declared):
+                    continue
+                found.append(f"{path.relative_to(REPO)}:{number}: {line.strip()}")
+    assert not found, "epsilons typed inline:\n" + "\n".join(found)

@@ -15,6 +15,7 @@ import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
 from fields.colormap import colorbar, linear_to_srgb, srgb_to_linear
+from viewer.tolerances import view_tol
 
 INK = (30, 30, 30)
 PAPER = (255, 255, 255)
@@ -72,8 +73,8 @@ def nice_ticks(lo: float, hi: float, most: int = 6) -> np.ndarray:
     raw = (hi - lo) / max(most - 1, 1)
     mag = 10.0 ** np.floor(np.log10(raw))
     step = next(m * mag for m in (1, 2, 2.5, 5, 10) if m * mag >= raw)
-    first = np.ceil(lo / step - 1e-9) * step
-    ticks = np.arange(first, hi + 1e-9 * step, step)
+    first = np.ceil(lo / step - view_tol.tick) * step
+    ticks = np.arange(first, hi + view_tol.tick * step, step)
     return np.round(ticks / step) * step + 0.0  # no 0.30000000000000004, no -0.0
 
 
@@ -172,5 +173,5 @@ def finish(on_white: np.ndarray, on_black: np.ndarray | None = None, k: int = 1)
     black = _block_mean(srgb_to_linear(np.asarray(on_black, np.float64) / 255.0), k)
     # the renderer's colour grading leaves white and black a unit or two off: within 1 % is clear or solid
     alpha = np.clip((0.99 - (white - black).max(axis=2, keepdims=True)) / 0.98, 0.0, 1.0)
-    rgb = np.where(alpha > 1e-4, black / np.maximum(alpha, 1e-4), 0.0)
+    rgb = np.where(alpha > view_tol.opaque, black / np.maximum(alpha, view_tol.opaque), 0.0)
     return np.round(np.concatenate([255.0 * linear_to_srgb(rgb), 255.0 * alpha], axis=2)).astype(np.uint8)

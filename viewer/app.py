@@ -46,6 +46,7 @@ from viewer.looks import (
 )
 from viewer.media import Video, check_size, frame_counts
 from viewer.state import PANELS, ViewState, from_section, write_view_file
+from viewer.tolerances import view_tol
 
 PRESETS = ("iso", "front", "side", "top")
 SIDE_WIDTH_EM = 20
@@ -485,7 +486,7 @@ class Viewer:
     def _look_along(self, j: int, forward: np.ndarray, up: np.ndarray) -> None:
         """Panel ``j`` looking along ``forward`` at its own subject, from its fitted distance."""
         center = self._pose(j).center
-        forward = forward / max(np.linalg.norm(forward), 1e-12)
+        forward = forward / max(np.linalg.norm(forward), view_tol.direction)
         eye = center - self._fitted_distance(j) * forward
         self.scenes[j].look_at(center.astype(np.float32), eye.astype(np.float32), np.asarray(up, np.float32))
         self.scenes[j].force_redraw()

@@ -22,6 +22,7 @@ from fracture.errors import InputError
 from fracture.mesh.topology import face_frames, unique_edges
 from viewer.annotate import finish
 from viewer.data import FIELDS, RunData, Surface
+from viewer.tolerances import view_tol
 
 # White: the renderer's colour grading maps 1.0 to 248, so the background is given a little above it.
 BACKGROUND = (1.07, 1.07, 1.07, 1.0)
@@ -280,11 +281,11 @@ def ground_quad(lo, hi, up: int, scale: float = 30.0) -> o3d.geometry.TriangleMe
     times the box's widest side, facing up."""
     lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
     a, b = (up + 1) % 3, (up + 2) % 3
-    mid, half = 0.5 * (lo + hi), 0.5 * scale * max(hi[a] - lo[a], hi[b] - lo[b], 1e-9)
+    mid, half = 0.5 * (lo + hi), 0.5 * scale * max(hi[a] - lo[a], hi[b] - lo[b], view_tol.extent)
     V = np.zeros((4, 3))
     V[:, a] = mid[a] + half * np.array([-1, 1, 1, -1])
     V[:, b] = mid[b] + half * np.array([-1, -1, 1, 1])
-    V[:, up] = lo[up] - 1e-3 * np.linalg.norm(hi - lo)
+    V[:, up] = lo[up] - view_tol.floor_gap * np.linalg.norm(hi - lo)
     return triangle_mesh(V, np.array([[0, 1, 2], [0, 2, 3]]), flat=True)
 
 
@@ -389,7 +390,7 @@ def frame_points(P: np.ndarray, aspect: float = 16 / 9, look: np.ndarray | None 
     look = look / np.linalg.norm(look)
     up = axes[1] if up is None else np.asarray(up, np.float64)
     up = up - (up @ look) * look
-    if np.linalg.norm(up) < 1e-6:
+    if np.linalg.norm(up) < view_tol.across:
         up = np.eye(3)[np.argmin(np.abs(look))]
         up = up - (up @ look) * look
     up /= np.linalg.norm(up)
@@ -410,7 +411,7 @@ def frame_points(P: np.ndarray, aspect: float = 16 / 9, look: np.ndarray | None 
     ex, ey = 0.5 * (a - b), 0.5 * (c - d)
     ez = max(0.5 * (a + b) / tan_h, 0.5 * (c + d) / tan_v)
     zc = 0.5 * (z.min() + z.max())  # the point looked at: the points' middle depth
-    ez = max(ez, zc + 1e-9)
+    ez = max(ez, zc + view_tol.depth)
     center = ex * cam_right + ey * cam_up + zc * direction
     return CameraPose(center, ex * cam_right + ey * cam_up + ez * direction, cam_up, fov)
 

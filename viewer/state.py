@@ -20,6 +20,7 @@ from fracture.pipeline.config import SCHEMA, read_yaml
 from fracture.errors import ConfigError
 from fracture.pipeline.schema import validate
 from viewer.looks import CameraPose, View
+from viewer.tolerances import view_tol
 
 PANELS = ("material", "iterations", "animation")
 
@@ -66,9 +67,10 @@ def from_section(section: dict | None, where: str) -> ViewState:
             raise ConfigError(where, key, "got only some of eye, center and up; expected all three (or none: fitted)")
         eye, center, up = (np.array(c[k], np.float64) for k in ("eye", "center", "up"))
         forward = center - eye
-        if np.linalg.norm(forward) < 1e-12:
+        if np.linalg.norm(forward) < view_tol.direction:
             raise ConfigError(where, key, "eye and center are the same point; expected a camera looking somewhere")
-        if np.linalg.norm(np.cross(forward, up)) < 1e-9 * np.linalg.norm(forward) * max(np.linalg.norm(up), 1e-300):
+        across = np.linalg.norm(np.cross(forward, up))
+        if across < view_tol.parallel * np.linalg.norm(forward) * max(np.linalg.norm(up), view_tol.direction):
             raise ConfigError(where, f"{key}.up", "up is along the viewing direction (or zero); expected a direction "
                               "across it")
         cameras[panel] = CameraPose(center, eye, up, c["fov"])

@@ -174,6 +174,6 @@ def fit_lattice(X: np.ndarray, Y: np.ndarray, lo, hi, n: int = 2, rigid_toleranc
     nodes = np.empty_like(prior)
     for k in range(3):
         rhs = np.concatenate([Y[:, k] - W @ prior[:, k], np.zeros(grid.size)])
-        nodes[:, k] = prior[:, k] + lsqr(M, rhs, atol=1e-14, btol=1e-14)[0]
+        nodes[:, k] = prior[:, k] + lsqr(M, rhs, atol=tol.lsqr, btol=tol.lsqr)[0]
     residual = float(np.linalg.norm(W @ nodes - Y, axis=1).max())
     return nodes.reshape(n, n, n, 3), residual, rigid_residual

@@ -92,7 +92,7 @@ def join_open_shells(V: np.ndarray, polys: list[np.ndarray], face_label: np.ndar
     pair up either way). Neighbouring pieces touch along part of their boundaries only
     and stay apart.
     """
-    _, at = weld(V, 1e-9 * diagonal(V))  # one key per position
+    _, at = weld(V, tol.same_position * diagonal(V))  # one key per position
     ids = np.concatenate(polys)
     nxt = np.concatenate([np.roll(f, -1) for f in polys])
     labels, owner = np.unique(np.repeat(face_label, [len(f) for f in polys]), return_inverse=True)

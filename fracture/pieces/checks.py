@@ -12,6 +12,7 @@ from fracture.errors import ResultError
 from fracture.mesh.topology import diagonal, signed_volume
 from fracture.pieces.assembly import Pieces, mesh_checks, overlap_and_gap
 from fracture.pieces.transfer import Transfer
+from fracture.tolerances import tol
 
 
 def piece_checks(pieces: Pieces, BV: np.ndarray, BF: np.ndarray, samples: int, rng: np.random.Generator) -> dict:
@@ -66,7 +67,7 @@ def verify_pieces(checks: dict, names: list[str]) -> None:
             raise ResultError(f"{what} has volume {p['volume']:.3g}; it is inside out or empty")
         if "volume_sampled" in p and n:
             share = min(max(p["volume_sampled"] / vb, 0.0), 1.0)
-            allowed = 5.0 * abs(vb) * np.sqrt(max(share * (1.0 - share), 1.0 / n) / n) + 1e-3 * abs(vb)
+            allowed = 5.0 * abs(vb) * np.sqrt(max(share * (1.0 - share), 1.0 / n) / n) + tol.volume_check * abs(vb)
             if abs(p["volume"] - p["volume_sampled"]) > allowed:
                 raise ResultError(f"{what}: its volume {p['volume']:.4g} disagrees with the {p['volume_sampled']:.4g} "
                                   f"its winding number encloses at {n} sample points (it wraps some space twice)")

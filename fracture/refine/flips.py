@@ -28,18 +28,17 @@ _DELAUNAY = tol.delaunay
 @numba.njit(cache=True, inline="always")
 def corner_cot(V, a, b, c):
     """Cotangent of the angle at vertex ``a`` of triangle (a, b, c), +inf for a degenerate triangle."""
-    ux, uy, uz = V[b, 0] - V[a, 0], V[b, 1] - V[a, 1], V[b, 2] - V[a, 2]
-    vx, vy, vz = V[c, 0] - V[a, 0], V[c, 1] - V[a, 1], V[c, 2] - V[a, 2]
-    nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
-    sine = np.sqrt(nx * nx + ny * ny + nz * nz)
-    return (ux * vx + uy * vy + uz * vz) / sine if sine > 0.0 else np.inf
+    A = vec.point(V, a)
+    u, v = vec.sub(vec.point(V, b), A), vec.sub(vec.point(V, c), A)
+    sine = vec.norm(vec.cross(u, v))
+    return vec.dot(u, v) / sine if sine > 0.0 else np.inf
 
 
 @numba.njit(cache=True, inline="always")
 def corner_obtuse(V, a, b, c):
     """The angle at vertex ``a`` of triangle (a, b, c) is over pi / 2 (its cotangent is negative)."""
-    return ((V[b, 0] - V[a, 0]) * (V[c, 0] - V[a, 0]) + (V[b, 1] - V[a, 1]) * (V[c, 1] - V[a, 1])
-            + (V[b, 2] - V[a, 2]) * (V[c, 2] - V[a, 2])) < 0.0
+    A = vec.point(V, a)
+    return vec.dot(vec.sub(vec.point(V, b), A), vec.sub(vec.point(V, c), A)) < 0.0
 
 
 @numba.njit(cache=True, inline="always")

@@ -30,6 +30,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from fracture.mesh import vec
 from fracture.mesh.faces import face_geometry
 from fracture.tolerances import tol
 
@@ -42,9 +43,10 @@ def _corner_term(area, pbar, nx, ny, nz, ex, ey, ez, gx, gy, gz):
     """One triangle's part of ``dE/dx_i`` for its corner ``i``: ``area / 3 * grad psi(x_i)`` plus
     ``pbar * 1/2 n x e`` (``n`` its unit normal, ``e`` its edge opposite ``i``, ``pbar`` the mean psi of
     its corners); returned as three components."""
-    return (area / 3.0 * gx + 0.5 * pbar * (ny * ez - nz * ey),
-            area / 3.0 * gy + 0.5 * pbar * (nz * ex - nx * ez),
-            area / 3.0 * gz + 0.5 * pbar * (nx * ey - ny * ex))
+    ne = vec.cross((nx, ny, nz), (ex, ey, ez))
+    return (area / 3.0 * gx + 0.5 * pbar * ne[0],
+            area / 3.0 * gy + 0.5 * pbar * ne[1],
+            area / 3.0 * gz + 0.5 * pbar * ne[2])
 
 
 @numba.njit(cache=True)
@@ -80,23 +82,22 @@ def _sample_displacement(P, T, psi_p, grad_p, psi_T, dt):
     k = P.shape[0]
     out = np.zeros((k, 3))
     for s in range(k):
-        ux, uy, uz = T[s, 1, 0] - T[s, 0, 0], T[s, 1, 1] - T[s, 0, 1], T[s, 1, 2] - T[s, 0, 2]
-        vx, vy, vz = T[s, 2, 0] - T[s, 0, 0], T[s, 2, 1] - T[s, 0, 1], T[s, 2, 2] - T[s, 0, 2]
-        nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
-        t = np.sqrt(nx * nx + ny * ny + nz * nz)
+        o = vec.point(T[s], 0)
+        n = vec.cross(vec.sub(vec.point(T[s], 1), o), vec.sub(vec.point(T[s], 2), o))
+        t = vec.norm(n)
         if t == 0.0:
             continue
-        nx, ny, nz = nx / t, ny / t, nz / t
+        nx, ny, nz = n[0] / t, n[1] / t, n[2] / t
         gx = gy = gz = 0.0
         area = 0.0
         for c in range(3):  # sub-triangle with p in place of corner c; its edge opposite p is T's edge opposite c
             b, e = (c + 1) % 3, (c + 2) % 3
-            bx, by, bz = T[s, b, 0] - P[s, 0], T[s, b, 1] - P[s, 1], T[s, b, 2] - P[s, 2]
-            cx, cy, cz = T[s, e, 0] - P[s, 0], T[s, e, 1] - P[s, 1], T[s, e, 2] - P[s, 2]
-            wx, wy, wz = by * cz - bz * cy, bz * cx - bx * cz, bx * cy - by * cx
-            sub = 0.5 * np.sqrt(wx * wx + wy * wy + wz * wz)
+            p = vec.point(P, s)
+            bb, cc = vec.sub(vec.point(T[s], b), p), vec.sub(vec.point(T[s], e), p)
+            sub = 0.5 * vec.norm(vec.cross(bb, cc))
             pb = (psi_p[s] + psi_T[s, b] + psi_T[s, e]) / 3.0
-            x, y, z = _corner_term(sub, pb, nx, ny, nz, cx - bx, cy - by, cz - bz,
+            edge = vec.sub(cc, bb)
+            x, y, z = _corner_term(sub, pb, nx, ny, nz, edge[0], edge[1], edge[2],
                                    grad_p[s, 0], grad_p[s, 1], grad_p[s, 2])
             gx += x
             gy += y

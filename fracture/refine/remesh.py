@@ -44,7 +44,8 @@ import numpy as np
 from fracture.refine.crossings_on_b import splits_would_cross
 from fracture.refine.flow import sample_displacement
 from fracture.mesh.edges import EdgeTable, first_per_group
-from fracture.mesh.faces import unit_normal_into, face_geometry
+from fracture.mesh import vec
+from fracture.mesh.faces import face_geometry, unit_normal_into
 from fracture.tolerances import tol
 
 # compiled code reads tolerances as module constants (fracture/tolerances.py says why each)
@@ -243,10 +244,10 @@ def split_wanted(T, P, bary, d, v, F, dt, k_edge, has_edge, near2, far, min_qual
     for f in range(m):
         near = np.inf
         for k in range(3):
-            x, y, z = T[f, k, 0] - P[f, 0], T[f, k, 1] - P[f, 1], T[f, k, 2] - P[f, 2]
-            near = min(near, x * x + y * y + z * z)
-        t = unit_normal_into(T[f, 1, 0] - T[f, 0, 0], T[f, 1, 1] - T[f, 0, 1], T[f, 1, 2] - T[f, 0, 2],
-                              T[f, 2, 0] - T[f, 0, 0], T[f, 2, 1] - T[f, 0, 1], T[f, 2, 2] - T[f, 0, 2], N, f)
+            r = vec.sub(vec.point(T[f], k), vec.point(P, f))
+            near = min(near, vec.dot(r, r))
+        o = vec.point(T[f], 0)
+        t = unit_normal_into(vec.sub(vec.point(T[f], 1), o), vec.sub(vec.point(T[f], 2), o), N, f)
         if near < near2:
             continue
         a, b, c = F[f, 0], F[f, 1], F[f, 2]
@@ -266,8 +267,8 @@ def split_wanted(T, P, bary, d, v, F, dt, k_edge, has_edge, near2, far, min_qual
             sq = 0.0
             for k in range(3):
                 i = (k + 2) % 3
-                x, y, z = T[f, k, 0] - T[f, i, 0], T[f, k, 1] - T[f, i, 1], T[f, k, 2] - T[f, i, 2]
-                sq += x * x + y * y + z * z
+                r = vec.sub(vec.point(T[f], k), vec.point(T[f], i))
+                sq += vec.dot(r, r)
             want[f] = (abs(dx * N[f, 0] + dy * N[f, 1] + dz * N[f, 2]) > far
                        and q * 0.5 * t / max(sq, _TINY) > min_quality)
     return want, N

@@ -203,7 +203,7 @@ def limit_moves(V, F, d, fold, cap):
     n = V.shape[0]
     scale = np.ones(n)
     for i in range(n):
-        move = np.sqrt(d[i, 0] ** 2 + d[i, 1] ** 2 + d[i, 2] ** 2)
+        move = vec.norm(vec.point(d, i))
         if move > cap:
             scale[i] = cap / move
     for f in range(F.shape[0]):
@@ -211,13 +211,9 @@ def limit_moves(V, F, d, fold, cap):
         # cross the opposite edge
         longest = 0.0
         for k in range(3):
-            a, b = F[f, k], F[f, (k + 1) % 3]
-            longest = max(longest, np.sqrt((V[b, 0] - V[a, 0]) ** 2 + (V[b, 1] - V[a, 1]) ** 2
-                                           + (V[b, 2] - V[a, 2]) ** 2))
-        a, b, c = F[f, 0], F[f, 1], F[f, 2]
-        ux, uy, uz = V[b, 0] - V[a, 0], V[b, 1] - V[a, 1], V[b, 2] - V[a, 2]
-        vx, vy, vz = V[c, 0] - V[a, 0], V[c, 1] - V[a, 1], V[c, 2] - V[a, 2]
-        twice = np.sqrt((uy * vz - uz * vy) ** 2 + (uz * vx - ux * vz) ** 2 + (ux * vy - uy * vx) ** 2)
+            longest = max(longest, vec.norm(vec.sub(vec.point(V, F[f, (k + 1) % 3]), vec.point(V, F[f, k]))))
+        A = vec.point(V, F[f, 0])
+        twice = vec.norm(vec.cross(vec.sub(vec.point(V, F[f, 1]), A), vec.sub(vec.point(V, F[f, 2]), A)))
         altitude = twice / max(longest, _TINY)
         for k in range(3):
             a, b = F[f, k], F[f, (k + 1) % 3]
@@ -249,11 +245,11 @@ def limit_by_shortest_edge(V, F, d, ids, fraction):
         for k in range(3):
             a, b = F[f, k], F[f, (k + 1) % 3]
             if mark[a] or mark[b]:
-                length = np.sqrt((V[b, 0] - V[a, 0]) ** 2 + (V[b, 1] - V[a, 1]) ** 2 + (V[b, 2] - V[a, 2]) ** 2)
+                length = vec.norm(vec.sub(vec.point(V, b), vec.point(V, a)))
                 shortest[a] = min(shortest[a], length)
                 shortest[b] = min(shortest[b], length)
     for i in ids:
-        move = np.sqrt(d[i, 0] ** 2 + d[i, 1] ** 2 + d[i, 2] ** 2)
+        move = vec.norm(vec.point(d, i))
         limit = fraction * shortest[i]
         if move > limit:
             s = limit / move

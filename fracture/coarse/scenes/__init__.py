@@ -31,6 +31,7 @@ from fracture.mesh.primitives import box, cylinder
 from fracture.coarse.animation import exterior_points, lattice_animation
 from fracture.coarse.scenes.animator import rigid_bodies, rigid_motion, rotation
 from fracture.coarse.scenes.voronoi import VoronoiFracture, seeds_inside, voronoi_fracture
+from fracture.tolerances import tol
 
 #: Coarse fracture triangles of the paper's examples (Section 6).
 PAPER_TRIANGLES = {"bunny": 256, "branch": 60, "wall": 204, "clay": 510, "jello": 488}
@@ -113,7 +114,7 @@ def bunny(rng: np.random.Generator, frames: int, separation: float) -> CoarseFra
         com = vf.pieces[c][0].mean(axis=0)
         out = com - contact
         out[up] = 0.0
-        v = 0.9 * out / max(np.linalg.norm(out), 1e-9)
+        v = 0.9 * out / max(np.linalg.norm(out), tol.tiny)
         v[up] = 1.2
         return v, rng.normal(0.0, 4.0, 3)
 
