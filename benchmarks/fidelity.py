@@ -33,7 +33,7 @@ from fracture.pipeline import runner  # noqa: E402
 from fracture.pipeline.config import load_config  # noqa: E402
 from fracture.fidelity import area_samples, run_figures  # noqa: E402
 from fracture.refine.engine import Refiner, RefineParams  # noqa: E402
-from fracture.refine.mesh import RefineMesh  # noqa: E402
+from fracture.mesh.fracture_surface import FractureSurface  # noqa: E402
 
 SCENES = ["example", "wall", "bunny", "branch", "clay", "jello"]
 
@@ -48,7 +48,7 @@ def scene_row(name: str, overrides: list[str]) -> dict:
 def sheet_row(kind: str, offset: float, params: RefineParams) -> dict:
     case = weak_sheet_case(kind, offset)
     pyramid = StrengthPyramid(case.grid, case.zeta, levels=5, sigma=1.0)
-    mesh = RefineMesh.from_coarse(case.cut_V, case.cut_F, np.tile([0, 1], (len(case.cut_F), 1)))
+    mesh = FractureSurface.from_coarse(case.cut_V, case.cut_F, np.tile([0, 1], (len(case.cut_F), 1)))
     start = time.perf_counter()
     log = Refiner(mesh, pyramid, case.BV, case.BF, params, np.random.default_rng(0)).run()
     seconds = time.perf_counter() - start

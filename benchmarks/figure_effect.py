@@ -35,7 +35,7 @@ from fracture.pipeline.config import load_config  # noqa: E402
 from fracture.mesh.exterior import Exterior  # noqa: E402
 from fracture.io.ply import read_ply  # noqa: E402
 from fracture.refine.engine import Refiner, RefineParams  # noqa: E402
-from fracture.refine.mesh import RefineMesh  # noqa: E402
+from fracture.mesh.fracture_surface import FractureSurface  # noqa: E402
 
 
 def plane_crossings(V: np.ndarray, F: np.ndarray, axis: int, at: float) -> np.ndarray:
@@ -78,7 +78,7 @@ def panel(ax, grid: Grid, zeta: np.ndarray, axis: int, surfaces, title: str, sol
 def sheet_panel(ax, kind: str, offset: float) -> None:
     case = weak_sheet_case(kind, offset)
     pyramid = StrengthPyramid(case.grid, case.zeta, levels=5, sigma=1.0)
-    mesh = RefineMesh.from_coarse(case.cut_V, case.cut_F, np.tile([0, 1], (len(case.cut_F), 1)))
+    mesh = FractureSurface.from_coarse(case.cut_V, case.cut_F, np.tile([0, 1], (len(case.cut_F), 1)))
     Refiner(mesh, pyramid, case.BV, case.BF, RefineParams(max_triangles=20000), np.random.default_rng(0)).run()
     panel(ax, case.grid, case.zeta, 2, [(case.cut_V, case.cut_F), (mesh.V, mesh.F)],
           f"{kind} weak sheet, cut {offset:g} voxels off")

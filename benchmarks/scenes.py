@@ -28,10 +28,10 @@ def refine(cfg, cf, fs):
     import numpy as np
 
     from fracture.refine.engine import Refiner
-    from fracture.refine.mesh import RefineMesh
+    from fracture.mesh.fracture_surface import FractureSurface
     from fracture.pipeline.typed import refine_params
 
-    mesh = RefineMesh.from_coarse(cf.V, cf.F, cf.sides)
+    mesh = FractureSurface.from_coarse(cf.V, cf.F, cf.sides)
     log = Refiner(mesh, fs.pyramid, cf.exterior_V, cf.exterior_F, refine_params(cfg),
                   np.random.default_rng(cfg["seed"])).run()
     return mesh, log

@@ -17,7 +17,7 @@ from fracture.io.obj import ObjFrames
 from fracture.pieces.assembly import Pieces, build_pieces, mesh_checks, overlap_and_gap
 from fracture.io.ply import read_ply
 from fracture.mesh.primitives import box, grid_faces
-from fracture.refine.mesh import RefineMesh
+from fracture.mesh.fracture_surface import FractureSurface
 from fracture.mesh.topology import signed_volume
 
 
@@ -34,7 +34,7 @@ def slanted_cut(n: int = 7):
     normal = np.cross(V[F[0, 1]] - V[F[0, 0]], V[F[0, 2]] - V[F[0, 0]])
     front = 1 if normal[0] > 0 else 0  # the normal points into component 1 (x larger)
     sides = np.tile([1 - front, front], (len(F), 1))
-    return BV, BF, RefineMesh.from_coarse(V, F, sides)
+    return BV, BF, FractureSurface.from_coarse(V, F, sides)
 
 
 def test_a_slanted_cut_makes_two_closed_pieces_with_the_exact_volumes():
@@ -87,7 +87,7 @@ def bump_cut():
     F = grid_faces(n + 1, n + 1)
     up = np.cross(V[F[0, 1]] - V[F[0, 0]], V[F[0, 2]] - V[F[0, 0]])[2] > 0
     sides = np.tile([0, 1] if up else [1, 0], (len(F), 1))
-    return BV, BF, RefineMesh.from_coarse(V, F, sides)
+    return BV, BF, FractureSurface.from_coarse(V, F, sides)
 
 
 def test_a_surface_leaving_b_makes_pieces_without_crossings():
@@ -151,7 +151,7 @@ def test_bridge_edges_along_b_are_split_into_the_material():
     # ends on S's boundary): the triangles would touch B along it
     BV, BF = box((0, 0, 0), (1, 1, 1), (4, 4, 4))
     V = np.array([[0.2, 0.5, 0.0], [0.8, 0.5, 0.0], [0.5, 0.2, 0.3], [0.5, 0.8, 0.3]])
-    mesh = RefineMesh.from_coarse(V, np.array([[0, 1, 2], [1, 0, 3]]), np.array([[0, 1], [0, 1]]))
+    mesh = FractureSurface.from_coarse(V, np.array([[0, 1, 2], [1, 0, 3]]), np.array([[0, 1], [0, 1]]))
     assert split_bridge_edges(mesh, Exterior(BV, BF)) == 1
     # the new vertex is the bridge's midpoint lowered to BRIDGE_DEPTH x its length inside B
     assert np.allclose(mesh.V[4], [0.5, 0.5, BRIDGE_DEPTH * 0.6])
@@ -160,7 +160,7 @@ def test_bridge_edges_along_b_are_split_into_the_material():
     assert np.allclose(W[4].toarray(), [[0.5, 0.5, 0, 0]])
     # an interior bridge already deep enough stays at its midpoint
     V2 = np.array([[0.5, 0.0, 0.5], [0.5, 1.0, 0.5], [0.5, 0.5, 0.0], [0.5, 0.5, 1.0]])
-    mesh2 = RefineMesh.from_coarse(V2, np.array([[0, 1, 2], [1, 0, 3]]), np.array([[0, 1], [0, 1]]))
+    mesh2 = FractureSurface.from_coarse(V2, np.array([[0, 1, 2], [1, 0, 3]]), np.array([[0, 1], [0, 1]]))
     split_bridge_edges(mesh2, Exterior(BV, BF))
     assert np.allclose(mesh2.V[4], [0.5, 0.5, 0.5])
 
@@ -278,7 +278,7 @@ def _fan_and_flap(y_height: float):
     w, x, y = [0.47, 0.33, 0.3], [0.4, 0.6, 0.0], [0.6, 0.75, y_height]
     V = np.array([a, b, c, w, x, y])
     F = np.array([[3, 0, 1], [3, 1, 2], [3, 2, 0], [0, 2, 4], [4, 2, 5]])
-    return RefineMesh.from_coarse(V, F, np.tile([0, 1], (len(F), 1)))
+    return FractureSurface.from_coarse(V, F, np.tile([0, 1], (len(F), 1)))
 
 
 def test_only_ears_along_b_are_clipped_so_s_keeps_its_fans():

@@ -9,7 +9,7 @@ from fields.pyramid import StrengthPyramid
 from fracture.mesh.primitives import box, sheet
 from fracture.refine.engine import RefineParams, Refiner
 from fracture.refine.remesh import plan_splits, split_folds
-from fracture.refine.mesh import RefineMesh
+from fracture.mesh.fracture_surface import FractureSurface
 
 
 def two_weak_sheets(levels=4):
@@ -22,7 +22,7 @@ def two_weak_sheets(levels=4):
 
 def flat_cut(x=0.52, n=7):
     V, F = sheet(lambda u, v: np.stack([np.full_like(u, x), u, v], 1), (0, 1), (0, 1), n, n)
-    return RefineMesh.from_coarse(V, F, np.tile([0, 1], (len(F), 1)))
+    return FractureSurface.from_coarse(V, F, np.tile([0, 1], (len(F), 1)))
 
 
 def test_flat_cut_moves_onto_the_nearer_weak_sheet_and_the_functional_decreases():
@@ -107,7 +107,7 @@ def test_settle_boundary_stops_a_vertex_whose_way_onto_b_is_blocked():
     z0 = V[v, 2]
     V[v, 1] = 0.03
     obstacle = np.array([[0.45, 0.015, z0 - 0.01], [0.59, 0.015, z0 - 0.01], [0.52, 0.015, z0 + 0.03]])
-    mesh = RefineMesh.from_coarse(np.vstack([V, obstacle]), np.vstack([F, len(V) + np.array([[0, 1, 2]])]),
+    mesh = FractureSurface.from_coarse(np.vstack([V, obstacle]), np.vstack([F, len(V) + np.array([[0, 1, 2]])]),
                                   np.vstack([sides, [[1, 2]]]))
     assert self_intersections(mesh.V, mesh.F) == 0
     r = Refiner(mesh, pyramid, BV, BF, RefineParams(), np.random.default_rng(0))

@@ -18,7 +18,7 @@ from fracture.mesh.intersect import self_intersections
 from fracture.refine.crossings_on_b import crossing_pairs
 from fracture.refine.engine import RefineParams, Refiner
 from fracture.mesh.edges import edge_table, row_edges
-from fracture.refine.mesh import RefineMesh
+from fracture.mesh.fracture_surface import FractureSurface
 from fracture.refine.remesh import plan_splits
 from fracture.coarse.scenes import build_scene
 from fracture.pipeline.stages.fields import fields_from_config
@@ -78,7 +78,7 @@ def test_the_tree_reproduces_every_vertex_when_nothing_moves(name):
     cf = build_scene(name, 0, 8)
     cfg = load_config(CONFIGS / f"{name}.yaml", ["input.frames=8", "seed=0"])
     fs = fields_from_config(cfg, cf.exterior_V, cf.V, cf.F)
-    mesh = RefineMesh.from_coarse(cf.V, cf.F, cf.sides)
+    mesh = FractureSurface.from_coarse(cf.V, cf.F, cf.sides)
     r = Refiner(mesh, fs.pyramid, cf.exterior_V, cf.exterior_F, RefineParams(max_triangles=8000),
                 np.random.default_rng(0))
     r.begin_stage(0)

@@ -11,12 +11,12 @@ from fracture.coarse.scenes.weak_sheets import SHEETS, weak_sheet_case
 from fracture.fidelity import area_samples
 from fracture.mesh.intersect import self_intersections
 from fracture.refine.engine import RefineParams, Refiner
-from fracture.refine.mesh import RefineMesh
+from fracture.mesh.fracture_surface import FractureSurface
 
 
 def refine_case(case, levels=5, **params):
     pyramid = StrengthPyramid(case.grid, case.zeta, levels=levels, sigma=1.0)
-    mesh = RefineMesh.from_coarse(case.cut_V, case.cut_F, np.tile([0, 1], (len(case.cut_F), 1)))
+    mesh = FractureSurface.from_coarse(case.cut_V, case.cut_F, np.tile([0, 1], (len(case.cut_F), 1)))
     r = Refiner(mesh, pyramid, case.BV, case.BF, RefineParams(max_triangles=12000, **params),
                 np.random.default_rng(0))
     return r, r.run()

@@ -24,6 +24,7 @@ from scipy.sparse.csgraph import connected_components
 from fracture.errors import InputError
 from fracture.io.meshes import read_obj_objects, read_ply_polygons
 from fracture.mesh.topology import diagonal, weld
+from fracture.tolerances import tol
 
 
 @dataclass
@@ -315,7 +316,6 @@ def coarse_from_frames(frames: list[MeshFrame], lattice: int = 2, separation: fl
     from fracture.coarse.animation import CoarseAnimation, fit_lattice, lattice_box
     from fracture.coarse.surface import make_coarse
     from fracture.coarse.tiling import label_tiling
-    from fracture.tolerances import tol
 
     rest = frames[0]
     diag = diagonal(rest.V)

@@ -136,7 +136,7 @@ class EdgeTable(EdgeArrays):
 
     def independent(self, eids: np.ndarray) -> np.ndarray:
         """Mask over the edges ``eids`` (in order of priority) of those that come first on every triangle
-        they are on: a set of edges no triangle carries two of, as :meth:`RefineMesh.split_edges` needs."""
+        they are on: a set of edges no triangle carries two of, as :meth:`FractureSurface.split_edges` needs."""
         rows, which = self.rows_of(eids)
         first = first_per_group(rows // 3, which)
         keep = np.ones(len(eids), bool)

@@ -45,7 +45,7 @@ import scipy.sparse as sp
 from fracture.coarse.surface import flood_fill_patches
 from fracture.pieces.imprint import Imprint
 from fracture.mesh.intersect import self_intersections
-from fracture.refine.mesh import RefineMesh
+from fracture.mesh.fracture_surface import FractureSurface
 from fracture.mesh.topology import (barycentric_weights, diagonal, directed_edge_face, directed_edges, signed_volume,
                                weld)
 
@@ -136,7 +136,7 @@ class Pieces:
         return self.parts[c]
 
 
-def label_patches(im: Imprint, mesh: RefineMesh, n_components: int, fallback) -> tuple[np.ndarray, float]:
+def label_patches(im: Imprint, mesh: FractureSurface, n_components: int, fallback) -> tuple[np.ndarray, float]:
     """Component of each of B's triangles, by patch.
 
     The rule is the one that makes the pieces closed, so it reads only the
@@ -179,7 +179,7 @@ def label_patches(im: Imprint, mesh: RefineMesh, n_components: int, fallback) ->
     return label[patch], agreement
 
 
-def build_pieces(im: Imprint, mesh: RefineMesh, n_components: int, fallback, resolve: bool = True) -> Pieces:
+def build_pieces(im: Imprint, mesh: FractureSurface, n_components: int, fallback, resolve: bool = True) -> Pieces:
     """Assemble the closed pieces from imprinted B ``im`` and the refined surface ``mesh``.
 
     ``fallback(face_ids)`` labels B triangles of patches that touch no cut

@@ -34,7 +34,7 @@ from fracture.errors import InputError
 from fracture.mesh.exterior import Exterior
 from fracture.refine.crossings_on_b import splits_would_cross
 from fracture.mesh.edges import edge_table, row_edges
-from fracture.refine.mesh import RefineMesh
+from fracture.mesh.fracture_surface import FractureSurface
 from fracture.tolerances import tol
 
 # A point within this barycentric distance of an edge (or two edges) of a B
@@ -328,7 +328,7 @@ def _walk_section(surf: _Surface, p: int, q: int, claimed: set, cut: set, where:
                      f"{np.round(P, 6).tolist()} and {np.round(Q, 6).tolist()}: the path along it does not end{_RETRY}")
 
 
-def clip_tangent_triangles(mesh: RefineMesh, exterior: Exterior, ratio: float = TANGENT, max_rounds: int = 20) -> int:
+def clip_tangent_triangles(mesh: FractureSurface, exterior: Exterior, ratio: float = TANGENT, max_rounds: int = 20) -> int:
     """Remove ears of S that lie along B: two boundary edges, centroid within ``ratio`` of their size from B.
 
     Such a triangle separates nothing (B is on one of its sides); kept, it
@@ -358,7 +358,7 @@ def clip_tangent_triangles(mesh: RefineMesh, exterior: Exterior, ratio: float = 
     return total
 
 
-def collapse_short_boundary(mesh: RefineMesh, length: float) -> int:
+def collapse_short_boundary(mesh: FractureSurface, length: float) -> int:
     """Merge the ends of boundary edges shorter than ``length`` (the triangle on the edge goes away).
 
     Two boundary vertices a hair apart cannot both be inserted into B without
@@ -395,7 +395,7 @@ def collapse_short_boundary(mesh: RefineMesh, length: float) -> int:
     return done
 
 
-def subdivide_boundary(mesh: RefineMesh, exterior: Exterior, tolerance: float, max_rounds: int = 12) -> int:
+def subdivide_boundary(mesh: FractureSurface, exterior: Exterior, tolerance: float, max_rounds: int = 12) -> int:
     """Split boundary edges of ``mesh`` whose midpoint is farther than ``tolerance`` from B.
 
     The new vertex goes onto B (the closest point to the midpoint), so the
@@ -420,7 +420,7 @@ def subdivide_boundary(mesh: RefineMesh, exterior: Exterior, tolerance: float, m
     return total
 
 
-def split_bridge_edges(mesh: RefineMesh, exterior: Exterior, depth: float = BRIDGE_DEPTH,
+def split_bridge_edges(mesh: FractureSurface, exterior: Exterior, depth: float = BRIDGE_DEPTH,
                        max_rounds: int = 20) -> int:
     """Split the interior edges of S that join two boundary vertices; the new vertex goes inside B.
 
@@ -458,7 +458,7 @@ def split_bridge_edges(mesh: RefineMesh, exterior: Exterior, depth: float = BRID
     return total
 
 
-def imprint_boundary(BV: np.ndarray, BF: np.ndarray, mesh: RefineMesh, where: str = "animate") -> Imprint:
+def imprint_boundary(BV: np.ndarray, BF: np.ndarray, mesh: FractureSurface, where: str = "animate") -> Imprint:
     """Remesh B and the refined surface ``mesh`` (edited in place) so that S's boundary is a chain of B edges.
 
     Boundary vertices of ``mesh`` move onto B exactly (by at most their
@@ -522,7 +522,7 @@ def _embed(BV, BF, E, verts, f0, closest, order, where):
     return surf, to_b, chains
 
 
-def _split_fracture_edges(mesh: RefineMesh, E, sface, chains, BV_cut: np.ndarray, to_b: dict):
+def _split_fracture_edges(mesh: FractureSurface, E, sface, chains, BV_cut: np.ndarray, to_b: dict):
     """Insert the chains' inner vertices into S's boundary edges (each triangle becomes a fan)."""
     to_fracture = np.full(len(BV_cut), -1, np.int64)
     for s, b in to_b.items():

@@ -22,7 +22,7 @@ if TYPE_CHECKING:
     from fracture.coarse.surface import CoarseFracture
     from fracture.pieces.assembly import Pieces
     from fracture.pieces.transfer import Transfer
-    from fracture.refine.mesh import RefineMesh
+    from fracture.mesh.fracture_surface import FractureSurface
 
 
 @dataclass
@@ -32,7 +32,7 @@ class Products:
     coarse: CoarseFracture | None = None  # coarse: the coarse fracture animation (Sec. 4.1)
     exterior: tuple[np.ndarray, np.ndarray] | None = None  # coarse: B's vertices and triangles
     fields: FieldSet | None = None  # fields: zeta, the distances and the pyramids (Sec. 4.2, 4.3)
-    refined: RefineMesh | None = None  # refine: the refined fracture surface (Sec. 4.3, 4.4)
+    refined: FractureSurface | None = None  # refine: the refined fracture surface (Sec. 4.3, 4.4)
     pieces: Pieces | None = None  # animate: the watertight pieces (Sec. 5)
     transfer: Transfer | None = None  # animate: the deformation transfer (Sec. 5)
 

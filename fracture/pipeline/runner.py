@@ -15,7 +15,6 @@ import hashlib
 import json
 import logging
 import platform
-import sys
 import time
 from datetime import datetime, timezone
 from importlib import metadata

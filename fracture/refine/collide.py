@@ -34,7 +34,7 @@ from fracture.mesh import hashgrid
 from fracture.refine.fans import certified_fans, closed_vertices, share_certified
 from fracture.mesh.edges import edge_table, EdgeTable
 from fracture.mesh import vec
-from fracture.mesh.intersect import box_grid, swept_boxes, typical_cell
+from fracture.mesh.intersect import box_grid, swept_boxes
 
 # compiled code reads tolerances as module constants (fracture/tolerances.py says why each)
 _TINY = tol.tiny

@@ -78,7 +78,7 @@ from fracture.refine.flips import flip_edges
 from fracture.refine.flow import energy, energy_gradient
 from fracture.mesh.edges import edge_table, EdgeTable, row_edges
 from fracture.refine.order import spatial_order
-from fracture.refine.mesh import RefineMesh
+from fracture.mesh.fracture_surface import FractureSurface
 from fracture.refine.params import RefineParams
 from fracture.refine.remesh import plan_chord_splits, plan_splits
 from fracture.refine.state import VertexState
@@ -142,7 +142,7 @@ class Refiner:
     another collision response, or for a test that blocks a vertex.
     """
 
-    def __init__(self, mesh: RefineMesh, pyramid, BV: np.ndarray, BF: np.ndarray, params: RefineParams,
+    def __init__(self, mesh: FractureSurface, pyramid, BV: np.ndarray, BF: np.ndarray, params: RefineParams,
                  rng: np.random.Generator, *, collisions=stop_collisions):
         self.mesh, self.pyramid, self.params, self.rng = mesh, pyramid, params, rng
         self.stop_collisions = collisions
@@ -226,7 +226,7 @@ class Refiner:
 
     # -- memory order -----------------------------------------------------------------------
     def _renumber(self, vorder: np.ndarray, forder: np.ndarray | None = None) -> None:
-        """Renumber the mesh (:meth:`RefineMesh.reorder`) and the per-vertex state with it."""
+        """Renumber the mesh (:meth:`FractureSurface.reorder`) and the per-vertex state with it."""
         new = self.mesh.reorder(vorder, forder)
         self.state.grow(len(vorder))
         self.state.permute(vorder)

@@ -70,7 +70,7 @@ class SplitPlan:
     t : (k,) float
     rows, which : (r,) int
         The directed triangle edges on the split edges and the split edge of each (for
-        :meth:`~fracture.refine.mesh.RefineMesh.split_edges`).
+        :meth:`~fracture.mesh.fracture_surface.FractureSurface.split_edges`).
     faces : (s,) int
         Triangles to split 1-to-3 at barycentric points ``bary (s, 3)``.
     full : bool
@@ -90,7 +90,7 @@ class SplitPlan:
         return len(self.edges) + len(self.faces)
 
     def apply(self, mesh) -> int:
-        """Split ``mesh`` (a :class:`~fracture.refine.mesh.RefineMesh`); returns the number of new vertices."""
+        """Split ``mesh`` (a :class:`~fracture.mesh.fracture_surface.FractureSurface`); returns the number of new vertices."""
         if len(self.edges):
             mesh.split_edges(self.edges, self.t, rows=self.rows, which=self.which)
         if len(self.faces):

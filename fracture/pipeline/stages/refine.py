@@ -24,8 +24,8 @@ import numpy as np
 from fracture.io.ply import write_ply
 from fracture.refine import kernels_cached
 from fracture.mesh.intersect import self_intersections
-from fracture.refine.engine import RefineParams, Refiner
-from fracture.refine.mesh import RefineMesh
+from fracture.refine.engine import Refiner
+from fracture.mesh.fracture_surface import FractureSurface
 from fracture.pipeline.context import RunContext
 from fracture.pipeline.typed import refine_params
 
@@ -37,7 +37,7 @@ def refine_stage(ctx: RunContext) -> None:
     fs = ctx.products.fields
     config = ctx.config
     params = refine_params(config)
-    mesh = RefineMesh.from_coarse(cf.V, cf.F, cf.sides)
+    mesh = FractureSurface.from_coarse(cf.V, cf.F, cf.sides)
     BV, BF = ctx.products.exterior
     refiner = Refiner(mesh, fs.pyramid, BV, BF, params,
                       np.random.default_rng(config.seed))

@@ -4,15 +4,15 @@ One shared non-manifold surface: every triangle once, with the components on
 its two sides. The operations here (1-to-3 triangle splits, edge splits that
 split every triangle on the edge) keep each triangle's orientation and side
 ids, and record every new vertex in the barycentric tree: its parent
-vertices and weights at the moment it was made. :meth:`RefineMesh.tree_matrix`
+vertices and weights at the moment it was made. :meth:`FractureSurface.tree_matrix`
 composes the tree into one sparse map from the coarse vertices to every
 vertex (rows sum to 1), which Section 5 uses to carry the coarse animation's
 deformation to the refined surface.
 
 The refinement renumbers vertices and triangles now and then so that
-neighbours stay near in memory (:meth:`RefineMesh.reorder`); the tree speaks
+neighbours stay near in memory (:meth:`FractureSurface.reorder`); the tree speaks
 of vertices by creation order (``label``), and
-:meth:`RefineMesh.creation_order` gives the order that restores it.
+:meth:`FractureSurface.creation_order` gives the order that restores it.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from fracture.mesh.edges import edge_table
 
 
 @dataclass
-class RefineMesh:
+class FractureSurface:
     """A fracture surface under refinement.
 
     Attributes
@@ -61,7 +61,7 @@ class RefineMesh:
             self.label = np.arange(len(self.V))
 
     @classmethod
-    def from_coarse(cls, V, F, sides) -> RefineMesh:
+    def from_coarse(cls, V, F, sides) -> FractureSurface:
         V = np.array(V, np.float64)
         return cls(V, np.array(F, np.int64), np.array(sides, np.int64), n_coarse=len(V))
 

@@ -8,7 +8,7 @@ import pytest
 from fracture.mesh.topology import face_frames
 from fracture.mesh.primitives import sheet
 from fracture.refine.order import spatial_order
-from fracture.refine.mesh import RefineMesh
+from fracture.mesh.fracture_surface import FractureSurface
 from fracture.mesh.topology import unique_edges
 
 
@@ -17,7 +17,7 @@ def junction():
     V = np.array([[0, 0, 0], [0, 0, 1], [1, 0, 0.5], [-0.5, 0.8, 0.5], [-0.5, -0.8, 0.5]], float)
     F = np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4]])
     sides = np.array([[0, 1], [1, 2], [2, 0]])
-    return RefineMesh.from_coarse(V, F, sides)
+    return FractureSurface.from_coarse(V, F, sides)
 
 
 def normals_and_area(m):
@@ -102,7 +102,7 @@ def test_spatial_order_puts_neighbours_near_in_memory():
     V, F = sheet(lambda u, v: np.stack([u, v, 0.1 * np.sin(3 * u)], 1), (0, 1), (0, 1), 60, 60)
     rng = np.random.default_rng(0)
     shuffle = rng.permutation(len(V))
-    m = RefineMesh.from_coarse(V[shuffle], np.argsort(shuffle)[F], np.tile([0, 1], (len(F), 1)))
+    m = FractureSurface.from_coarse(V[shuffle], np.argsort(shuffle)[F], np.tile([0, 1], (len(F), 1)))
     m.F = m.F[rng.permutation(len(F))]
     spread = lambda: np.abs(np.diff(m.F[:, [0, 1, 2, 0]], axis=1)).mean()  # noqa: E731
     shuffled = spread()
