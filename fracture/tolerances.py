@@ -80,8 +80,22 @@ tol.side_test_floor = 1e-200
 # vertex is that vertex.
 tol.coincide = 1e-12
 
-# Positions this close (relative to the diagonal) are one: a file's corners written twice.
+# Positions this close (relative to the diagonal) are one: a file's corners written twice, or points a
+# boolean computed exactly and only rounding separates (the Voronoi cells of the built-in scenes).
 tol.same_position = 1e-9
+
+# A vertex this close to a bisector plane (relative to the diagonal) lies on it (the Voronoi cells).
+tol.on_plane = 1e-7
+
+# Imprinting B: a point within this barycentric distance of an edge (or two edges) of a B triangle is put
+# on that edge (vertex): no sliver triangles of relative height below it; the point moves by at most this
+# fraction of the height.
+tol.snap = 1e-4
+
+# Fans that cannot fold: a positive component, or a cross product that places a direction in a wedge,
+# must exceed this fraction of the product of the lengths involved: far beyond rounding, so a pass is a
+# proof.
+tol.fan_margin = 1e-9
 
 # Least-squares fits of the coarse motion (the lattice of a deforming piece) are solved to this relative
 # accuracy: far below any motion a frame shows.

@@ -37,10 +37,8 @@ from fracture.mesh.edges import edge_table, row_edges
 from fracture.mesh.fracture_surface import FractureSurface
 from fracture.tolerances import tol
 
-# A point within this barycentric distance of an edge (or two edges) of a B
-# triangle is put on that edge (vertex): no sliver triangles of relative
-# height below it. The point moves by at most this fraction of the height.
-SNAP = 1e-4
+# A point within this barycentric distance of an edge of a B triangle is put on it (tol.snap says why).
+SNAP = tol.snap
 
 # Boundary edges of S are split until their midpoints are this close to B,
 # relative to B's median edge length.

@@ -29,10 +29,10 @@ import numpy as np
 
 from fracture.mesh.edges import EdgeTable
 from fracture.mesh import vec
+from fracture.tolerances import tol
 
-# A positive component, or a cross product that places a direction in a wedge, must exceed this
-# fraction of the product of the lengths involved: far beyond rounding, so a pass is a proof.
-_MARGIN = 1e-9
+# compiled code reads tolerances as module constants (tol.fan_margin says why)
+_MARGIN = tol.fan_margin
 
 
 @numba.njit(cache=True)

@@ -25,12 +25,12 @@ from scipy.spatial import HalfspaceIntersection, cKDTree
 from fracture.errors import InputError
 from fracture.mesh.exterior import Exterior
 from fracture.mesh.topology import directed_edge_face, plane_basis, signed_volume, unique_edges, weld
+from fracture.tolerances import tol
 
-# Points closer than this (relative to the box diagonal) are one point; the
-# booleans compute shared points exactly, so only rounding separates them.
-_WELD = 1e-9
-# A vertex this close to a bisector plane (relative to the diagonal) lies on it.
-_ON_PLANE = 1e-7
+# Points this close are one, and a vertex this close to a bisector plane lies on it (relative to the
+# diagonal; fracture/tolerances.py says why)
+_WELD = tol.same_position
+_ON_PLANE = tol.on_plane
 
 
 @dataclass
