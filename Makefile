@@ -31,6 +31,7 @@ bench: install
 	$(BIN)/python benchmarks/bench_fields.py
 	$(BIN)/python benchmarks/bench_coarse.py
 	$(BIN)/python benchmarks/bench_refine.py --repeat 3 --rounds 2
+	$(BIN)/python benchmarks/bench_refine.py --repeat 3 --rounds 2 --cores 1
 	$(BIN)/python benchmarks/bench_animate.py --triangles 200000
 	$(BIN)/python benchmarks/fidelity.py
 

@@ -11,9 +11,12 @@ refinement's. With ``--repeat N`` each scene is refined N times in its process
 between processes (and minutes) than within one: ``--rounds R`` runs the
 whole list R times, every scene in a new process each round. The table gives
 each scene's fastest run and, in "spread", its slowest over its fastest.
-Prints the paper's figures (one core of an i7-2600) beside ours.
+Prints the paper's figures (one core of an i7-2600) beside ours. The
+refinement's own loops run on one core; libigl's closest-point queries use
+every core the process may run on: ``--cores 1`` pins each scene's process to
+one core (the paper's setting), the default leaves it every core.
 
-Usage: python benchmarks/bench_refine.py [--scenes wall clay ...] [--iterations N] [--repeat N] [--rounds R]
+Usage: python benchmarks/bench_refine.py [--scenes wall clay ...] [--iterations N] [--repeat N] [--rounds R] [--cores N]
 """
 
 from __future__ import annotations
@@ -30,8 +33,12 @@ PAPER = {"bunny": (174_000, 11.7), "branch": (123_000, 5.0), "wall": (208_000, 1
          "clay": (40_000, 3.0), "jello": (32_000, 3.0)}
 
 
-def run_scene(name: str, iterations: int | None, repeat: int, out) -> None:
+def run_scene(name: str, iterations: int | None, repeat: int, cores: int | None, out) -> None:
     import copy
+    import os
+
+    if cores is not None:  # before any library starts its threads
+        os.sched_setaffinity(0, sorted(os.sched_getaffinity(0))[:cores])
 
     from fracture.mesh.intersect import self_intersections
 
@@ -61,17 +68,18 @@ def main() -> None:
     ap.add_argument("--iterations", type=int, default=None, help="override refine.iterations")
     ap.add_argument("--repeat", type=int, default=1, help="refinements per scene and process; the fastest is shown")
     ap.add_argument("--rounds", type=int, default=1, help="runs of the whole scene list, a new process per scene each")
+    ap.add_argument("--cores", type=int, default=None, help="pin each scene's process to this many cores (default: all)")
     args = ap.parse_args()
-    for flag in ("repeat", "rounds"):
-        if getattr(args, flag) < 1:
+    for flag in ("repeat", "rounds", "cores"):
+        if getattr(args, flag) is not None and getattr(args, flag) < 1:
             ap.error(f"--{flag} must be at least 1, got {getattr(args, flag)}")
     t0 = time.perf_counter()
-    for _ in in_processes(run_scene, ["jello"], 2, 1):  # compiles the kernels, or loads them from the cache
+    for _ in in_processes(run_scene, ["jello"], 2, 1, args.cores):  # compiles the kernels, or loads them from the cache
         pass
     print(f"(kernels ready in {time.perf_counter() - t0:.1f} s, not timed below)\n")
     best = {}
     for _ in range(args.rounds):
-        for name, r in in_processes(run_scene, args.scenes, args.iterations, args.repeat):
+        for name, r in in_processes(run_scene, args.scenes, args.iterations, args.repeat, args.cores):
             old = best.get(name, r)
             best[name] = dict(min(old, r, key=lambda x: x["seconds"]), slowest=max(old["slowest"], r["slowest"]),
                               first=min(old["first"], r["first"]), peak_mb=max(old["peak_mb"], r["peak_mb"]))
