@@ -178,6 +178,7 @@ def test_obj_frames_round_trip(tmp_path):
         w.write(tmp_path / "g.obj", [V0, V1[:-1]])
 
 
+@pytest.mark.slow
 def test_the_example_run_writes_pieces_and_frames(tmp_path):
     cfg = load_config(CONFIGS / "example.yaml", ["animate.ply_frames=true", "animate.obj_frames=true"])
     out = runner.run(cfg, tmp_path / "run", progress=False)
@@ -202,6 +203,7 @@ def test_the_example_run_writes_pieces_and_frames(tmp_path):
     assert "mtllib materials.mtl" in text and "newmtl interior" in (out / "frames" / "materials.mtl").read_text()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", SCENE_CASES)
 def test_every_scene_animates_into_closed_pieces(name, tmp_path):
     cfg = scene_config(name, [f"refine.max_triangles={BUDGETS.get(name, 6000)}", "refine.iterations=8", "animate.check_samples=4000",

@@ -30,6 +30,7 @@ SEEDS = (list(range(SYSTEMATIC + EXTRA)) if EXTRA else
 INTERNAL = re.compile(r"\bon B\b|\bcomponent\b|Traceback|\bS\b")
 
 
+@pytest.mark.slow
 def test_random_cuts_succeed_or_refuse_clearly(tmp_path):
     outcomes = {}
     for seed in SEEDS:

@@ -24,6 +24,7 @@ from fracture.coarse.scenes import build_scene
 from fracture.pipeline.stages.fields import fields_from_config
 from fracture.pipeline.stages.refine import load_snapshots
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", SCENE_CASES)
 def test_refined_surface_is_clean_on_b_and_separates_the_components(name, tmp_path):
     cfg = scene_config(name, [f"refine.max_triangles={BUDGETS.get(name, 6000)}", "refine.iterations=8"])
@@ -108,6 +109,7 @@ def example_runs(tmp_path_factory):
     return runs
 
 
+@pytest.mark.slow
 def test_the_stress_weight_controls_how_far_the_crack_travels(example_runs):
     """Section 4.2: a larger stress weight keeps the result closer to the coarse surface. On the example
     wall the refined crack's mean distance to the coarse one falls monotonically with the weight, at
@@ -117,6 +119,7 @@ def test_the_stress_weight_controls_how_far_the_crack_travels(example_runs):
     assert distances[0] > 3.0 * distances[2]
 
 
+@pytest.mark.slow
 def test_the_example_crack_follows_the_brick_mortar_boundaries(example_runs):
     """The paper's effect (Figs. 4, 10): the coarse crack crosses bricks; the refined one runs in the weak
     layers between bricks and mortar. Measured as the share of its area in the weakest 20 % of zeta inside
@@ -126,6 +129,7 @@ def test_the_example_crack_follows_the_brick_mortar_boundaries(example_runs):
     assert refined >= 0.45 and refined >= 3.0 * coarse
 
 
+@pytest.mark.slow
 def test_the_marble_bunny_cracks_follow_the_soft_veins(tmp_path):
     """Fig. 1: the marble bunny's coarse cracks cross the hard, grainy body; the refined ones run in the
     soft veins. The weakest 20 % of zeta inside the bunny lie in the veins (a quarter of the stone): at
@@ -138,6 +142,7 @@ def test_the_marble_bunny_cracks_follow_the_soft_veins(tmp_path):
     assert refined["mean_zeta"] <= 0.75 * coarse["mean_zeta"]
 
 
+@pytest.mark.slow
 def test_the_branch_cut_turns_toward_the_axis_in_the_soft_core(tmp_path):
     """Fig. 9: the branch is soft inside and hard outside, its grain along the axis. Its oblique coarse cut
     (35 degrees from the cross-section) turns toward the axis in the core and across it at the bark, and
