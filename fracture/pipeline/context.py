@@ -6,6 +6,7 @@ import json
 import logging
 import sys
 from dataclasses import dataclass, field, fields
+from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping
 
@@ -66,9 +67,9 @@ class RunContext:
     cache: Any = None
     keys: dict[str, str] = field(default_factory=dict)
 
-    @property
+    @cached_property
     def config(self) -> Config:
-        """The config as typed records (:func:`~fracture.pipeline.typed.typed_config`)."""
+        """The config as typed records (:func:`~fracture.pipeline.typed.typed_config`), made once per run."""
         return typed_config(self.cfg)
 
     def tell(self, event: str, **data) -> None:

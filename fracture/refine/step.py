@@ -162,7 +162,7 @@ class ImplicitStep:
     """
 
     def __init__(self):
-        self._edges = self._pattern = self._ldl = None
+        self._L = self._pattern = self._ldl = self._row_sums = None
         self.factorisations = self.reuses = 0
 
     def __call__(self, L: CotangentWeights, area: np.ndarray, v: np.ndarray, tau: float) -> np.ndarray:
@@ -170,14 +170,16 @@ class ImplicitStep:
         ``tau``), ``area`` the barycentric vertex area ``A_i`` (the diagonal of ``M``), ``v`` the
         explicit velocity of Eq. 3. The matrix is written straight into QDLDL's form, the upper
         triangle by columns, whose pattern is kept while the edges stay the same."""
-        old = self._edges
-        if old is None or not (old[2] == L.n and np.array_equal(old[0], L.lo) and np.array_equal(old[1], L.hi)):
-            self._edges, self._pattern, self._ldl = (L.lo, L.hi, L.n), _upper_pattern(L.lo, L.hi, L.n), None
+        if L is not self._L:  # a retried step passes the same weights: pattern and row sums as they were
+            old = self._L
+            if old is None or not (old.n == L.n and np.array_equal(old.lo, L.lo) and np.array_equal(old.hi, L.hi)):
+                self._pattern, self._ldl = _upper_pattern(L.lo, L.hi, L.n), None
+            self._L, self._row_sums = L, np.bincount(L.lo, L.weight, L.n) + np.bincount(L.hi, L.weight, L.n)
         pattern = self._pattern
         M = np.maximum(area, _TINY)
         data = np.empty(len(pattern.indices))
         data[pattern.edge_slot] = -tau * L.weight
-        data[pattern.diagonal_slot] = M + tau * (np.bincount(L.lo, L.weight, L.n) + np.bincount(L.hi, L.weight, L.n))
+        data[pattern.diagonal_slot] = M + tau * self._row_sums
         K = sp.csc_matrix((data, pattern.indices, pattern.indptr), shape=(L.n, L.n))
         if self._ldl is None:
             self._ldl = qdldl.Solver(K, upper=True)
