@@ -19,6 +19,7 @@ from fracture.refine.crossings_on_b import crossing_pairs
 from fracture.refine.engine import RefineParams, Refiner
 from fracture.mesh.edges import edge_table, row_edges
 from fracture.mesh.fracture_surface import FractureSurface
+from fracture.tolerances import tol
 from fracture.refine.remesh import plan_splits
 from fracture.coarse.scenes import build_scene
 from fracture.pipeline.stages.fields import fields_from_config
@@ -41,7 +42,8 @@ def test_refined_surface_is_clean_on_b_and_separates_the_components(name, tmp_pa
     assert stats["max_boundary_distance"] < 1e-6
     assert "seconds" in manifest["stages"]["refine"]
     # no accepted step raises the functional the flow minimises
-    assert (np.array(stats["functional"]) <= np.array(stats["functional_before_step"])).all()
+    E, before = np.array(stats["functional"]), np.array(stats["functional_before_step"])
+    assert (E <= before + tol.functional_rise * np.abs(before)).all()
     assert stats["stopped_because"] == "settled" or stats["stopped_because"].startswith(("iterations",
                                                                                          "stage iterations"))
 
@@ -82,7 +84,7 @@ def test_the_tree_reproduces_every_vertex_when_nothing_moves(name):
     mesh = FractureSurface.from_coarse(cf.V, cf.F, cf.sides)
     r = Refiner(mesh, fs.pyramid, cf.exterior_V, cf.exterior_F, RefineParams(max_triangles=8000),
                 np.random.default_rng(0))
-    r.begin_stage(0)
+    r.begin_stage(*r.stages()[-1])  # the last stage: level 0
     for _ in range(4):  # splits only: the flow's moves are left out
         table = r.edges()
         v, w, *_ = r._velocity(table)

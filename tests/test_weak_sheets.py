@@ -12,6 +12,7 @@ from fracture.fidelity import area_samples
 from fracture.mesh.intersect import self_intersections
 from fracture.refine.engine import RefineParams, Refiner
 from fracture.mesh.fracture_surface import FractureSurface
+from fracture.tolerances import tol
 
 
 def refine_case(case, levels=5, **params):
@@ -31,7 +32,8 @@ def test_the_refined_surface_ends_on_the_weak_sheet(kind, offset):
     d = case.distance_to_sheet(area_samples(r.mesh.V, r.mesh.F))
     assert start.mean() > 0.8 * offset  # the cut started off the sheet
     assert d.mean() < 1.0 and np.mean(d < 1.0) >= 0.7
-    assert (np.array(log.functional) <= np.array(log.functional_before)).all()
+    E, before = np.array(log.functional), np.array(log.functional_before)
+    assert (E <= before + tol.functional_rise * np.abs(before)).all()  # up to rounding
     assert self_intersections(r.mesh.V, r.mesh.F) == 0
     assert log.boundary_error[-1] < 1e-9
 

@@ -18,7 +18,7 @@ class RefineParams:
     iterations: int = _p(60, 0, 10000, "largest number of iterations of the flow, all stages")
     stage_iterations: int = _p(15, 1, 10000, "largest number of iterations of one stage of the coarse-to-fine schedule")
     coarse_levels: int = _p(2, 1, 8, "every stage follows the mean of this many consecutive pyramid levels: the "
-                            "first the coarsest, each next one a level finer, the last the finest; "
+                            "first the coarsest, each next one a level finer; the last stage follows level 0 alone; "
                             "pyramid.levels gives one stage on every level (the paper's field)")
     tolerance: float = _p(0.02, 0.0, 10.0, "a stage has settled when the mean vertex move of an iteration is below "
                           "this (grid cells) and it split at most 0.5 % of the triangles")
