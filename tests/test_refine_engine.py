@@ -7,7 +7,7 @@ import numpy as np
 from fields.grid import Grid
 from fields.pyramid import StrengthPyramid
 from fracture.mesh.primitives import box, sheet
-from fracture.refine.engine import RefineParams, Refiner
+from fracture.refine.engine import RefineParams, Refiner, neighbour_clearance
 from fracture.refine.remesh import plan_splits, split_folds
 from fracture.mesh.fracture_surface import FractureSurface
 from fracture.tolerances import tol
@@ -258,3 +258,29 @@ def test_inner_vertices_that_would_leave_b_are_found_and_only_near_ones_are_aske
     asked.clear()
     X1[edge, 1] = 0.015  # inside, nearer than its distance at the last answer: not asked
     assert r.leaving_b(X1, np.array([edge])).size == 0 and asked == []
+
+
+def test_a_split_vertex_inside_its_parents_clear_balls_is_not_asked_about():
+    """leaving_b: a vertex made by a split has never been asked about, but it lies within the balls
+    free of B around its parents' last answers: B is not asked about it, unless its move takes it out
+    of them (then it is asked, and reported if it leaves)."""
+    pyramid = two_weak_sheets()
+    BV, BF = box([0, 0, 0], [1, 1, 1], (8, 8, 8))
+    mesh = flat_cut()
+    r = Refiner(mesh, pyramid, BV, BF, RefineParams(), np.random.default_rng(0))
+    inner = np.flatnonzero((np.abs(mesh.V[:, 1:] - 0.5) < 0.3).all(axis=1))
+    r.closest_on_b(inner)
+    table = r.edges()
+    a, b = inner[0], inner[np.argmin(np.linalg.norm(mesh.V[inner[1:]] - mesh.V[inner[0]], axis=1)) + 1]
+    assert table.find(np.array([[a, b]]))[0] >= 0  # neighbours
+    new = mesh.split_edges(np.array([[a, b]]), np.array([0.5]))[0]
+    r.state.grow(len(mesh.V))
+    asked = []
+    closest = r.B.closest
+    r.B.closest = lambda P: (asked.append(len(P)), closest(P))[1]
+    X1 = mesh.V.copy()
+    X1[new, 0] += 0.02
+    assert r.leaving_b(X1, np.array([new])).size == 0 and asked == []
+    assert neighbour_clearance(mesh.F, X1, r.state.near_at, r.state.near_d2, np.array([new]))[0] > 0.1
+    X1[new, 0] = 1.1  # out through the face x = 1, beyond every neighbour's ball
+    assert r.leaving_b(X1, np.array([new])).tolist() == [new] and asked == [1]

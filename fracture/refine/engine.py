@@ -307,13 +307,18 @@ class Refiner:
         less how far apart they are. So a vertex whose last known distance
         (at an inside position, kept by :meth:`closest_on_b`), less its move
         since, exceeds the thickness is inside and clear of B; only the rest
-        are asked about. An answer at a position outside B is forgotten: it
-        bounds nothing.
+        are asked about. The same holds for a neighbour's last answer: a
+        vertex made by a split (never asked) lies within its parents' clear
+        balls, and inside the object they are mostly far wider than its
+        edges (:func:`neighbour_clearance`). An answer at a position outside B
+        is forgotten: it bounds nothing.
         """
         s = self.state
         thin = self.params.thickness * self.h
-        bound = np.sqrt(s.near_d2[ids]) - np.linalg.norm(X1[ids] - s.near_at[ids], axis=1)
-        near = ids[~(bound > thin)]  # NaN (never asked, or last asked outside B) counts as near
+        clear = np.sqrt(s.near_d2) - np.linalg.norm(X1 - s.near_at, axis=1)  # NaN: no answer
+        near = ids[~(clear[ids] > thin)]  # NaN (never asked, or last asked outside B) counts as near
+        if len(near):
+            near = near[~(neighbour_clearance(self.mesh.F, X1, s.near_at, s.near_d2, near) > thin)]
         if not len(near):
             return near
         d2 = self.closest_on_b(near, X1)[0]
@@ -579,6 +584,23 @@ class Refiner:
             log.stop += f"; {which} off B (up to {off_b / self.h:.3g} grid cells): collisions block the way"
         self._renumber(self.mesh.creation_order())  # the tree's order, coarse vertices first
         return self.log
+
+
+def neighbour_clearance(F: np.ndarray, X: np.ndarray, at: np.ndarray, d2: np.ndarray, ids: np.ndarray) -> np.ndarray:
+    """For vertices ``ids`` at ``X[ids]``: the largest ``sqrt(d2[j]) - |X[i] - at[j]|`` over their
+    neighbours ``j`` in triangles ``F``, where ``d2[j]`` is the squared distance to B of the inside
+    point ``at[j]`` (NaN: unknown). Positive, it is a lower bound of ``X[i]``'s distance to B, and
+    ``X[i]`` lies inside (the distance is 1-Lipschitz); ``-inf`` where no neighbour is known."""
+    mark = np.zeros(len(X), bool)
+    mark[ids] = True
+    T = F[mark[F].any(axis=1)]
+    i = np.concatenate([T[:, 0], T[:, 0], T[:, 1], T[:, 1], T[:, 2], T[:, 2]])
+    j = np.concatenate([T[:, 1], T[:, 2], T[:, 0], T[:, 2], T[:, 0], T[:, 1]])
+    keep = mark[i] & np.isfinite(d2[j]) & ~np.isnan(at[j, 0])
+    i, j = i[keep], j[keep]
+    bound = np.full(len(X), -np.inf)
+    np.maximum.at(bound, i, np.sqrt(d2[j]) - np.linalg.norm(X[i] - at[j], axis=1))
+    return bound[ids]
 
 
 def _drop(d: np.ndarray, ids: np.ndarray, c: np.ndarray, nb: np.ndarray) -> None:
