@@ -73,8 +73,10 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 
+from fracture.mesh import vec
 from fracture.mesh.exterior import Exterior
 from fracture.refine.collide import stop_collisions
 from fracture.refine.crossings_on_b import close_pairs
@@ -591,16 +593,29 @@ def neighbour_clearance(F: np.ndarray, X: np.ndarray, at: np.ndarray, d2: np.nda
     neighbours ``j`` in triangles ``F``, where ``d2[j]`` is the squared distance to B of the inside
     point ``at[j]`` (NaN: unknown). Positive, it is a lower bound of ``X[i]``'s distance to B, and
     ``X[i]`` lies inside (the distance is 1-Lipschitz); ``-inf`` where no neighbour is known."""
-    mark = np.zeros(len(X), bool)
+    mark = np.zeros(len(X), np.bool_)
     mark[ids] = True
-    T = F[mark[F].any(axis=1)]
-    i = np.concatenate([T[:, 0], T[:, 0], T[:, 1], T[:, 1], T[:, 2], T[:, 2]])
-    j = np.concatenate([T[:, 1], T[:, 2], T[:, 0], T[:, 2], T[:, 0], T[:, 1]])
-    keep = mark[i] & np.isfinite(d2[j]) & ~np.isnan(at[j, 0])
-    i, j = i[keep], j[keep]
     bound = np.full(len(X), -np.inf)
-    np.maximum.at(bound, i, np.sqrt(d2[j]) - np.linalg.norm(X[i] - at[j], axis=1))
+    _neighbour_clearance(F, X, at, d2, mark, bound)
     return bound[ids]
+
+
+@numba.njit(cache=True)
+def _neighbour_clearance(F, X, at, d2, mark, bound):
+    # one pass over the triangles (a loop with a running maximum, which NumPy's
+    # maximum.at makes ten times slower on the wall's 200K triangles)
+    for f in range(F.shape[0]):
+        for k in range(3):
+            i = F[f, k]
+            if not mark[i]:
+                continue
+            for o in (1, 2):
+                j = F[f, (k + o) % 3]
+                if not (np.isfinite(d2[j]) and at[j, 0] == at[j, 0]):
+                    continue
+                b = np.sqrt(d2[j]) - vec.norm(vec.sub(vec.point(X, i), vec.point(at, j)))
+                if b > bound[i]:
+                    bound[i] = b
 
 
 def _drop(d: np.ndarray, ids: np.ndarray, c: np.ndarray, nb: np.ndarray) -> None:
