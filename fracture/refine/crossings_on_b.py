@@ -97,7 +97,10 @@ def _candidates(M: np.ndarray, L: np.ndarray, gap: float) -> np.ndarray:
         among = cKDTree(M[long_]).query_pairs(float(L.max()) + gap, output_type="ndarray")
         found.append(np.sort(long_[among], axis=1))
     pairs = np.concatenate(found).astype(np.int64).reshape(-1, 2)
-    return np.unique(pairs, axis=0)
+    # unique rows through one integer key each, in the same (lexicographic) order:
+    # np.unique(axis=0) sorts a structured view, five times slower
+    key = np.unique(pairs[:, 0] * len(M) + pairs[:, 1])
+    return np.stack([key // len(M), key % len(M)], 1)
 
 
 def _point_segment(p, a, b):
