@@ -118,3 +118,26 @@ def test_the_command_line_uses_the_cache_unless_told_not_to(tmp_path, small_conf
     stages = lambda d: json.loads((tmp_path / d / "manifest.json").read_text())["stages"]  # noqa: E731
     assert {s["cache"] for s in stages("b").values()} == {"reused"}
     assert all("cache" not in s for s in stages("c").values())
+
+
+def test_entries_are_written_beside_later_stages_and_are_whole_when_a_later_stage_fails(tmp_path, small_config):
+    """The runner stores a stage's entry in a thread while the next stages run; a later stage's failure
+    waits for it: the earlier stages' entries are complete, nothing is half-written, the run leaves no
+    directory, and the next run reuses them."""
+    from fracture.pipeline.stages import STAGES, Stage
+
+    cache = StageCache(tmp_path / "cache")
+
+    def fails(ctx):
+        raise RuntimeError("the refinement failed")
+
+    broken = tuple(Stage(s.name, fails) if s.name == "refine" else s for s in STAGES)
+    with pytest.raises(RuntimeError):
+        runner.run(load_config(small_config), tmp_path / "a", progress=False, cache=cache, stages=broken)
+    assert not (tmp_path / "a").exists()
+    assert list((tmp_path / "cache").glob("*/.*")) == []  # nothing half-written
+    for stage in ("coarse", "fields"):
+        entries = list((tmp_path / "cache" / stage).iterdir())
+        assert len(entries) == 1 and (entries[0] / "meta.json").is_file() and (entries[0] / "products.pkl").is_file()
+    manifest = run(load_config(small_config), tmp_path / "b", cache)
+    assert reuse(manifest) == {"coarse": "reused", "fields": "reused", "refine": "stored", "animate": "stored"}

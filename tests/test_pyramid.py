@@ -46,6 +46,10 @@ def test_a_window_of_levels_is_their_mean_and_its_gradient_the_mean_of_theirs():
         lowest, span = pyr.window_range(first, count)
         table = np.mean(pyr.levels[first:first + count], axis=0)
         assert lowest == pytest.approx(table.min()) and span == pytest.approx(np.ptp(table))
+        # the compiled table: NumPy's differences, bit for bit
+        want = np.stack(np.gradient(table, *grid.spacing, edge_order=1), axis=3)
+        np.testing.assert_array_equal(pyr.coarse_table(first, count)[..., 2:], want)
+        np.testing.assert_array_equal(pyr.coarse_table(first, count)[..., 1], table)
     np.testing.assert_allclose(pyr.coarse_field(0, P)[2], pyr.gradient(P), atol=1e-10)  # every level: the paper's
     with pytest.raises(ValueError):
         pyr.coarse_table(5, 1)

@@ -16,6 +16,7 @@ import json
 import logging
 import platform
 import time
+from concurrent.futures import Executor, Future, ThreadPoolExecutor
 from datetime import datetime, timezone
 from importlib import metadata
 from pathlib import Path
@@ -75,12 +76,17 @@ def stages_until(until: str | None, stages: tuple[Stage, ...] = STAGES) -> tuple
     return stages[: names.index(until) + 1]
 
 
-def _run_stage(ctx: RunContext, stage: Stage, keep_products: bool, out: Path) -> dict:
+def _run_stage(ctx: RunContext, stage: Stage, keep_products: bool, out: Path, writer: Executor | None = None) -> dict:
     """Run one stage, or reuse its cached result (:mod:`fracture.pipeline.cache`); returns what the manifest says of it.
 
     The stage's result is what it adds to the context: files, products (kept
     only for stages whose products a later stage reads), counts, statistics
-    and notes.
+    and notes. With a ``writer``, the result is stored into the cache there
+    while the next stages run (the manifest's ``cache`` is then a future,
+    :func:`_stored`): a preview's fields entry, tens of megabytes, is written
+    while the surface is refined. Later stages neither change an earlier
+    stage's files nor its products (the animate stage copies the refined
+    surface), so the entry is what the stage made.
     """
     name, cache = stage.name, ctx.cache
     if cache is None:
@@ -107,9 +113,15 @@ def _run_stage(ctx: RunContext, stage: Stage, keep_products: bool, out: Path) ->
     changed = lambda new, old: {k: v for k, v in new.items() if k not in old or old[k] is not v}  # noqa: E731
     meta = dict(counts=changed(ctx.counts, counts), stats=changed(ctx.stats, stats), notes=ctx.notes[n_notes:],
                 run=str(out))
-    stored = cache.store(name, key, ctx.dir, ctx.files[n_files:],
-                         changed(ctx.products.made(), products) if keep_products else {}, meta)
-    return {"cache": "stored" if stored is not None else "not stored (the cache cannot be written)"}
+    args = (name, key, ctx.dir, ctx.files[n_files:], changed(ctx.products.made(), products) if keep_products else {},
+            meta)
+    if writer is not None:
+        return {"cache": writer.submit(cache.store, *args)}
+    return {"cache": _stored(cache.store(*args))}
+
+
+def _stored(entry: Path | None) -> str:
+    return "stored" if entry is not None else "not stored (the cache cannot be written)"
 
 
 def run(cfg: dict, out: str | Path, until: str | None = None, force: bool = False, progress: bool = True,
@@ -155,16 +167,21 @@ def run(cfg: dict, out: str | Path, until: str | None = None, force: bool = Fals
         "packages": _versions(),
         "stages": {},
     }
-    with staged_directory(out, force) as staging:
+    # the cache's entries are written by one thread beside the stages, all before the run is complete
+    # (and before a failed run's directory is removed: the entries copy files from it)
+    with staged_directory(out, force) as staging, ThreadPoolExecutor(1, "fracref-cache") as writer:
         ctx = RunContext(cfg=cfg, dir=staging, progress=progress, listener=listener, cache=cache)
         ctx.path("config.yaml").write_text(dump_config(cfg), encoding="utf-8")
         for stage in chosen:
             t0 = time.perf_counter()
             ctx.tell("stage", name=stage.name)
             log.info("%s: started", stage.name)
-            info = _run_stage(ctx, stage, keep_products=stage is not stages[-1], out=Path(out))
+            info = _run_stage(ctx, stage, keep_products=stage is not stages[-1], out=Path(out), writer=writer)
             manifest["stages"][stage.name] = {"seconds": round(time.perf_counter() - t0, 4), **info}
             log.info("%s: done in %.2f s", stage.name, manifest["stages"][stage.name]["seconds"])
+        for info in manifest["stages"].values():
+            if isinstance(info.get("cache"), Future):
+                info["cache"] = _stored(info["cache"].result())
         if cache is not None:
             cache.trim()  # once per run: it walks every entry
         manifest["stats"] = ctx.stats
