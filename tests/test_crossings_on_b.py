@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from fracture.refine.crossings_on_b import crossing_pairs, splits_would_cross
+from fracture.refine.crossings_on_b import candidate_pairs, close_pairs, crossing_pairs, splits_would_cross
 
 UP = lambda P: np.tile([0.0, 0.0, 1.0], (len(P), 1))  # noqa: E731  (B is the plane z = 0)
 
@@ -53,3 +53,23 @@ def test_every_crossing_is_found_among_short_and_long_edges():
     want = {(int(p), int(q)) for p, q in zip(i[cross], j[cross])}
     got = {tuple(sorted(map(int, p))) for p in crossing_pairs(X, E, UP)}
     assert len(want) > 20 and got == want
+
+
+def test_the_candidates_of_a_move_hold_every_pair_close_after_it():
+    """candidate_pairs(X, E, gap, move): the pairs that come within the gap at any positions within ``move``
+    of X are among them (and the checks of close_pairs among them give its own answer)."""
+    rng = np.random.default_rng(5)
+    X = rng.uniform(0, 1, (400, 3)) * [1, 1, 0.01]  # a thin slab: edges on a plane, as on a face of B
+    E = np.stack([np.arange(0, 400, 2), np.arange(1, 400, 2)], 1)
+    X[E[:, 1]] = X[E[:, 0]] + rng.normal(0, 0.03, (200, 3)) * [1, 1, 0]
+    gap, move = 0.01, 0.02
+    candidates = candidate_pairs(X, E, gap, move)
+    known = {tuple(p) for p in candidates.tolist()}
+    for _ in range(5):
+        d = rng.normal(size=X.shape)
+        Y = X + move * rng.uniform(0, 1, (len(X), 1)) * d / np.linalg.norm(d, axis=1)[:, None]
+        pairs, crossing = close_pairs(Y, E, UP, gap)
+        assert {tuple(p) for p in pairs.tolist()} <= known
+        with_candidates = close_pairs(Y, E, UP, gap, candidates)
+        assert np.array_equal(with_candidates[0], pairs) and np.array_equal(with_candidates[1], crossing)
+    assert len(candidate_pairs(X, E, gap)) < len(candidates)  # the move widens the search

@@ -32,14 +32,18 @@ def crossing_pairs(X: np.ndarray, E: np.ndarray, normal_at, gap: float = 0.0) ->
     return pairs
 
 
-def close_pairs(X: np.ndarray, E: np.ndarray, normal_at, gap: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`crossing_pairs` and, for each pair, whether it crosses (rather than only comes close)."""
+def close_pairs(X: np.ndarray, E: np.ndarray, normal_at, gap: float = 0.0,
+                candidates: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`crossing_pairs` and, for each pair, whether it crosses (rather than only comes close).
+
+    ``candidates``: pairs ``i < j`` of edges, sorted and unique, among which the close ones are
+    (:func:`candidate_pairs`); by default they are searched for at ``X``."""
     none = np.zeros((0, 2), np.int64), np.zeros(0, bool)
     if len(E) < 2:
         return none
     A, B = X[E[:, 0]], X[E[:, 1]]
     M, L = 0.5 * (A + B), np.linalg.norm(B - A, axis=1)
-    pairs = _candidates(M, L, gap)
+    pairs = _candidates(M, L, gap) if candidates is None else candidates
     if not len(pairs):
         return none
     i, j = pairs[:, 0], pairs[:, 1]
@@ -70,6 +74,17 @@ def close_pairs(X: np.ndarray, E: np.ndarray, normal_at, gap: float = 0.0) -> tu
         near |= np.minimum.reduce([_point_segment(a, c, d), _point_segment(b, c, d), _point_segment(c, a, b),
                                    _point_segment(d, a, b)]) < gap
     return np.stack([i[near], j[near]], 1), cross[near]
+
+
+def candidate_pairs(X: np.ndarray, E: np.ndarray, gap: float, move: float = 0.0) -> np.ndarray:
+    """Pairs of edges ``E`` (sorted, unique) among which are all those that come within ``gap`` of each
+    other at ``X``, or at any positions of their vertices within ``move`` of ``X``: a midpoint moves
+    by at most ``move`` and a length changes by at most ``2 move``, so the search widens by ``4 move``.
+    One search then serves the checks of a step's trial positions (:func:`close_pairs`)."""
+    if len(E) < 2:
+        return np.zeros((0, 2), np.int64)
+    A, B = X[E[:, 0]], X[E[:, 1]]
+    return _candidates(0.5 * (A + B), np.linalg.norm(B - A, axis=1), gap + 4.0 * move)
 
 
 def _candidates(M: np.ndarray, L: np.ndarray, gap: float) -> np.ndarray:

@@ -79,7 +79,7 @@ import numpy as np
 from fracture.mesh import vec
 from fracture.mesh.exterior import Exterior
 from fracture.refine.collide import stop_collisions
-from fracture.refine.crossings_on_b import close_pairs
+from fracture.refine.crossings_on_b import candidate_pairs, close_pairs
 from fracture.refine.fans import closed_vertices
 from fracture.refine.flips import flip_edges
 from fracture.refine.flow import energy, energy_gradient
@@ -278,13 +278,17 @@ class Refiner:
         if not len(E):
             return 0
         gap = _CURVE_GAP * self.h
-        pairs, crossing = close_pairs(self.mesh.V, E, self.B.normal_at, gap)
+        # every round's positions lie between the surface's and X1: one candidate search serves them all
+        ends = np.unique(E)
+        move = float(np.sqrt(((X1[ends] - self.mesh.V[ends]) ** 2).sum(axis=1).max()))
+        candidates = candidate_pairs(self.mesh.V, E, gap, move)
+        pairs, crossing = close_pairs(self.mesh.V, E, self.B.normal_at, gap, candidates)
         close = {tuple(x) for x in pairs.tolist()}
         cross = {tuple(x) for x in pairs[crossing].tolist()}
         kept = 0
         for _ in range(rounds):
             # new pairs closer than the gap, and new crossings (of pairs already close, too)
-            now, crossing = close_pairs(X1, E, self.B.normal_at, gap)
+            now, crossing = close_pairs(X1, E, self.B.normal_at, gap, candidates)
             pairs = [x for x, c in zip(now.tolist(), crossing.tolist())
                      if tuple(x) not in close or (c and tuple(x) not in cross)]
             if not pairs:
