@@ -493,10 +493,9 @@ def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, eta: float, t
     on = np.zeros(n, bool)
     todo = overlapping
     unsure = np.zeros(n, bool)
-    sure = unsure
-    if every:
-        sure = certified_fans(X0, X1, F, closed if closed is not None else closed_vertices(F, n, table))
-    else:
+    # the first round tests the full step, for which the fans are certified
+    sure = certified_fans(X0, X1, F, closed if closed is not None else closed_vertices(F, n, table))
+    if not every:
         on[moving] = True
         todo = _pairs_touching(F, overlapping, on)
     first = None
