@@ -493,8 +493,9 @@ def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, eta: float, t
     on = np.zeros(n, bool)
     todo = overlapping
     unsure = np.zeros(n, bool)
-    # the first round tests the full step, for which the fans are certified
-    sure = certified_fans(X0, X1, F, closed if closed is not None else closed_vertices(F, n, table))
+    sure = unsure
+    if every or 4 * len(moving) > n:  # the first round tests the full step of many vertices: certify the fans
+        sure = certified_fans(X0, X1, F, closed if closed is not None else closed_vertices(F, n, table))
     if not every:
         on[moving] = True
         todo = _pairs_touching(F, overlapping, on)
