@@ -16,9 +16,14 @@ library tests segments for crossing on a surface.
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 from scipy.spatial import cKDTree
+
+from fracture.mesh import vec
 from fracture.tolerances import tol
+
+_TINY = tol.tiny  # a module constant: compiled code reads globals as constants
 
 
 def crossing_pairs(X: np.ndarray, E: np.ndarray, normal_at, gap: float = 0.0) -> np.ndarray:
@@ -46,34 +51,78 @@ def close_pairs(X: np.ndarray, E: np.ndarray, normal_at, gap: float = 0.0,
     pairs = _candidates(M, L, gap) if candidates is None else candidates
     if not len(pairs):
         return none
-    i, j = pairs[:, 0], pairs[:, 1]
-    near = np.linalg.norm(M[i] - M[j], axis=1) <= 0.5 * (L[i] + L[j]) + gap
-    share = (E[i, 0, None] == E[j]).any(axis=1) | (E[i, 1, None] == E[j]).any(axis=1)
-    keep = near & ~share
-    i, j = i[keep], j[keep]
+    keep = _near_apart(X, E, pairs, gap)
+    i, j = pairs[keep, 0], pairs[keep, 1]
     if not len(i):
         return none
-    n = normal_at(0.5 * (M[i] + M[j]))
-    # a frame of B's tangent plane at each pair
-    helper = np.where((np.abs(n[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
-    u = np.cross(n, helper)
-    u /= np.linalg.norm(u, axis=1)[:, None]
-    v = np.cross(n, u)
+    n = np.ascontiguousarray(normal_at(0.5 * (M[i] + M[j])), np.float64)
+    close, cross = _on_b(X, E, i, j, n, gap)
+    return np.stack([i[close], j[close]], 1), cross[close]
 
-    def flat(P):
-        return np.stack([np.einsum("ij,ij->i", P, u), np.einsum("ij,ij->i", P, v)], 1)
 
-    a, b, c, d = flat(A[i]), flat(B[i]), flat(A[j]), flat(B[j])
+@numba.njit(cache=True)
+def _near_apart(X, E, pairs, gap):
+    """Which candidate pairs of edges are near (midpoints within half their lengths' sum and ``gap``)
+    and share no vertex."""
+    keep = np.zeros(pairs.shape[0], np.bool_)
+    for k in range(pairs.shape[0]):
+        a, b = pairs[k, 0], pairs[k, 1]
+        p, q, r, s = E[a, 0], E[a, 1], E[b, 0], E[b, 1]
+        if p == r or p == s or q == r or q == s:
+            continue
+        Mi = _mid(vec.point(X, p), vec.point(X, q))
+        Mj = _mid(vec.point(X, r), vec.point(X, s))
+        Li = vec.norm(vec.sub(vec.point(X, q), vec.point(X, p)))
+        Lj = vec.norm(vec.sub(vec.point(X, s), vec.point(X, r)))
+        keep[k] = vec.norm(vec.sub(Mi, Mj)) <= 0.5 * (Li + Lj) + gap
+    return keep
 
-    def side(p, q, r):  # sign of the turn p -> q -> r
-        return np.sign((q[:, 0] - p[:, 0]) * (r[:, 1] - p[:, 1]) - (q[:, 1] - p[:, 1]) * (r[:, 0] - p[:, 0]))
 
-    cross = (side(a, b, c) * side(a, b, d) < 0) & (side(c, d, a) * side(c, d, b) < 0)
-    near = cross.copy()
-    if gap > 0.0:
-        near |= np.minimum.reduce([_point_segment(a, c, d), _point_segment(b, c, d), _point_segment(c, a, b),
-                                   _point_segment(d, a, b)]) < gap
-    return np.stack([i[near], j[near]], 1), cross[near]
+@numba.njit(cache=True)
+def _on_b(X, E, i, j, n, gap):
+    """For edge pairs ``(i, j)`` and B's normal ``n`` near them: whether, seen along ``n``, the edges
+    cross or come within ``gap`` of each other, and whether they cross."""
+    close = np.zeros(i.shape[0], np.bool_)
+    cross = np.zeros(i.shape[0], np.bool_)
+    for k in range(i.shape[0]):
+        nk = vec.point(n, k)
+        helper = (1.0, 0.0, 0.0) if abs(nk[0]) < 0.9 else (0.0, 1.0, 0.0)  # a frame of B's tangent plane
+        u = vec.cross(nk, helper)
+        nu = vec.norm(u)
+        u = (u[0] / nu, u[1] / nu, u[2] / nu)
+        v = vec.cross(nk, u)
+        a = _flat(vec.point(X, E[i[k], 0]), u, v)
+        b = _flat(vec.point(X, E[i[k], 1]), u, v)
+        c = _flat(vec.point(X, E[j[k], 0]), u, v)
+        d = _flat(vec.point(X, E[j[k], 1]), u, v)
+        cross[k] = (_side(a, b, c) * _side(a, b, d) < 0) and (_side(c, d, a) * _side(c, d, b) < 0)
+        close[k] = cross[k] or (gap > 0.0 and min(_point_segment(a, c, d), _point_segment(b, c, d),
+                                                   _point_segment(c, a, b), _point_segment(d, a, b)) < gap)
+    return close, cross
+
+
+@numba.njit(cache=True, inline="always")
+def _mid(a, b):
+    return (0.5 * (a[0] + b[0]), 0.5 * (a[1] + b[1]), 0.5 * (a[2] + b[2]))
+
+
+@numba.njit(cache=True, inline="always")
+def _flat(P, u, v):
+    return (vec.dot(P, u), vec.dot(P, v))
+
+
+@numba.njit(cache=True, inline="always")
+def _side(p, q, r):
+    """Sign of the turn p -> q -> r."""
+    return np.sign((q[0] - p[0]) * (r[1] - p[1]) - (q[1] - p[1]) * (r[0] - p[0]))
+
+
+@numba.njit(cache=True, inline="always")
+def _point_segment(p, a, b):
+    """Distance of 2D point ``p`` from segment ``a b``."""
+    ab0, ab1 = b[0] - a[0], b[1] - a[1]
+    t = min(max(((p[0] - a[0]) * ab0 + (p[1] - a[1]) * ab1) / max(ab0 * ab0 + ab1 * ab1, _TINY), 0.0), 1.0)
+    return np.sqrt((a[0] + t * ab0 - p[0]) ** 2 + (a[1] + t * ab1 - p[1]) ** 2)
 
 
 def candidate_pairs(X: np.ndarray, E: np.ndarray, gap: float, move: float = 0.0) -> np.ndarray:
@@ -116,13 +165,6 @@ def _candidates(M: np.ndarray, L: np.ndarray, gap: float) -> np.ndarray:
     # np.unique(axis=0) sorts a structured view, five times slower
     key = np.unique(pairs[:, 0] * len(M) + pairs[:, 1])
     return np.stack([key // len(M), key % len(M)], 1)
-
-
-def _point_segment(p, a, b):
-    """Distances ``(k,)`` of 2D points ``p`` from segments ``a b``."""
-    ab = b - a
-    t = np.clip(np.einsum("ij,ij->i", p - a, ab) / np.maximum(np.einsum("ij,ij->i", ab, ab), tol.tiny), 0.0, 1.0)
-    return np.linalg.norm(a + t[:, None] * ab - p, axis=1)
 
 
 def splits_would_cross(V: np.ndarray, E: np.ndarray, which: np.ndarray, M: np.ndarray, normal_at) -> np.ndarray:
