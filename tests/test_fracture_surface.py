@@ -112,3 +112,29 @@ def test_spatial_order_puts_neighbours_near_in_memory():
     assert spread() < 0.1 * shuffled  # edges join vertices close in the numbering
     lowest = m.F.min(axis=1)
     assert (np.diff(lowest) >= 0).all()  # triangles by their first vertex
+
+
+def test_the_compiled_tree_map_is_the_composition_of_the_batches():
+    """tree_matrix: the map made row by row equals, bit for bit, the batches composed by sparse products
+    (each batch's rows the product of its parents' weights with the map so far), with edge splits (a
+    parent named twice, one weight zero) and face splits on a corner (a zero weight) among them."""
+    import scipy.sparse as sp
+
+    rng = np.random.default_rng(7)
+    m = junction()
+    for _ in range(8):
+        f = rng.choice(len(m.F), size=min(4, len(m.F)), replace=False)
+        bary = rng.dirichlet([1, 1, 1], size=len(f))
+        bary[0] = [0.5, 0.5, 0.0]  # on an edge of its triangle
+        m.split_triangles(f, bary)
+        e, _ = unique_edges(m.F)
+        m.split_edges(e[rng.choice(len(e), 1)], rng.uniform(0.2, 0.8, 1))
+    W = sp.identity(m.n_coarse, format="csr")
+    for parents, weights in zip(m.parents, m.weights):
+        k = len(parents)
+        P = sp.csr_matrix((weights.ravel(), (np.repeat(np.arange(k), 3), parents.ravel())), shape=(k, W.shape[0]))
+        W = sp.vstack([W, P @ W], format="csr")
+    W.eliminate_zeros()
+    got = m.tree_matrix()
+    assert np.array_equal(got.indptr, W.indptr) and np.array_equal(got.indices, W.indices)
+    assert np.array_equal(got.data, W.data)

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 import scipy.sparse as sp
 
@@ -137,14 +138,70 @@ class FractureSurface:
 
     def tree_matrix(self) -> sp.csr_matrix:
         """Sparse ``(n, n_coarse)`` map from the coarse vertices (in creation order) to every vertex
-        (in the current order); rows sum to 1."""
-        W = sp.identity(self.n_coarse, format="csr")
-        for parents, weights in zip(self.parents, self.weights):
-            k = len(parents)
-            P = sp.csr_matrix((weights.ravel(), (np.repeat(np.arange(k), 3), parents.ravel())),
-                              shape=(k, W.shape[0]))
-            W = sp.vstack([W, P @ W], format="csr")
-        W.eliminate_zeros()
+        (in the current order); rows sum to 1.
+
+        Row by row in creation order, each new vertex's row the weighted sum of its parents' rows
+        (:func:`_tree_rows`, compiled: composing batch by batch with sparse products re-stacked the
+        growing map once per batch)."""
+        n = self.n_coarse + sum(len(p) for p in self.parents)
+        parents = np.concatenate(self.parents) if self.parents else np.zeros((0, 3), np.int64)
+        weights = np.concatenate(self.weights) if self.weights else np.zeros((0, 3))
+        indptr, indices, data = _tree_rows(self.n_coarse, np.ascontiguousarray(parents, np.int64),
+                                           np.ascontiguousarray(weights, np.float64))
+        W = sp.csr_matrix((data, indices, indptr), shape=(n, self.n_coarse))
         if not np.array_equal(self.label, np.arange(len(self.label))):
             W = W[self.label]
         return W
+
+
+@numba.njit(cache=True)
+def _tree_rows(n_coarse, parents, weights):
+    """CSR rows of the tree map: the coarse vertices' unit rows, then per new vertex the sum of its
+    parents' rows weighted, accumulated as SciPy's sparse product does (parents by increasing id, a
+    repeated parent's weights summed first; columns in the reverse order of their first appearance;
+    sums of exactly zero left out), so the map is the same, bit for bit, as the product's."""
+    m = parents.shape[0]
+    indptr = np.zeros(n_coarse + m + 1, np.int64)
+    cap = max(16, 4 * (n_coarse + m))
+    indices = np.empty(cap, np.int64)
+    data = np.empty(cap)
+    for i in range(n_coarse):
+        indices[i], data[i] = i, 1.0
+        indptr[i + 1] = i + 1
+    nnz = n_coarse
+    sums = np.zeros(n_coarse)
+    nxt = np.full(n_coarse, -1, np.int64)
+    order = np.empty(3, np.int64)
+    for r in range(m):
+        # the row's entries by parent id, a parent named twice once with its weights summed
+        order[:] = np.argsort(parents[r], kind="mergesort")
+        head, length = -2, 0
+        k = 0
+        while k < 3:
+            p = parents[r, order[k]]
+            v = weights[r, order[k]]
+            while k + 1 < 3 and parents[r, order[k + 1]] == p:
+                k += 1
+                v += weights[r, order[k]]
+            k += 1
+            for jj in range(indptr[p], indptr[p + 1]):
+                c = indices[jj]
+                sums[c] += v * data[jj]
+                if nxt[c] == -1:
+                    nxt[c] = head
+                    head = c
+                    length += 1
+        if nnz + length > indices.shape[0]:
+            grown = max(2 * indices.shape[0], nnz + length)
+            indices2, data2 = np.empty(grown, np.int64), np.empty(grown)
+            indices2[:nnz], data2[:nnz] = indices[:nnz], data[:nnz]
+            indices, data = indices2, data2
+        for _ in range(length):
+            if sums[head] != 0.0:
+                indices[nnz], data[nnz] = head, sums[head]
+                nnz += 1
+            c = head
+            head = nxt[c]
+            nxt[c], sums[c] = -1, 0.0
+        indptr[n_coarse + r + 1] = nnz
+    return indptr, indices[:nnz].copy(), data[:nnz].copy()
