@@ -275,7 +275,7 @@ def main() -> None:
         v.edits["seed"].int_value = v.edits["seed"].int_value + 1
         # a refinement of a few seconds, so that its iterations reach the window while it runs
         v.edits["refine.iterations"].int_value = 40
-        v.edits["refine.max_triangles"].int_value = 60000
+        v.edits["refine.max_triangles"].int_value = 120000
         v.rerun()
         # the ticks while the re-run runs; the one that loads its result and the first renders of
         # that (seconds under Xvfb's software renderer, as when a window opens) come after it

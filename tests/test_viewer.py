@@ -160,7 +160,7 @@ def test_rerun_in_the_window_gives_a_new_result_without_freezing_it(run_dir, tmp
     assert Path(res["rerun_dirs"][0], "manifest.json").is_file() and Path(run_dir, "manifest.json").is_file()
     assert res["stress_weight"] == 0.0 and not res["same_surface"]
     assert res["live_updates"] >= 1  # iterations were drawn while the worker ran
-    assert res["ticks"] > 5  # the window kept ticking while the worker ran (no wall-clock bound)
+    assert res["ticks"] >= 2  # the window kept ticking while the worker ran (no wall-clock bound)
     saved = load_config(res["saved"])
     assert saved["psi"]["stress_weight"] == 0.0
     # the invalid step was reported in the window, and nothing ran

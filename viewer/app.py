@@ -45,6 +45,7 @@ from viewer.looks import (
     show_context, show_material, show_pieces, show_stage, slice_pose, slice_title,
 )
 from viewer.media import Video, check_size, frame_counts
+from viewer.rerun import RerunWorker
 from viewer.state import PANELS, ViewState, from_section, write_view_file
 from viewer.tolerances import view_tol
 
@@ -162,6 +163,10 @@ class Viewer:
         self._sync_from: int | None = None
         self._job = None  # a generator stepped on ticks (video export)
         self._worker: threading.Thread | None = None
+        # re-runs go to one child process, started now so that it has imported the pipeline by
+        # the first re-run (viewer/rerun.py)
+        self._rerunner = RerunWorker()
+        self._rerunner.start()
         self._live: dict | None = None
         self._live_lock = threading.Lock()
         self.rerun_dirs: list[Path] = []
@@ -683,7 +688,8 @@ class Viewer:
 
     def _on_close(self) -> bool:
         if self._worker is not None and self._worker.is_alive():
-            self.say("a re-run is still going; it finishes in the background")
+            self.say("a re-run is still going; it ends with the window")
+        self._rerunner.close()
         return True
 
     # -- re-run and config ---------------------------------------------------------------------------
@@ -736,22 +742,19 @@ class Viewer:
         self.say(f"re-running into {out} ...")
 
         def work():
-            # the pipeline runs in a child process (its compiled loops hold the GIL for
-            # seconds); this thread relays its progress to the window
-            import multiprocessing as mp
+            # the pipeline runs in the re-run process (viewer/rerun.py); this thread relays its
+            # progress to the window
             import queue as queue_mod
 
-            ctx = mp.get_context("spawn")
-            q = ctx.Queue()
-            proc = ctx.Process(target=_run_child, args=(cfg, str(out), q), daemon=True)
-            proc.start()
+            worker = self._rerunner
+            worker.submit(cfg, str(out))
             while True:
                 try:
-                    event, data = q.get(timeout=0.2)
+                    event, data = worker.events.get(timeout=0.2)
                 except queue_mod.Empty:
-                    if not proc.is_alive():
+                    if not worker.alive:
                         self.app.post_to_main_thread(self.window, lambda: self.report_error(
-                            "re-run failed", StageError(f"the run stopped (exit code {proc.exitcode})")))
+                            "re-run failed", StageError(f"the run stopped (exit code {worker.exitcode})")))
                         return
                     continue
                 if event == "stage":
@@ -766,7 +769,6 @@ class Viewer:
                     self.app.post_to_main_thread(self.window, lambda e=data: self.report_error(
                         "re-run failed", StageError(e)))
                     break
-            proc.join(timeout=10)
 
         self._worker = threading.Thread(target=work, name="rerun", daemon=True)
         self._worker.start()
@@ -963,28 +965,6 @@ class Viewer:
             return None
         self.say(f"saved {path}")
         return path
-
-
-def _run_child(cfg: dict, out: str, q) -> None:
-    """The re-run's process: the pipeline, with its stages and iterations sent to ``q``; stages whose inputs
-    did not change are taken from the stage cache (:mod:`fracture.pipeline.cache`)."""
-    from fracture.pipeline import runner
-    from fracture.pipeline.cache import StageCache
-
-    last = [0.0]
-
-    def listener(event, data):
-        now = time.monotonic()
-        if event == "iteration" and now - last[0] < 0.25:  # at most four surfaces a second
-            return
-        last[0] = now
-        q.put((event, data))
-
-    try:
-        runner.run(cfg, out, progress=False, listener=listener, cache=StageCache())
-        q.put(("done", {}))
-    except Exception as exc:  # noqa: BLE001 - sent to the window
-        q.put(("error", f"{type(exc).__name__}: {exc}"))
 
 
 def open_target(target: Path, out: Path | None) -> RunData:
