@@ -273,3 +273,22 @@ def test_a_cold_kernel_cache_is_told_apart_from_a_warm_one(tmp_path):
     (pkg / "__pycache__" / "a.one-4.py311.nbi").unlink()
     (pkg / "__pycache__" / "b.one-4.py311.nbi").write_bytes(b"")  # another module's
     assert not kernels_cached(pkg)
+
+
+def test_a_file_that_fails_to_be_written_fails_the_run_and_leaves_nothing(tmp_path, small_config, monkeypatch):
+    """Files are written beside the stages; one whose write fails (a full disk, say) fails the run, which
+    then leaves no directory, and a run after it is whole."""
+    from fracture.pipeline import context
+
+    def full(path, array):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(context, "_write_npy", full)
+    with pytest.raises(OutputError, match="No space left"):
+        runner.run(load_config(small_config), tmp_path / "run", until="fields", progress=False)
+    assert not (tmp_path / "run").exists() and [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+    monkeypatch.undo()
+    out = runner.run(load_config(small_config), tmp_path / "run", until="fields", progress=False)
+    manifest = json.loads((out / "manifest.json").read_text())
+    for rel, info in manifest["files"].items():
+        assert (out / rel).stat().st_size == info["bytes"] and sha256(out / rel) == info["sha256"]

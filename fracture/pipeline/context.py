@@ -66,6 +66,10 @@ class RunContext:
     # the stage cache (fracture.pipeline.cache.StageCache) or None, and the keys of the stages run so far
     cache: Any = None
     keys: dict[str, str] = field(default_factory=dict)
+    # an executor that writes the save_* files beside the stages (the runner's), and what it was given:
+    # a file saved so is whole once the run waits for these (before its manifest), not on return
+    writer: Any = None
+    pending: list = field(default_factory=list)
 
     @cached_property
     def config(self) -> Config:
@@ -84,27 +88,42 @@ class RunContext:
             self.files.append(rel)
         return p
 
+    def _write(self, write, *args) -> None:
+        """``write(*args)`` now, or by :attr:`writer` (the arguments are the caller's no more)."""
+        if self.writer is None:
+            write(*args)
+        else:
+            self.pending.append(self.writer.submit(write, *args))
+
+    def wait_for_files(self) -> None:
+        """Wait until every file saved so far is written (raises what a write raised)."""
+        pending, self.pending = self.pending, []
+        for done in pending:
+            done.result()
+
     def save_array(self, rel: str, array: np.ndarray) -> None:
         """A ``.npy`` file (byte-identical for identical arrays)."""
-        with open(self.path(rel), "wb") as f:
-            np.save(f, np.ascontiguousarray(array), allow_pickle=False)
+        self._write(_write_npy, self.path(rel), np.array(array, order="C", copy=True))
 
     def save_npz(self, rel: str, arrays: dict[str, np.ndarray]) -> None:
         """An uncompressed ``.npz`` with fixed member timestamps (byte-identical for identical arrays)."""
         import io
         import zipfile
 
-        with zipfile.ZipFile(self.path(rel), "w", zipfile.ZIP_STORED) as z:
+        out = io.BytesIO()
+        with zipfile.ZipFile(out, "w", zipfile.ZIP_STORED) as z:
             for name, a in arrays.items():
                 buf = io.BytesIO()
                 np.save(buf, np.ascontiguousarray(a), allow_pickle=False)
                 z.writestr(zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0)), buf.getvalue())
+        self._write(Path.write_bytes, self.path(rel), out.getvalue())
 
     def save_json(self, rel: str, data: Any) -> None:
-        self.path(rel).write_text(json.dumps(data, indent=2, sort_keys=True) + "\n", encoding="utf-8")
+        self._write(Path.write_bytes, self.path(rel),
+                    (json.dumps(data, indent=2, sort_keys=True) + "\n").encode("utf-8"))
 
     def save_png(self, rel: str, image: np.ndarray) -> None:
-        self.path(rel).write_bytes(png_bytes(image))
+        self._write(_write_png, self.path(rel), np.array(image, copy=True))
 
     def bar(self, total: int, desc: str):
         """A progress bar (silent when progress is off); it stays on screen when done."""
@@ -115,3 +134,12 @@ class RunContext:
         log.info("%s", text)
         if self.progress:
             tqdm.write(text, file=sys.stderr)
+
+
+def _write_npy(path: Path, array: np.ndarray) -> None:
+    with open(path, "wb") as f:
+        np.save(f, array, allow_pickle=False)
+
+
+def _write_png(path: Path, image: np.ndarray) -> None:
+    path.write_bytes(png_bytes(image))

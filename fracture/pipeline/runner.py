@@ -167,10 +167,11 @@ def run(cfg: dict, out: str | Path, until: str | None = None, force: bool = Fals
         "packages": _versions(),
         "stages": {},
     }
-    # the cache's entries are written by one thread beside the stages, all before the run is complete
-    # (and before a failed run's directory is removed: the entries copy files from it)
+    # the stages' files and the cache's entries are written by one thread beside the stages, in the
+    # order given (an entry copies its stage's files), all before the run is complete and before a
+    # failed run's directory is removed
     with staged_directory(out, force) as staging, ThreadPoolExecutor(1, "fracref-cache") as writer:
-        ctx = RunContext(cfg=cfg, dir=staging, progress=progress, listener=listener, cache=cache)
+        ctx = RunContext(cfg=cfg, dir=staging, progress=progress, listener=listener, cache=cache, writer=writer)
         ctx.path("config.yaml").write_text(dump_config(cfg), encoding="utf-8")
         for stage in chosen:
             t0 = time.perf_counter()
@@ -179,6 +180,7 @@ def run(cfg: dict, out: str | Path, until: str | None = None, force: bool = Fals
             info = _run_stage(ctx, stage, keep_products=stage is not stages[-1], out=Path(out), writer=writer)
             manifest["stages"][stage.name] = {"seconds": round(time.perf_counter() - t0, 4), **info}
             log.info("%s: done in %.2f s", stage.name, manifest["stages"][stage.name]["seconds"])
+        ctx.wait_for_files()  # before their hashes (a write that failed fails the run)
         for info in manifest["stages"].values():
             if isinstance(info.get("cache"), Future):
                 info["cache"] = _stored(info["cache"].result())
