@@ -18,6 +18,7 @@ import platform
 import time
 from concurrent.futures import Executor, Future, ThreadPoolExecutor
 from datetime import datetime, timezone
+from functools import lru_cache
 from importlib import metadata
 from pathlib import Path
 from typing import Any
@@ -56,7 +57,10 @@ def _sha256(path: Path) -> str:
     return h.hexdigest()
 
 
+@lru_cache(maxsize=1)
 def _versions() -> dict[str, str]:
+    """The distributions' versions (read once per process: installing a package changes a process's
+    modules no more)."""
     out = {}
     for name in _PACKAGES:
         try:
@@ -164,7 +168,7 @@ def run(cfg: dict, out: str | Path, until: str | None = None, force: bool = Fals
         "started": started.isoformat(timespec="seconds"),
         "python": platform.python_version(),
         "platform": platform.platform(),
-        "packages": _versions(),
+        "packages": dict(_versions()),
         "stages": {},
     }
     # the stages' files and the cache's entries are written by one thread beside the stages, in the
