@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import sys
 from pathlib import Path
 
@@ -127,7 +128,30 @@ def cache_from_args(args):
 
 
 def _terminate(signum, frame):
-    raise SystemExit(128 + signum)  # unwinds like Ctrl-C: a run being staged is removed
+    """SIGTERM: unwind like Ctrl-C, so that a run being staged is removed.
+
+    Inside a callback from the compiler's C code (numba writing a kernel to
+    its cache through llvmlite) an exception would be printed and dropped, and
+    the run would go on: the signal is sent again a moment later, once the
+    callback has returned."""
+    if _in_compiler_callback(frame):
+        import threading
+
+        threading.Timer(_REDELIVER_SECONDS, os.kill, (os.getpid(), signum)).start()
+        return
+    raise SystemExit(128 + signum)
+
+
+# Seconds after which a SIGTERM that arrived inside a compiler callback is sent again.
+_REDELIVER_SECONDS = 0.05
+
+
+def _in_compiler_callback(frame) -> bool:
+    while frame is not None:
+        if "llvmlite" in frame.f_code.co_filename:
+            return True
+        frame = frame.f_back
+    return False
 
 
 def main(argv: list[str] | None = None) -> int:

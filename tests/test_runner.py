@@ -292,3 +292,27 @@ def test_a_file_that_fails_to_be_written_fails_the_run_and_leaves_nothing(tmp_pa
     manifest = json.loads((out / "manifest.json").read_text())
     for rel, info in manifest["files"].items():
         assert (out / rel).stat().st_size == info["bytes"] and sha256(out / rel) == info["sha256"]
+
+
+def test_sigterm_inside_a_compiler_callback_is_taken_after_it(monkeypatch):
+    """The command line's SIGTERM handler: inside a callback from llvmlite's C code (where an exception
+    would be printed and dropped) it sends the signal again a moment later; elsewhere it exits."""
+    import signal
+    import time
+
+    from fracref import cli
+
+    sent = []
+    monkeypatch.setattr(cli.os, "kill", lambda pid, sig: sent.append((pid, sig)))
+    namespace = {"sys": sys}
+    exec(compile("def callback():\n    return sys._getframe()\n",
+                 "/venv/site-packages/llvmlite/binding/executionengine.py", "exec"), namespace)
+    cli._terminate(signal.SIGTERM, namespace["callback"]())  # returns: no exception inside the callback
+    for _ in range(100):
+        if sent:
+            break
+        time.sleep(0.02)
+    assert sent == [(os.getpid(), signal.SIGTERM)]
+    with pytest.raises(SystemExit) as exit_info:
+        cli._terminate(signal.SIGTERM, sys._getframe())
+    assert exit_info.value.code == 128 + signal.SIGTERM
