@@ -206,29 +206,17 @@ class StrengthPyramid:
 @numba.njit(cache=True)
 def _window_table(psi, mean, hx, hy, hz, out):
     """``out[..., :] = [psi, mean, grad mean]`` with NumPy's ``gradient`` (``edge_order=1``: central
-    differences inside, one-sided at the faces, the same operations in the same order: the same bits),
-    in one pass instead of three gradient arrays, a stack and a concatenation."""
+    differences inside, one-sided at the faces; the same operations in the same order, so the same
+    bits), in one pass instead of three gradient arrays, a stack and a concatenation."""
     nx, ny, nz = mean.shape
     for i in range(nx):
+        i0, i1 = max(i - 1, 0), min(i + 1, nx - 1)  # neighbours, the point itself at a face
         for j in range(ny):
+            j0, j1 = max(j - 1, 0), min(j + 1, ny - 1)
             for k in range(nz):
+                k0, k1 = max(k - 1, 0), min(k + 1, nz - 1)
                 out[i, j, k, 0] = psi[i, j, k]
                 out[i, j, k, 1] = mean[i, j, k]
-                if i == 0:
-                    out[i, j, k, 2] = (mean[1, j, k] - mean[0, j, k]) / hx
-                elif i == nx - 1:
-                    out[i, j, k, 2] = (mean[i, j, k] - mean[i - 1, j, k]) / hx
-                else:
-                    out[i, j, k, 2] = (mean[i + 1, j, k] - mean[i - 1, j, k]) / (2.0 * hx)
-                if j == 0:
-                    out[i, j, k, 3] = (mean[i, 1, k] - mean[i, 0, k]) / hy
-                elif j == ny - 1:
-                    out[i, j, k, 3] = (mean[i, j, k] - mean[i, j - 1, k]) / hy
-                else:
-                    out[i, j, k, 3] = (mean[i, j + 1, k] - mean[i, j - 1, k]) / (2.0 * hy)
-                if k == 0:
-                    out[i, j, k, 4] = (mean[i, j, 1] - mean[i, j, 0]) / hz
-                elif k == nz - 1:
-                    out[i, j, k, 4] = (mean[i, j, k] - mean[i, j, k - 1]) / hz
-                else:
-                    out[i, j, k, 4] = (mean[i, j, k + 1] - mean[i, j, k - 1]) / (2.0 * hz)
+                out[i, j, k, 2] = (mean[i1, j, k] - mean[i0, j, k]) / ((i1 - i0) * hx)
+                out[i, j, k, 3] = (mean[i, j1, k] - mean[i, j0, k]) / ((j1 - j0) * hy)
+                out[i, j, k, 4] = (mean[i, j, k1] - mean[i, j, k0]) / ((k1 - k0) * hz)

@@ -7,7 +7,7 @@ import numpy as np
 from fields.grid import Grid
 from fields.pyramid import StrengthPyramid
 from fracture.mesh.primitives import box, sheet
-from fracture.refine.engine import RefineParams, Refiner, neighbour_clearance
+from fracture.refine.engine import RefineParams, Refiner, clearance
 from fracture.refine.remesh import plan_splits, split_folds
 from fracture.mesh.fracture_surface import FractureSurface
 from fracture.tolerances import tol
@@ -281,6 +281,6 @@ def test_a_split_vertex_inside_its_parents_clear_balls_is_not_asked_about():
     X1 = mesh.V.copy()
     X1[new, 0] += 0.02
     assert r.leaving_b(X1, np.array([new])).size == 0 and asked == []
-    assert neighbour_clearance(mesh.F, X1, r.state.near_at, r.state.near_d2, np.array([new]))[0] > 0.1
+    assert clearance(mesh.F, X1, r.state.near_at, r.state.near_d2, np.array([new]))[0] > 0.1
     X1[new, 0] = 1.1  # out through the face x = 1, beyond every neighbour's ball
     assert r.leaving_b(X1, np.array([new])).tolist() == [new] and asked == [1]

@@ -51,7 +51,7 @@ def close_pairs(X: np.ndarray, E: np.ndarray, normal_at, gap: float = 0.0,
     pairs = _candidates(M, L, gap) if candidates is None else candidates
     if not len(pairs):
         return none
-    keep = _near_apart(X, E, pairs, gap)
+    keep = _near_apart(E, M, L, pairs, gap)
     i, j = pairs[keep, 0], pairs[keep, 1]
     if not len(i):
         return none
@@ -61,20 +61,16 @@ def close_pairs(X: np.ndarray, E: np.ndarray, normal_at, gap: float = 0.0,
 
 
 @numba.njit(cache=True)
-def _near_apart(X, E, pairs, gap):
-    """Which candidate pairs of edges are near (midpoints within half their lengths' sum and ``gap``)
-    and share no vertex."""
+def _near_apart(E, M, L, pairs, gap):
+    """Which candidate pairs of edges (midpoints ``M``, lengths ``L``) are near (midpoints within half
+    their lengths' sum and ``gap``) and share no vertex."""
     keep = np.zeros(pairs.shape[0], np.bool_)
     for k in range(pairs.shape[0]):
         a, b = pairs[k, 0], pairs[k, 1]
         p, q, r, s = E[a, 0], E[a, 1], E[b, 0], E[b, 1]
         if p == r or p == s or q == r or q == s:
             continue
-        Mi = _mid(vec.point(X, p), vec.point(X, q))
-        Mj = _mid(vec.point(X, r), vec.point(X, s))
-        Li = vec.norm(vec.sub(vec.point(X, q), vec.point(X, p)))
-        Lj = vec.norm(vec.sub(vec.point(X, s), vec.point(X, r)))
-        keep[k] = vec.norm(vec.sub(Mi, Mj)) <= 0.5 * (Li + Lj) + gap
+        keep[k] = vec.norm(vec.sub(vec.point(M, a), vec.point(M, b))) <= 0.5 * (L[a] + L[b]) + gap
     return keep
 
 
@@ -99,11 +95,6 @@ def _on_b(X, E, i, j, n, gap):
         close[k] = cross[k] or (gap > 0.0 and min(_point_segment(a, c, d), _point_segment(b, c, d),
                                                    _point_segment(c, a, b), _point_segment(d, a, b)) < gap)
     return close, cross
-
-
-@numba.njit(cache=True, inline="always")
-def _mid(a, b):
-    return (0.5 * (a[0] + b[0]), 0.5 * (a[1] + b[1]), 0.5 * (a[2] + b[2]))
 
 
 @numba.njit(cache=True, inline="always")

@@ -279,7 +279,7 @@ class Refiner:
             return 0
         gap = _CURVE_GAP * self.h
         # every round's positions lie between the surface's and X1: one candidate search serves them all
-        ends = np.unique(E)
+        ends = E.ravel()  # a vertex on two edges counts twice: the same largest move
         move = float(np.sqrt(((X1[ends] - self.mesh.V[ends]) ** 2).sum(axis=1).max()))
         candidates = candidate_pairs(self.mesh.V, E, gap, move)
         pairs, crossing = close_pairs(self.mesh.V, E, self.B.normal_at, gap, candidates)
@@ -316,15 +316,12 @@ class Refiner:
         are asked about. The same holds for a neighbour's last answer: a
         vertex made by a split (never asked) lies within its parents' clear
         balls, and inside the object they are mostly far wider than its
-        edges (:func:`neighbour_clearance`). An answer at a position outside B
-        is forgotten: it bounds nothing.
+        edges (:func:`clearance`). An answer at a position outside B is
+        forgotten: it bounds nothing.
         """
         s = self.state
         thin = self.params.thickness * self.h
-        clear = np.sqrt(s.near_d2) - np.linalg.norm(X1 - s.near_at, axis=1)  # NaN: no answer
-        near = ids[~(clear[ids] > thin)]  # NaN (never asked, or last asked outside B) counts as near
-        if len(near):
-            near = near[~(neighbour_clearance(self.mesh.F, X1, s.near_at, s.near_d2, near) > thin)]
+        near = ids[~(clearance(self.mesh.F, X1, s.near_at, s.near_d2, ids) > thin)]
         if not len(near):
             return near
         d2 = self.closest_on_b(near, X1)[0]
@@ -592,34 +589,38 @@ class Refiner:
         return self.log
 
 
-def neighbour_clearance(F: np.ndarray, X: np.ndarray, at: np.ndarray, d2: np.ndarray, ids: np.ndarray) -> np.ndarray:
-    """For vertices ``ids`` at ``X[ids]``: the largest ``sqrt(d2[j]) - |X[i] - at[j]|`` over their
-    neighbours ``j`` in triangles ``F``, where ``d2[j]`` is the squared distance to B of the inside
-    point ``at[j]`` (NaN: unknown). Positive, it is a lower bound of ``X[i]``'s distance to B, and
-    ``X[i]`` lies inside (the distance is 1-Lipschitz); ``-inf`` where no neighbour is known."""
+def clearance(F: np.ndarray, X: np.ndarray, at: np.ndarray, d2: np.ndarray, ids: np.ndarray) -> np.ndarray:
+    """For vertices ``ids`` at ``X[ids]``: the largest ``sqrt(d2[j]) - |X[i] - at[j]|`` over the vertex
+    itself and its neighbours ``j`` in triangles ``F``, where ``d2[j]`` is the squared distance to B of
+    the inside point ``at[j]`` (NaN: unknown). Positive, it is a lower bound of ``X[i]``'s distance to
+    B, and ``X[i]`` lies inside (the distance is 1-Lipschitz); ``-inf`` where nothing is known."""
     mark = np.zeros(len(X), np.bool_)
     mark[ids] = True
     bound = np.full(len(X), -np.inf)
-    _neighbour_clearance(F, X, at, d2, mark, bound)
+    _clearance(F, X, at, d2, mark, bound)
     return bound[ids]
 
 
+@numba.njit(cache=True, inline="always")
+def _ball(X, at, d2, i, j, bound):
+    """Raise ``bound[i]`` to what ``j``'s answer (if any) proves of ``X[i]``."""
+    if np.isfinite(d2[j]) and at[j, 0] == at[j, 0]:
+        bound[i] = max(bound[i], np.sqrt(d2[j]) - vec.norm(vec.sub(vec.point(X, i), vec.point(at, j))))
+
+
 @numba.njit(cache=True)
-def _neighbour_clearance(F, X, at, d2, mark, bound):
-    # one pass over the triangles (a loop with a running maximum, which NumPy's
+def _clearance(F, X, at, d2, mark, bound):
+    # one pass over the vertices and one over the triangles (a running maximum, which NumPy's
     # maximum.at makes ten times slower on the wall's 200K triangles)
+    for i in range(X.shape[0]):
+        if mark[i]:
+            _ball(X, at, d2, i, i, bound)
     for f in range(F.shape[0]):
         for k in range(3):
             i = F[f, k]
-            if not mark[i]:
-                continue
-            for o in (1, 2):
-                j = F[f, (k + o) % 3]
-                if not (np.isfinite(d2[j]) and at[j, 0] == at[j, 0]):
-                    continue
-                b = np.sqrt(d2[j]) - vec.norm(vec.sub(vec.point(X, i), vec.point(at, j)))
-                if b > bound[i]:
-                    bound[i] = b
+            if mark[i]:
+                _ball(X, at, d2, i, F[f, (k + 1) % 3], bound)
+                _ball(X, at, d2, i, F[f, (k + 2) % 3], bound)
 
 
 def _drop(d: np.ndarray, ids: np.ndarray, c: np.ndarray, nb: np.ndarray) -> None:
