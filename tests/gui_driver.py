@@ -270,6 +270,7 @@ def main() -> None:
     elif scenario == "sweep":
         result.update(sweep_points(app, v, out, shot))
     elif scenario == "rerun":
+        result["worker_at_open"] = v._rerunner.alive  # a window only looked at starts no re-run process
         before = v.run.iteration(len(v.run.iterations) - 1)
         v.edits["psi.stress_weight"].double_value = 0.0
         v.edits["seed"].int_value = v.edits["seed"].int_value + 1

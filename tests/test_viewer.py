@@ -156,6 +156,7 @@ def test_dragging_turns_each_panel_about_its_subject_and_exports_leave_the_camer
 @pytest.mark.gui
 def test_rerun_in_the_window_gives_a_new_result_without_freezing_it(run_dir, tmp_path):
     res = _window("rerun", run_dir, tmp_path)
+    assert not res["worker_at_open"]
     assert len(res["rerun_dirs"]) == 1 and res["shown"] == res["rerun_dirs"][0]
     assert Path(res["rerun_dirs"][0], "manifest.json").is_file() and Path(run_dir, "manifest.json").is_file()
     assert res["stress_weight"] == 0.0 and not res["same_surface"]

@@ -163,10 +163,9 @@ class Viewer:
         self._sync_from: int | None = None
         self._job = None  # a generator stepped on ticks (video export)
         self._worker: threading.Thread | None = None
-        # re-runs go to one child process, started now so that it has imported the pipeline by
-        # the first re-run (viewer/rerun.py)
+        # re-runs go to one child process (viewer/rerun.py), started when a parameter is first
+        # edited, so that it has imported the pipeline by the re-run; a window only looked at starts none
         self._rerunner = RerunWorker()
-        self._rerunner.start()
         self._live: dict | None = None
         self._live_lock = threading.Lock()
         self.rerun_dirs: list[Path] = []
@@ -311,6 +310,7 @@ class Viewer:
             row.add_stretch()
             row.add_child(edit)
             group.add_child(row)
+            edit.set_on_value_changed(lambda _value: self._rerunner.start())
             self.edits[key] = edit
         buttons = gui.Horiz(0.5 * em)
         for text, handler in (("Re-run", self.rerun), ("Save config", lambda: self.save_config()),

@@ -5,7 +5,8 @@ GIL for seconds). A new process per re-run would pay, every time, for the
 interpreter, the imports (NumPy, SciPy, numba, libigl: about half a second)
 and the loading of the compiled kernels from numba's cache (about a third of
 a second), more than a preview's refinement itself. So one child, started
-with the window, imports the pipeline once and serves the re-runs in turn:
+when a parameter is first edited (or by the first re-run), imports the
+pipeline once and serves the re-runs in turn:
 a re-run with only psi changed then costs what the run costs (the stage
 cache supplies the rest, :mod:`fracture.pipeline.cache`). A child that died
 is started again for the next re-run.

@@ -80,13 +80,13 @@ def stages_until(until: str | None, stages: tuple[Stage, ...] = STAGES) -> tuple
     return stages[: names.index(until) + 1]
 
 
-def _run_stage(ctx: RunContext, stage: Stage, keep_products: bool, out: Path, writer: Executor | None = None) -> dict:
+def _run_stage(ctx: RunContext, stage: Stage, keep_products: bool, out: Path, writer: Executor) -> dict:
     """Run one stage, or reuse its cached result (:mod:`fracture.pipeline.cache`); returns what the manifest says of it.
 
     The stage's result is what it adds to the context: files, products (kept
     only for stages whose products a later stage reads), counts, statistics
-    and notes. With a ``writer``, the result is stored into the cache there
-    while the next stages run (the manifest's ``cache`` is then a future,
+    and notes. It is stored into the cache by ``writer`` while the next
+    stages run (the manifest's ``cache`` is a future until the run ends,
     :func:`_stored`): a preview's fields entry, tens of megabytes, is written
     while the surface is refined. Later stages neither change an earlier
     stage's files nor its products (the animate stage copies the refined
@@ -119,9 +119,7 @@ def _run_stage(ctx: RunContext, stage: Stage, keep_products: bool, out: Path, wr
                 run=str(out))
     args = (name, key, ctx.dir, ctx.files[n_files:], changed(ctx.products.made(), products) if keep_products else {},
             meta)
-    if writer is not None:
-        return {"cache": writer.submit(cache.store, *args)}
-    return {"cache": _stored(cache.store(*args))}
+    return {"cache": writer.submit(cache.store, *args)}
 
 
 def _stored(entry: Path | None) -> str:
@@ -174,7 +172,7 @@ def run(cfg: dict, out: str | Path, until: str | None = None, force: bool = Fals
     # the stages' files and the cache's entries are written by one thread beside the stages, in the
     # order given (an entry copies its stage's files), all before the run is complete and before a
     # failed run's directory is removed
-    with staged_directory(out, force) as staging, ThreadPoolExecutor(1, "fracref-cache") as writer:
+    with staged_directory(out, force) as staging, ThreadPoolExecutor(1, "fracref-writer") as writer:
         ctx = RunContext(cfg=cfg, dir=staging, progress=progress, listener=listener, cache=cache, writer=writer)
         ctx.path("config.yaml").write_text(dump_config(cfg), encoding="utf-8")
         for stage in chosen:
