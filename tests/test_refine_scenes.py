@@ -131,14 +131,20 @@ def test_the_example_crack_follows_the_brick_mortar_boundaries(example_runs):
     assert refined >= 0.48 and refined >= 3.0 * coarse
 
 
+def coarse_and_refined(name: str, budget: int, tmp_path) -> tuple[dict, dict]:
+    """The fidelity figures (:func:`run_figures`) of a built-in scene's coarse and refined surfaces, refined
+    at a triangle budget."""
+    cfg = load_config(CONFIGS / f"{name}.yaml", [f"refine.max_triangles={budget}", "refine.snapshots=false"])
+    figures = run_figures(runner.run(cfg, tmp_path / "run", until="refine", progress=False))
+    return figures["coarse"], figures["refined"]
+
+
 @pytest.mark.slow
 def test_the_collapsing_walls_network_follows_the_brick_mortar_boundaries(tmp_path):
     """Fig. 10: the wrecking ball's coarse fracture network crosses bricks; the refined network runs along
     the head and bed joints' weak layers. At 40K triangles at least 44 % of its area lies in the weakest
     20 % of zeta (the coarse network: 15 %), and the mean strength on it falls by a third."""
-    cfg = load_config(CONFIGS / "wall.yaml", ["refine.max_triangles=40000", "refine.snapshots=false"])
-    figures = run_figures(runner.run(cfg, tmp_path / "run", until="refine", progress=False))
-    coarse, refined = figures["coarse"], figures["refined"]
+    coarse, refined = coarse_and_refined("wall", 40000, tmp_path)
     assert refined["weak_share_20"] >= 0.44 and refined["weak_share_20"] >= 2.5 * coarse["weak_share_20"]
     assert refined["mean_zeta"] <= 0.67 * coarse["mean_zeta"]
 
@@ -149,9 +155,7 @@ def test_the_marble_bunny_cracks_follow_the_soft_veins(tmp_path):
     soft veins. The weakest 20 % of zeta inside the bunny lie in the veins (a quarter of the stone): at
     least 35 % of the refined area lies there (the coarse cracks: 16 %), at least twice the coarse share,
     and the mean strength on the cracks falls by a quarter (a preview budget of 30K triangles)."""
-    cfg = load_config(CONFIGS / "bunny.yaml", ["refine.max_triangles=30000", "refine.snapshots=false"])
-    figures = run_figures(runner.run(cfg, tmp_path / "run", until="refine", progress=False))
-    coarse, refined = figures["coarse"], figures["refined"]
+    coarse, refined = coarse_and_refined("bunny", 30000, tmp_path)
     assert refined["weak_share_20"] >= 0.35 and refined["weak_share_20"] >= 2.0 * coarse["weak_share_20"]
     assert refined["mean_zeta"] <= 0.75 * coarse["mean_zeta"]
 
