@@ -45,8 +45,11 @@ def test_read_mesh_errors(tmp_path):
 
 def test_check_triangle_mesh_errors():
     V = np.zeros((3, 3))
-    with pytest.raises(InputError, match=r"span \[0, 3\]"):
-        check_triangle_mesh(V, [[0, 1, 3]], "m")
+    with pytest.raises(InputError, match=r"face 2 refers to vertex 4 \(both counted from 1\), but there are 3 "
+                                         r"vertices \(2 such faces\)"):
+        check_triangle_mesh(V, [[0, 1, 2], [0, 1, 3], [-1, 1, 2]], "m")
+    with pytest.raises(InputError, match=r"2 vertices have NaN or infinite coordinates \(first: vertex 2, counted"):
+        check_triangle_mesh(np.array([[0, 0, 0], [np.nan, 0, 0], [0, np.inf, 0.0]]), [[0, 1, 2]], "m")
     with pytest.raises(InputError, match="repeat a vertex"):
         check_triangle_mesh(V, [[0, 1, 1]], "m")
     with pytest.raises(InputError, match=r"shape \(3, 2\)"):

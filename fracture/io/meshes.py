@@ -45,9 +45,15 @@ def check_triangle_mesh(V, F, what: str, closed: bool = False) -> tuple[np.ndarr
     F = np.ascontiguousarray(F, np.int64)
     bad = ~np.isfinite(V).all(axis=1)
     if bad.any():
-        raise InputError(f"{what}: {int(bad.sum())} vertices have NaN or infinite coordinates (first: vertex {int(np.flatnonzero(bad)[0])})")
-    if F.min() < 0 or F.max() >= len(V):
-        raise InputError(f"{what}: face indices span [{int(F.min())}, {int(F.max())}], expected [0, {len(V) - 1}]")
+        raise InputError(f"{what}: {int(bad.sum())} vertices have NaN or infinite coordinates (first: vertex "
+                         f"{int(np.flatnonzero(bad)[0]) + 1}, counted from 1)")
+    outside = np.flatnonzero(((F < 0) | (F >= len(V))).any(axis=1))
+    if len(outside):
+        f = int(outside[0])
+        corner = int(F[f][(F[f] < 0) | (F[f] >= len(V))][0])
+        raise InputError(f"{what}: face {f + 1} refers to vertex {corner + 1} (both counted from 1), but there are "
+                         f"{len(V)} vertices{f' ({len(outside)} such faces)' if len(outside) > 1 else ''}; expected "
+                         f"vertex numbers 1 to {len(V)}")
     repeated = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
     if repeated.any():
         raise InputError(f"{what}: {int(repeated.sum())} faces repeat a vertex (first: face "
