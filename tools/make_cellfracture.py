@@ -58,7 +58,8 @@ def _args():
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--case", action="append", choices=sorted(CASES), help="default: every case")
     ap.add_argument("--frames", type=int, default=30)
-    ap.add_argument("--formats", default="sample,blender_obj,ply,usd")
+    ap.add_argument("--formats", default=None, help="comma-separated, of " + ",".join(FORMATS) + " (default: every "
+                    "one this Blender writes; Debian's Blender 3.4 has no USD exporter)")
     ap.add_argument("--random", type=int, default=0, metavar="N",
                     help="instead of the named cases, N random ones (object, cells, seed and pose drawn "
                          "with --random-seed): inputs the corpus has not seen")
@@ -214,9 +215,28 @@ def write_ply(path: Path, pieces, frame: int):
     path.write_text("\n".join(head + body) + "\n")
 
 
+FORMATS = ("sample", "blender_obj", "ply", "usd")
+
+
+def _formats(asked: str | None) -> set:
+    """The formats to write: ``asked`` checked against what this Blender can write."""
+    usd = "usd_export" in dir(bpy.ops.wm)  # the registered operators (a missing one fails only when called)
+    if asked is None:
+        return {f for f in FORMATS if f != "usd" or usd}
+    formats = set(asked.split(","))
+    unknown = formats - set(FORMATS)
+    if unknown:
+        sys.exit(f"make_cellfracture.py: --formats: unknown {', '.join(sorted(unknown))}; expected some of "
+                 f"{', '.join(FORMATS)}")
+    if "usd" in formats and not usd:
+        sys.exit(f"make_cellfracture.py: --formats usd: Blender {bpy.app.version_string} has no USD exporter "
+                 "(Debian's build leaves it out); leave usd out, or run a Blender with USD")
+    return formats
+
+
 def main():
     args = _args()
-    formats = set(args.formats.split(","))
+    formats = _formats(args.formats)
     cases = random_cases(args.random, args.random_seed) if args.random else CASES
     names = sorted(cases) if args.random else args.case or sorted(CASES)
     for case in names:
