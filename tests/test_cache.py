@@ -67,6 +67,30 @@ def test_a_changed_input_file_invalidates_the_stages_after_it(tmp_path, small_co
     assert set(reuse(again).values()) == {"stored"}
 
 
+def test_the_key_holds_every_source_file_and_a_code_change_invalidates_every_stage(tmp_path, small_config,
+                                                                                 monkeypatch):
+    from fracture.pipeline import cache as cache_module
+
+    root, files = cache_module.source_files()
+    names = {str(p.relative_to(root)) for p in files}
+    assert {"fracture/pipeline/cache.py", "fracture/refine/engine.py", "fields/pyramid.py"} <= names
+    cache = StageCache(tmp_path / "cache")
+    run(load_config(small_config), tmp_path / "a", cache)
+    edited = tmp_path / "src"  # the same sources with one more line in one file
+    for p in files:
+        copy = edited / p.relative_to(root)
+        copy.parent.mkdir(parents=True, exist_ok=True)
+        copy.write_bytes(p.read_bytes() + (b"# changed\n" if p.name == "tiling.py" else b""))
+    monkeypatch.setattr(cache_module, "source_files",
+                        lambda: (edited, [edited / p.relative_to(root) for p in files]))
+    cache_module.code_version.cache_clear()
+    try:
+        again = run(load_config(small_config), tmp_path / "b", cache)
+    finally:
+        cache_module.code_version.cache_clear()
+    assert set(reuse(again).values()) == {"stored"}
+
+
 def test_an_interrupted_store_leaves_no_entry_and_stale_ones_go(tmp_path, small_config, monkeypatch):
     cache = StageCache(tmp_path / "cache")
     real = pickle.dump

@@ -69,15 +69,23 @@ def default_max_bytes() -> int:
     return int(float(os.environ.get("FRACREF_CACHE_MAX_GB", DEFAULT_MAX_GB)) * 1e9)
 
 
+def source_files() -> tuple[Path, list[Path]]:
+    """The project's root and the pipeline's source files (of ``fields`` and ``fracture``), sorted."""
+    root = Path(__file__).resolve().parents[2]  # fracture/pipeline/cache.py
+    files = [path for package in ("fields", "fracture") for path in sorted((root / package).rglob("*.py"))]
+    if not files:  # a key without the code would serve results of any earlier version
+        raise RuntimeError(f"no pipeline sources under {root}")
+    return root, files
+
+
 @lru_cache(maxsize=1)
 def code_version() -> str:
     """A digest of the pipeline's source files and the numerical libraries' versions."""
     h = hashlib.sha256()
-    root = Path(__file__).resolve().parents[1]
-    for package in ("fields", "fracture"):
-        for path in sorted((root / package).rglob("*.py")):
-            h.update(str(path.relative_to(root)).encode())
-            h.update(path.read_bytes())
+    root, files = source_files()
+    for path in files:
+        h.update(str(path.relative_to(root)).encode())
+        h.update(path.read_bytes())
     for name in _LIBRARIES:
         with contextlib.suppress(metadata.PackageNotFoundError):
             h.update(f"{name}=={metadata.version(name)}".encode())
