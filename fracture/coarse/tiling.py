@@ -32,6 +32,9 @@ somewhere. This module does not match faces; it labels space and contours the la
    flat for Cell Fracture and is coarsened by pymeshlab's quadric edge
    collapse with its rim kept vertex for vertex; a sheet whose coarsened
    triangles would cross another keeps its contoured ones.
+4. **Pinholes** (:mod:`fracture.coarse.pinholes`): a sheet's closed boundary
+   curve on B smaller than a tenth of a cell is collapsed to a point, just
+   inside B, with B's island inside it.
 
 Written here because no library at hand (libigl, pymeshlab, Open3D,
 scikit-image) contours a grid of several labels into one conforming surface.
@@ -45,6 +48,7 @@ import igl
 import numpy as np
 from scipy import ndimage
 
+from fracture.coarse.pinholes import PINHOLE, close_pinholes
 from fracture.errors import InputError
 from fracture.tolerances import tol
 from fracture.mesh.topology import fan, unique_edges
@@ -464,6 +468,11 @@ def label_tiling(V: np.ndarray, polygons: list[list[np.ndarray]], names: list[st
             h, ", ".join(repr(names[p]) for p in np.flatnonzero(~present))))
     X, FF, sides, BF, bpiece = _contour(pieces, origin, h, shape, label)
     X, FF, sides = _simplified(X, FF, sides)
+    X, FF, sides, BF, bpiece, pinholes = close_pinholes(X, FF, sides, BF, bpiece, h)
+    if pinholes:
+        notes.append(f"closed {pinholes} pinhole{'s' if pinholes > 1 else ''}: a piece reached the surface through "
+                     f"a hole in a crack smaller than {PINHOLE:g} grid cells ({PINHOLE * h:.3g}); the crack now "
+                     "ends just inside")
     if not _b_is_manifold(BF, len(X)):
         raise AssertionError(f"{where}marching tetrahedra gave an outer surface that is not a closed 2-manifold")
     if not len(FF):
