@@ -270,9 +270,10 @@ def main():
             "case": case, "object": kind, "cells": cells, "pieces": len(pieces), "seed": seed,
             "rotation_degrees": rot, "height": height, "frames": args.frames,
             "blender": bpy.app.version_string,
-            "formats": {"sample": "Z up, world coordinates, n-gons", "blender_obj": "Blender's OBJ exporter "
-                        "defaults: Y up, forward -Z", "ply": "ASCII, Z up, all pieces in one mesh, n-gons",
-                        "usd": "Blender's USD exporter: time-sampled transforms, Z up"},
+            "formats": {k: v for k, v in {
+                "sample": "Z up, world coordinates, n-gons", "blender_obj": "Blender's OBJ exporter defaults: Y up, "
+                "forward -Z", "ply": "ASCII, Z up, all pieces in one mesh, n-gons",
+                "usd": "Blender's USD exporter: time-sampled transforms, Z up"}.items() if k in formats},
         }, indent=1))
         print(f"{case}: {len(pieces)} pieces, {args.frames} frames -> {out}")
 
