@@ -121,7 +121,7 @@ def _collapse(X, FF, sides, BF, bpiece, loop, size, crossings):
         return None
     if not igl.winding_number(X2, BF2, q[None, :])[0] > 0.5:
         return None
-    if not _pieces_close(FF2, sides2, BF2, bpiece2, np.unique(np.r_[sides[rows].ravel(), bpiece[island]])):
+    if not _pieces_close(FF2, sides2, BF2, bpiece2, np.unique(np.r_[sides[rows].ravel(), bpiece[merged[BF].any(axis=1)]])):
         return None
     if self_intersections(X2, FF2) > crossings:
         return None
