@@ -7,9 +7,9 @@ import pytest
 from conftest import REPO
 from fracture.coarse import tiling
 from fracture.coarse.mesh_sequence import read_frame
-from fracture.coarse.pinholes import PINHOLE, _closed, _loops
+from fracture.coarse.pinholes import PINHOLE, _loops
 from fracture.mesh.intersect import self_intersections
-from fracture.mesh.topology import signed_volume
+from fracture.mesh.topology import closed_oriented, signed_volume
 
 REST = REPO / "tests" / "data" / "cellfracture_pinhole_rest.obj"  # frame 1 of a Blender 3.4 OBJ export, 12 pieces
 
@@ -48,11 +48,11 @@ def test_the_export_has_a_pinhole_and_the_import_closes_it(closed_and_open):
 
 def test_after_closing_every_piece_is_closed_and_together_they_fill_b(closed_and_open):
     t, _ = closed_and_open
-    assert _closed(t.exterior_F)
+    assert closed_oriented(t.exterior_F)
     for c in range(len(t.kept)):
         F = np.concatenate([t.exterior_F[t.exterior_piece == c], t.fracture_F[t.sides[:, 0] == c],
                             t.fracture_F[t.sides[:, 1] == c][:, ::-1]])
-        assert _closed(F), c
+        assert closed_oriented(F), c
         assert signed_volume(t.V, F) > 0
     total = sum(signed_volume(t.V, np.concatenate([t.exterior_F[t.exterior_piece == c],
                                                    t.fracture_F[t.sides[:, 0] == c],

@@ -69,3 +69,14 @@ def test_orient_sheets_reports_a_moebius_strip():
     F += [[n - 1, 2 * n - 1, n], [n, 2 * n - 1, 0]]  # the twist
     _, _, conflict = orient_sheets(np.array(F))
     assert conflict is not None
+
+
+def test_closed_oriented_asks_every_edge_once_each_way():
+    from fracture.mesh.topology import closed_oriented
+
+    tet = np.array([[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]])
+    assert closed_oriented(tet)
+    assert not closed_oriented(tet[:3])  # a hole
+    assert not closed_oriented(np.r_[tet[:3], tet[3:, ::-1]])  # a face turned
+    assert not closed_oriented(np.r_[tet, tet[:1]])  # a face twice
+    assert closed_oriented(np.zeros((0, 3), np.int64))

@@ -30,7 +30,7 @@ from scipy.sparse import csgraph
 
 from fracture.coarse.surface import flood_fill_patches
 from fracture.mesh.intersect import self_intersections
-from fracture.mesh.topology import unique_edges
+from fracture.mesh.topology import closed_oriented, unique_edges
 
 # A closed boundary curve of a sheet smaller than this (grid cells, its box's diagonal) is a pinhole.
 PINHOLE = 0.1
@@ -55,17 +55,9 @@ def _loops(FF: np.ndarray, n: int) -> list[np.ndarray]:
     return out
 
 
-def _closed(F: np.ndarray) -> bool:
-    """Every edge of ``F`` passed once in each direction: a closed, oriented 2-manifold (edge-wise)."""
-    E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]).astype(np.int64)
-    n = int(E.max()) + 1
-    key, rev = E[:, 0] * n + E[:, 1], E[:, 1] * n + E[:, 0]
-    return len(np.unique(key)) == len(key) and bool(np.isin(rev, key).all())
-
-
 def _pieces_close(FF, sides, BF, bpiece, pieces) -> bool:
     """Each of ``pieces``, its B triangles and its sides of the sheets, is closed and oriented."""
-    return all(_closed(np.concatenate([BF[bpiece == c], FF[sides[:, 0] == c], FF[sides[:, 1] == c][:, ::-1]]))
+    return all(closed_oriented(np.concatenate([BF[bpiece == c], FF[sides[:, 0] == c], FF[sides[:, 1] == c][:, ::-1]]))
                for c in pieces)
 
 
@@ -111,7 +103,7 @@ def _collapse(X, FF, sides, BF, bpiece, loop, size, crossings):
     BF2 = np.where(merged[BF], ip, BF)[keep_b]
     bpiece2 = bpiece[keep_b]
     # checks: B closed, the apex inside it, the cone a closed fan of one sheet, the pieces closed, no crossings
-    if not _closed(BF2):
+    if not closed_oriented(BF2):
         return None
     cone = np.flatnonzero((FF2 == iq).any(axis=1))
     if len(np.unique(sides2[cone], axis=0)) != 1:

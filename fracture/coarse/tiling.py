@@ -51,7 +51,7 @@ from scipy import ndimage
 from fracture.coarse.pinholes import PINHOLE, close_pinholes
 from fracture.errors import InputError
 from fracture.tolerances import tol
-from fracture.mesh.topology import fan, unique_edges
+from fracture.mesh.topology import closed_oriented, fan, unique_edges
 
 # Cells along the object's largest extent.
 DEFAULT_CELLS = 32
@@ -390,14 +390,6 @@ def _simplified(X: np.ndarray, FF: np.ndarray, sides: np.ndarray):
     return X, FF, sides
 
 
-def _b_is_manifold(BF: np.ndarray, n: int) -> bool:
-    """Every edge of B in exactly two triangles, once in each direction."""
-    E = np.concatenate([BF[:, [0, 1]], BF[:, [1, 2]], BF[:, [2, 0]]]).astype(np.int64)
-    key = E[:, 0] * n + E[:, 1]
-    rev = E[:, 1] * n + E[:, 0]
-    return len(np.unique(key)) == len(key) and bool(np.isin(rev, key).all())
-
-
 def _check_tiling(label, overlap, gaps, names, h, where) -> str | None:
     """Refuse pieces that overlap by more than :data:`_OVERLAP` cells on average (the overlap's volume
     over the smaller piece's volume to the power 2/3, an area); returns a note on the widest slit that
@@ -473,7 +465,7 @@ def label_tiling(V: np.ndarray, polygons: list[list[np.ndarray]], names: list[st
         notes.append(f"closed {pinholes} pinhole{'s' if pinholes > 1 else ''}: a piece reached the surface through "
                      f"a hole in a crack smaller than {PINHOLE:g} grid cells ({PINHOLE * h:.3g}); the crack now "
                      "ends just inside")
-    if not _b_is_manifold(BF, len(X)):
+    if not closed_oriented(BF):
         raise AssertionError(f"{where}marching tetrahedra gave an outer surface that is not a closed 2-manifold")
     if not len(FF):
         raise InputError(f"{where}no two pieces touch: nothing to refine (is this a fractured object?)")

@@ -26,6 +26,18 @@ def _keys(E: np.ndarray, n: int) -> np.ndarray:
     return E[:, 0].astype(np.int64) * n + E[:, 1]
 
 
+def closed_oriented(F: np.ndarray) -> bool:
+    """Every directed edge of ``F`` appears once and its reverse once: closed, edge-manifold and
+    consistently oriented together (an empty ``F`` is)."""
+    D = directed_edges(F)
+    if not len(D):
+        return True
+    n = int(D.max()) + 1
+    key, rev = _keys(D, n), _keys(D[:, ::-1], n)
+    uniq, count = np.unique(key, return_counts=True)
+    return bool((count == 1).all() and np.isin(rev, uniq, assume_unique=False).all())
+
+
 def barycentric_weights(P: np.ndarray, T: np.ndarray) -> np.ndarray:
     """Barycentric coordinates ``(k, 3)`` of points ``P`` on triangles ``T (k, 3, 3)`` (libigl), as weights:
     negative coordinates (rounding, a point just off its triangle) become 0 and each row sums to 1."""

@@ -46,7 +46,7 @@ from fracture.coarse.surface import flood_fill_patches
 from fracture.pieces.imprint import Imprint
 from fracture.mesh.intersect import self_intersections
 from fracture.mesh.fracture_surface import FractureSurface
-from fracture.mesh.topology import (barycentric_weights, diagonal, directed_edge_face, directed_edges, signed_volume,
+from fracture.mesh.topology import (barycentric_weights, closed_oriented, diagonal, directed_edge_face, signed_volume,
                                weld)
 
 # Jittered attempts after the plain one (seeds 1, 2, ...), each moving the positions by up to this much of B's
@@ -446,15 +446,8 @@ def mesh_checks(V: np.ndarray, F: np.ndarray, intersections: bool = True) -> dic
     ``closed_oriented``: every directed edge appears once and its reverse
     once (closed, edge-manifold and consistently oriented together).
     """
-    D = directed_edges(F)
-    n = len(V)
-    key = D[:, 0] * n + D[:, 1]
-    rev = D[:, 1] * n + D[:, 0]
-    uniq, count = np.unique(key, return_counts=True)
-    pos = np.minimum(np.searchsorted(uniq, rev), len(uniq) - 1)
-    closed_oriented = bool((count == 1).all() and (uniq[pos] == rev).all())
     vertex_manifold = bool(np.asarray(igl.is_vertex_manifold(np.ascontiguousarray(F, np.int64))).all())
-    out = {"closed_oriented": closed_oriented, "vertex_manifold": vertex_manifold,
+    out = {"closed_oriented": closed_oriented(F), "vertex_manifold": vertex_manifold,
            "volume": signed_volume(V, F), "triangles": int(len(F)), "vertices": int(len(V))}
     if intersections:
         out["self_intersections"] = crossing_pairs(V, F)
