@@ -24,7 +24,8 @@ def _loop_sizes(t):
 
 
 def _cell(t):
-    return float(np.ptp(read_frame(REST).V, axis=0).max()) / t.cells
+    """The tiling's grid cell (the object's largest extent over its cells)."""
+    return float(np.ptp(t.V[t.exterior_F].reshape(-1, 3), axis=0).max()) / t.cells
 
 
 @pytest.fixture(scope="module")

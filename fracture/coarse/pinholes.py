@@ -61,9 +61,9 @@ def _pieces_close(FF, sides, BF, bpiece, pieces) -> bool:
                for c in pieces)
 
 
-def _collapse(X, FF, sides, BF, bpiece, loop, size, crossings):
-    """The surfaces with the pinhole ``loop`` closed (module notes), or None where a check fails
-    (``crossings``: the sheets' crossing pairs before)."""
+def _collapse(X, FF, sides, BF, bpiece, loop, extent, size, crossings):
+    """The surfaces with the pinhole ``loop`` (``extent`` across) closed (module notes), or None where a
+    check fails (``crossings``: the sheets' crossing pairs before)."""
     in_loop = np.zeros(len(X), bool)
     in_loop[loop] = True
     # B's island: the smaller side of the mouth's edges on B
@@ -92,7 +92,6 @@ def _collapse(X, FF, sides, BF, bpiece, loop, size, crossings):
     length = float(np.linalg.norm(d))
     if length == 0.0:
         return None
-    extent = float(np.linalg.norm(np.ptp(X[loop], axis=0)))
     q = p + min(1.0, 2.0 * extent / length) * d
     ip, iq = len(X), len(X) + 1
     X2 = np.concatenate([X, [p, q]])
@@ -130,10 +129,11 @@ def close_pinholes(X: np.ndarray, FF: np.ndarray, sides: np.ndarray, BF: np.ndar
     """
     closed = 0
     size = limit * h
-    small = [loop for loop in _loops(FF, len(X)) if np.linalg.norm(np.ptp(X[loop], axis=0)) < size]
+    extents = [(loop, float(np.linalg.norm(np.ptp(X[loop], axis=0)))) for loop in _loops(FF, len(X))]
+    small = [(loop, extent) for loop, extent in extents if extent < size]
     crossings = self_intersections(X, FF) if small else 0
-    for loop in small:
-        out = _collapse(X, FF, sides, BF, bpiece, loop, size, crossings)
+    for loop, extent in small:
+        out = _collapse(X, FF, sides, BF, bpiece, loop, extent, size, crossings)
         if out is not None:
             X, FF, sides, BF, bpiece = out
             closed += 1
