@@ -1,0 +1,73 @@
+"""Alpha-expansion on small graphs against brute force, and the lattice's area weights on planes."""
+
+import itertools
+
+import numpy as np
+import pytest
+
+from fracture.refine.cut_weights import area_weights, cut_cost, grain_cost, grain_weight_table, sphere_directions
+from fracture.refine.expansion import PottsGraph, _move, expand
+
+
+def _graph(rng, n=9, density=0.5):
+    pairs = [(i, j) for i in range(n) for j in range(i + 1, n) if rng.random() < density]
+    p, q = np.array(pairs).T
+    return PottsGraph(n, p, q, rng.random(len(p)))
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_an_expansion_move_is_the_best_move_of_its_label(seed):
+    rng = np.random.default_rng(seed)
+    g = _graph(rng)
+    labels = rng.integers(0, 3, g.n)
+    free = rng.random(g.n) < 0.8
+    for a in range(3):
+        nodes = np.flatnonzero(free & (labels != a))
+        switch = _move(g, labels, nodes, a)
+        moved = labels.copy()
+        moved[nodes[switch]] = a
+        best = min(g.energy(np.where(np.isin(np.arange(g.n), nodes[list(s)]), a, labels))
+                   for k in range(len(nodes) + 1) for s in itertools.combinations(range(len(nodes)), k))
+        assert g.energy(moved) == pytest.approx(best, abs=1e-12)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_two_labels_reach_the_global_minimum_and_three_within_twice_it(seed):
+    rng = np.random.default_rng(10 + seed)
+    g = _graph(rng, n=10)
+    for k in (2, 3):
+        labels = rng.integers(0, k, g.n)
+        free = np.ones(g.n, bool)
+        free[:k] = False  # one fixed node of each label: the empty cut is not allowed
+        labels[:k] = np.arange(k)
+        out, log = expand(g, labels, free)
+        assert (out[~free] == labels[~free]).all()
+        assert all(b <= a + 1e-12 for a, b in zip(log.energy, log.energy[1:]))
+        best = min(g.energy(np.r_[np.arange(k), rest]) for rest in itertools.product(range(k), repeat=g.n - k))
+        if k == 2:
+            assert g.energy(out) == pytest.approx(best, abs=1e-12)
+        else:
+            assert g.energy(out) <= 2 * best + 1e-12
+
+
+@pytest.mark.parametrize("spacing", [(1, 1, 1), (0.5, 0.5, 0.5), (1, 1, 0.7)])
+def test_the_weights_measure_the_area_of_planes_at_every_orientation(spacing):
+    w = area_weights(spacing)
+    N = np.random.default_rng(0).normal(size=(500, 3))
+    N /= np.linalg.norm(N, axis=1)[:, None]
+    cost = cut_cost(spacing, w, N)
+    assert np.all(np.abs(cost - 1.0) < 0.08)
+    assert (w >= 0).all()
+    six = np.zeros(13)
+    six[:3] = np.prod(spacing) / np.asarray(spacing, float)  # the staircase's weights: exact on axis planes
+    assert cut_cost(spacing, six, np.array([[1, 1, 0]]) / np.sqrt(2))[0] > 1.35
+
+
+def test_grain_weights_make_cuts_across_the_grain_dear():
+    d = np.array([0.0, 0.0, 1.0])
+    T = grain_weight_table((1, 1, 1), 3.0, d[None])[0]
+    along = cut_cost((1, 1, 1), T, np.array([[1.0, 0, 0], [0, 1.0, 0]]))
+    across = cut_cost((1, 1, 1), T, d[None])[0]
+    assert np.all(np.abs(along - 1.0) < 0.12) and abs(across - 3.0) < 0.3
+    N = sphere_directions(200)
+    assert np.abs(cut_cost((1, 1, 1), T, N) / grain_cost(N, d, 3.0) - 1).max() < 0.12
