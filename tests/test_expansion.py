@@ -68,6 +68,6 @@ def test_grain_weights_make_cuts_across_the_grain_dear():
     T = grain_weight_table((1, 1, 1), 3.0, d[None])[0]
     along = cut_cost((1, 1, 1), T, np.array([[1.0, 0, 0], [0, 1.0, 0]]))
     across = cut_cost((1, 1, 1), T, d[None])[0]
-    assert np.all(np.abs(along - 1.0) < 0.12) and abs(across - 3.0) < 0.3
+    assert np.all(np.abs(along - 1.0) < 0.12) and abs(across - 3.0) < 0.35
     N = sphere_directions(200)
     assert np.abs(cut_cost((1, 1, 1), T, N) / grain_cost(N, d, 3.0) - 1).max() < 0.12
