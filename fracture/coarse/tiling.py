@@ -16,18 +16,10 @@ somewhere. This module does not match faces; it labels space and contours the la
    pieces, take the nearer piece. Two pieces overlapping by more than a fifth
    of a cell on average are refused (a moved piece); a piece with no node is
    left out, with a note.
-2. **Multi-material marching tetrahedra** (Wu and Sullivan 2003). Each cube
-   of the grid whose corners carry several labels is split into Kuhn's six
-   tetrahedra; between two labels of a tetrahedron the interface is the
-   polygon through its edges' crossings, its three-label faces' points and,
-   with four labels, its own point. Between two pieces this is a fracture
-   polygon (its normal points into the second), between a piece and the
-   outside a polygon of B. Tetrahedra have no ambiguous cases: B is a closed,
-   oriented 2-manifold and the sheets meet each other and B along shared
-   edges. Crossings lie on the surfaces (bisection of the winding numbers
-   along the edge); points of faces and tetrahedra are means of their
-   crossings (those on B when there are some, so B keeps its plane where a
-   sheet meets it).
+2. **Multi-material marching tetrahedra** (:mod:`fracture.mesh.multilabel`):
+   the interfaces between the labels, the fracture sheets between pieces and
+   B between a piece and the outside. An edge's crossing lies on the surfaces
+   (bisection of the winding numbers along the edge).
 3. **Coarsening.** Each sheet (all triangles between one pair of pieces) is
    flat for Cell Fracture and is coarsened by pymeshlab's quadric edge
    collapse with its rim kept vertex for vertex; a sheet whose coarsened
@@ -35,9 +27,6 @@ somewhere. This module does not match faces; it labels space and contours the la
 4. **Pinholes** (:mod:`fracture.coarse.pinholes`): a sheet's closed boundary
    curve on B smaller than a tenth of a cell is collapsed to a point, just
    inside B, with B's island inside it.
-
-Written here because no library at hand (libigl, pymeshlab, Open3D,
-scikit-image) contours a grid of several labels into one conforming surface.
 """
 
 from __future__ import annotations
@@ -49,6 +38,7 @@ import numpy as np
 from scipy import ndimage
 
 from fracture.coarse.pinholes import PINHOLE, close_pinholes
+from fracture.mesh.multilabel import contour_labels
 from fracture.errors import InputError
 from fracture.tolerances import tol
 from fracture.mesh.topology import closed_oriented, fan, unique_edges
@@ -62,8 +52,6 @@ _OVERLAP = 0.2
 _OVERLAP_NODES = 10
 # Bisection steps for an edge's crossing (its place to 2^-this of a cell).
 _BISECTIONS = 12
-# Crossings keep this fraction of the edge from its nodes.
-_NODE_GAP = 0.02
 
 
 @dataclass
@@ -141,186 +129,37 @@ def _labels(pieces, nodes: np.ndarray, shape, h: float) -> tuple[np.ndarray, np.
     return label, filled, top2, gaps
 
 
-# Kuhn's split of a cube into 6 tetrahedra along its diagonal 000-111: every path from corner 000 to 111
-# along the axes, corners as bit offsets (x, y, z). Neighbouring cubes split their common face alike.
-_KUHN = np.array([[[0, 0, 0], a, a + b, [1, 1, 1]] for a, b in [
-    (np.eye(3, dtype=int)[i], np.eye(3, dtype=int)[j]) for i in range(3) for j in range(3) if i != j]])
-
-
-def _mixed_tets(label: np.ndarray) -> np.ndarray:
-    """Node ids ``(t, 4)`` of the Kuhn tetrahedra of every cube whose corners carry more than one label."""
-    shape = label.shape
-    corners = [label[i:shape[0] - 1 + i, j:shape[1] - 1 + j, k:shape[2] - 1 + k]
-               for i in (0, 1) for j in (0, 1) for k in (0, 1)]
-    lo, hi = np.minimum.reduce(corners), np.maximum.reduce(corners)
-    cube = np.argwhere(lo != hi)  # (c, 3)
-    node = cube[:, None, None, :] + _KUHN[None]  # (c, 6, 4, 3)
-    return np.ravel_multi_index(tuple(np.moveaxis(node, -1, 0)), shape).reshape(-1, 4)
-
-
-def _key(ids: np.ndarray, n: int) -> np.ndarray:
-    """One integer per sorted tuple of node ids (pairs or triples)."""
-    ids = np.sort(ids, axis=-1)
-    out = ids[..., 0].astype(np.int64)
-    for c in range(1, ids.shape[-1]):
-        out = out * n + ids[..., c]
-    return out
-
-
-_PAIRS = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]
-_FACES = [(0, 1, 2), (0, 1, 3), (0, 2, 3), (1, 2, 3)]
-
-
-def _interfaces(tets: np.ndarray, lab: np.ndarray, n_nodes: int):
-    """The points of the interfaces inside every tetrahedron (Wu and Sullivan's multi-material marching
-    tetrahedra), each tagged with the interface it lies on.
-
-    Between two labels A < B of a tetrahedron the interface polygon has the points of its edges whose
-    ends carry A and B, of its faces that carry A, B and a third label, and its own point when it carries
-    four labels (3 or 4 points). Returns, per tagged point: the tetrahedron, A, B, the point's kind
-    (0 edge, 1 face, 2 tetrahedron) and key (sorted node ids, or the tetrahedron).
-    """
-    L = lab[tets]  # (t, 4)
-    t_all = np.arange(len(tets))
-    rec = []
-    for i, j in _PAIRS:  # edges: one interface, their ends' labels
-        a, b = L[:, i], L[:, j]
-        sel = a != b
-        u, v = tets[sel, i], tets[sel, j]
-        rec.append((t_all[sel], np.minimum(a, b)[sel], np.maximum(a, b)[sel], np.zeros(sel.sum(), np.int64),
-                    np.minimum(u, v) * n_nodes + np.maximum(u, v)))
-    for f in _FACES:  # faces with three labels: the three interfaces between them
-        la = L[:, list(f)]
-        ls = np.sort(la, axis=1)
-        sel = (ls[:, 0] != ls[:, 1]) & (ls[:, 1] != ls[:, 2])
-        key = _key(tets[sel][:, list(f)], n_nodes)
-        for x, y in ((0, 1), (0, 2), (1, 2)):
-            rec.append((t_all[sel], ls[sel, x], ls[sel, y], np.ones(sel.sum(), np.int64), key))
-    Ls = np.sort(L, axis=1)
-    four = (Ls[:, 0] != Ls[:, 1]) & (Ls[:, 1] != Ls[:, 2]) & (Ls[:, 2] != Ls[:, 3])
-    for x, y in _PAIRS:
-        rec.append((t_all[four], Ls[four, x], Ls[four, y], np.full(four.sum(), 2, np.int64), t_all[four]))
-    return [np.concatenate(c) for c in zip(*rec)]
-
-
-def _positions(pieces, nodes, lab, h, edge_keys, face_keys, tet_ids, tets, n_nodes):
-    """Points of the edges (where the edge leaves the piece at its inside end: the piece's winding
-    number crosses 1/2, found by bisection), faces and tetrahedra (the mean of their edges' crossings,
-    of those on B where they have some: :func:`_mean_preferring`)."""
-    u, v = edge_keys // n_nodes, edge_keys % n_nodes
-    la, lb = lab[u], lab[v]
-    inner = np.where(la > 0, u, v)  # the end inside the piece whose surface the edge crosses
-    outer = np.where(la > 0, v, u)
-    owner = np.where(la > 0, la, lb) - 1
-    P0, P1 = nodes[inner], nodes[outer]
-    # the crossing: where the inside end's piece stops winding more than the outside end's (another
-    # piece), or where the pieces together stop winding more than 1/2 (the outside), by bisection
-    other = np.where(la > 0, lb, la) - 1  # -1: outside
-    lo, hi = np.zeros(len(u)), np.ones(len(u))
+def _winding_crossing(pieces, h: float):
+    """The crossing of a grid edge for :func:`~fracture.mesh.multilabel.contour_labels`: where the edge
+    leaves the piece at its inside end, i.e. where that piece's winding number stops exceeding the
+    other end's piece's (or the pieces' sum stops exceeding 1/2, toward the outside), by bisection."""
     boxes = [(PV.min(axis=0) - 2 * h, PV.max(axis=0) + 2 * h) for PV, _ in pieces]
-    for _ in range(_BISECTIONS):
-        mid = 0.5 * (lo + hi)
-        X = P0 + mid[:, None] * (P1 - P0)
-        w_in, w_out, total = np.zeros(len(u)), np.zeros(len(u)), np.zeros(len(u))
-        for p, (PV, PF) in enumerate(pieces):
-            near = np.flatnonzero(np.all((X >= boxes[p][0]) & (X <= boxes[p][1]), axis=1))
-            if not len(near):
-                continue
-            w = igl.fast_winding_number(PV, PF, X[near])
-            total[near] += w
-            w_in[near[owner[near] == p]] = w[owner[near] == p]
-            w_out[near[other[near] == p]] = w[other[near] == p]
-        inside = np.where(other >= 0, w_in > w_out, total > 0.5)
-        lo, hi = np.where(inside, mid, lo), np.where(inside, hi, mid)
-    t = 0.5 * (lo + hi)
-    # no point on a node: a triangle with two points there would have no area
-    t = np.clip(t, _NODE_GAP, 1.0 - _NODE_GAP)
-    PE = P0 + t[:, None] * (P1 - P0)
 
-    def edge(x, y):  # the crossing ids of edges x - y (edge_keys is sorted)
-        return np.searchsorted(edge_keys, np.minimum(x, y) * n_nodes + np.maximum(x, y))
+    def crossing(U, W, la, lb):
+        inner_u = la > 0  # bisect from the end inside a piece
+        P0, P1 = np.where(inner_u[:, None], U, W), np.where(inner_u[:, None], W, U)
+        owner = np.where(inner_u, la, lb) - 1
+        other = np.where(inner_u, lb, la) - 1  # -1: outside
+        n = len(P0)
+        lo, hi = np.zeros(n), np.ones(n)
+        for _ in range(_BISECTIONS):
+            mid = 0.5 * (lo + hi)
+            X = P0 + mid[:, None] * (P1 - P0)
+            w_in, w_out, total = np.zeros(n), np.zeros(n), np.zeros(n)
+            for p, (PV, PF) in enumerate(pieces):
+                near = np.flatnonzero(np.all((X >= boxes[p][0]) & (X <= boxes[p][1]), axis=1))
+                if not len(near):
+                    continue
+                w = igl.fast_winding_number(PV, PF, X[near])
+                total[near] += w
+                w_in[near[owner[near] == p]] = w[owner[near] == p]
+                w_out[near[other[near] == p]] = w[other[near] == p]
+            inside = np.where(other >= 0, w_in > w_out, total > 0.5)
+            lo, hi = np.where(inside, mid, lo), np.where(inside, hi, mid)
+        t = 0.5 * (lo + hi)
+        return np.where(inner_u, t, 1.0 - t)
 
-    a, b, c = face_keys // (n_nodes * n_nodes), (face_keys // n_nodes) % n_nodes, face_keys % n_nodes
-    Fg = np.stack([edge(a, b), edge(a, c), edge(b, c)], 1)
-    # a tetrahedron with four labels: its six edges all cross
-    T = tets[tet_ids]
-    Tg = np.stack([edge(T[:, i], T[:, j]) for i, j in _PAIRS], 1).reshape(-1, 6)
-    outside = (lab[u] == 0) | (lab[v] == 0)
-    return PE, _mean_preferring(PE, Fg, outside), _mean_preferring(PE, Tg, outside)
-
-
-def _mean_preferring(P: np.ndarray, groups: np.ndarray, prefer: np.ndarray) -> np.ndarray:
-    """Per row of ``groups`` (crossing ids), the mean of its preferred crossings, or of all when it has
-    none."""
-    if not len(groups):
-        return np.zeros((0, 3))
-    w = prefer[groups].astype(np.float64)
-    w[w.sum(axis=1) == 0] = 1.0
-    return np.einsum("gk,gki->gi", w, P[groups]) / w.sum(axis=1)[:, None]
-
-
-def _contour(pieces, origin, h, shape, label):
-    lab = label.ravel()
-    n_nodes = lab.size
-    tets = _mixed_tets(label)
-    tet, A, B, kind, val = _interfaces(tets, lab, n_nodes)
-    edge_keys, face_keys, tet_ids = (np.unique(val[kind == k]) for k in range(3))
-    grid = np.stack(np.unravel_index(np.arange(n_nodes), shape), 1)
-    nodes = origin + grid * h
-    PE, PF, PT = _positions(pieces, nodes, lab, h, edge_keys, face_keys, tet_ids, tets, n_nodes)
-    X = np.concatenate([PE, PF, PT])
-    index = np.empty(len(val), np.int64)
-    start = 0
-    for k, table in enumerate((edge_keys, face_keys, tet_ids)):
-        sel = kind == k
-        index[sel] = start + np.searchsorted(table, val[sel])
-        start += len(table)
-    # the points' places before they were moved onto the surfaces, for the order around each polygon
-    eu, ev = edge_keys // n_nodes, edge_keys % n_nodes
-    fa, fb, fc = face_keys // (n_nodes * n_nodes), (face_keys // n_nodes) % n_nodes, face_keys % n_nodes
-    X0 = np.concatenate([0.5 * (nodes[eu] + nodes[ev]), (nodes[fa] + nodes[fb] + nodes[fc]) / 3,
-                         nodes[tets[tet_ids]].mean(axis=1)])
-
-    # group the tagged points by polygon (tetrahedron, A, B)
-    n_lab = int(lab.max()) + 1
-    poly = (tet * n_lab + A) * n_lab + B
-    order = np.argsort(poly, kind="stable")
-    poly, index, tet, A, B = poly[order], index[order], tet[order], A[order], B[order]
-    first = np.flatnonzero(np.r_[True, poly[1:] != poly[:-1]])
-    size = np.diff(np.r_[first, len(poly)])
-    # the axis of each polygon: from its tetrahedron's A corners to its B corners
-    corner = nodes[tets[tet[first]]]  # (p, 4, 3)
-    cl = lab[tets[tet[first]]]
-    isA = (cl == A[first, None])[..., None]
-    isB = (cl == B[first, None])[..., None]
-    axis = (corner * isB).sum(1) / isB.sum(1) - (corner * isA).sum(1) / isA.sum(1)
-    helper = np.where((np.abs(axis[:, 0]) < 0.9 * np.linalg.norm(axis, axis=1))[:, None], [1.0, 0.0, 0.0],
-                      [0.0, 1.0, 0.0])
-    e1 = np.cross(axis, helper)
-    e2 = np.cross(axis, e1)
-    owner = np.repeat(np.arange(len(first)), size)
-    Q = X0[index] - np.add.reduceat(X0[index], first)[owner] / size[owner, None]
-    ang = np.arctan2(np.einsum("ij,ij->i", Q, e2[owner]), np.einsum("ij,ij->i", Q, e1[owner]))
-    order = np.lexsort((ang, owner))
-    index = index[order]
-    tris, tri_poly = [], []
-    for m in (3, 4):
-        sel = np.flatnonzero(size == m)
-        if not len(sel):
-            continue
-        ids = index[first[sel, None] + np.arange(m)]  # (p, m), counter-clockwise around the axis
-        for j in range(1, m - 1):
-            tris.append(ids[:, [0, j, j + 1]])
-            tri_poly.append(sel)
-    if (size < 3).any() or (size > 4).any():
-        raise AssertionError("marching tetrahedra: an interface polygon without 3 or 4 points")
-    T = np.concatenate(tris)
-    tp = np.concatenate(tri_poly)
-    TA, TB = A[first][tp], B[first][tp]
-    outside = TA == 0  # (0, piece): B, facing the piece; turn it to face the outside
-    T[outside] = T[outside][:, ::-1]
-    fracture = ~outside
-    return X, T[fracture], np.stack([TA, TB], 1)[fracture] - 1, T[outside], TB[outside] - 1
+    return crossing
 
 
 def _simplify_sheets(X: np.ndarray, FF: np.ndarray, sides: np.ndarray):
@@ -458,7 +297,8 @@ def label_tiling(V: np.ndarray, polygons: list[list[np.ndarray]], names: list[st
     if len(kept) < len(pieces):
         notes.append("left out pieces thinner than a grid cell ({:.3g}) everywhere: {}".format(
             h, ", ".join(repr(names[p]) for p in np.flatnonzero(~present))))
-    X, FF, sides, BF, bpiece = _contour(pieces, origin, h, shape, label)
+    c = contour_labels(label, origin, np.full(3, h), _winding_crossing(pieces, h))
+    X, FF, sides, BF, bpiece = c.V, c.fracture_F, c.sides, c.exterior_F, c.exterior_piece
     X, FF, sides = _simplified(X, FF, sides)
     X, FF, sides, BF, bpiece, pinholes = close_pinholes(X, FF, sides, BF, bpiece, h)
     if pinholes:

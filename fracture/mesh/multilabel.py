@@ -1,0 +1,219 @@
+"""Multi-material marching tetrahedra (Wu and Sullivan 2003): the interfaces between the labels of a
+grid as one conforming surface.
+
+Each cube of the grid whose corners carry several labels is split into
+Kuhn's six tetrahedra; between two labels of a tetrahedron the interface is
+the polygon through its edges' crossings, its three-label faces' points and,
+with four labels, its own point. Between two pieces this is a fracture
+polygon (its normal points into the second), between a piece and the
+outside (label 0) a polygon of B. Tetrahedra have no ambiguous cases: B is a
+closed, oriented 2-manifold and the sheets meet each other and B along
+shared edges. Where an edge crosses is the caller's (a bisection of winding
+numbers for imported pieces, B itself or the middle for a graph cut's
+labels); points of faces and tetrahedra are means of their crossings (those
+on B when there are some, so B keeps its plane where a sheet meets it).
+
+Written here because no library at hand (libigl, pymeshlab, Open3D,
+scikit-image) contours a grid of several labels into one conforming surface.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+# Crossings keep this fraction of the edge from its nodes.
+_NODE_GAP = 0.02
+
+
+@dataclass
+class LabelContour:
+    """The result of :func:`contour_labels`.
+
+    Attributes
+    ----------
+    V : (n, 3) float
+        Points of both surfaces.
+    fracture_F : (m, 3) int
+        Triangles between two pieces; the normal points from ``sides[:, 0]`` into ``sides[:, 1]``.
+    sides : (m, 2) int
+        Piece behind and in front of each fracture triangle (``sides[:, 0] < sides[:, 1]``).
+    exterior_F : (k, 3) int
+        Triangles between a piece and the outside, facing out.
+    exterior_piece : (k,) int
+        The piece each of them bounds.
+    """
+
+    V: np.ndarray
+    fracture_F: np.ndarray
+    sides: np.ndarray
+    exterior_F: np.ndarray
+    exterior_piece: np.ndarray
+
+
+# Kuhn's split of a cube into 6 tetrahedra along its diagonal 000-111: every path from corner 000 to 111
+# along the axes, corners as bit offsets (x, y, z). Neighbouring cubes split their common face alike.
+_KUHN = np.array([[[0, 0, 0], a, a + b, [1, 1, 1]] for a, b in [
+    (np.eye(3, dtype=int)[i], np.eye(3, dtype=int)[j]) for i in range(3) for j in range(3) if i != j]])
+
+
+def _mixed_tets(label: np.ndarray) -> np.ndarray:
+    """Node ids ``(t, 4)`` of the Kuhn tetrahedra of every cube whose corners carry more than one label."""
+    shape = label.shape
+    corners = [label[i:shape[0] - 1 + i, j:shape[1] - 1 + j, k:shape[2] - 1 + k]
+               for i in (0, 1) for j in (0, 1) for k in (0, 1)]
+    lo, hi = np.minimum.reduce(corners), np.maximum.reduce(corners)
+    cube = np.argwhere(lo != hi)  # (c, 3)
+    node = cube[:, None, None, :] + _KUHN[None]  # (c, 6, 4, 3)
+    return np.ravel_multi_index(tuple(np.moveaxis(node, -1, 0)), shape).reshape(-1, 4)
+
+
+def _key(ids: np.ndarray, n: int) -> np.ndarray:
+    """One integer per sorted tuple of node ids (pairs or triples)."""
+    ids = np.sort(ids, axis=-1)
+    out = ids[..., 0].astype(np.int64)
+    for c in range(1, ids.shape[-1]):
+        out = out * n + ids[..., c]
+    return out
+
+
+_PAIRS = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]
+_FACES = [(0, 1, 2), (0, 1, 3), (0, 2, 3), (1, 2, 3)]
+
+
+def _interfaces(tets: np.ndarray, lab: np.ndarray, n_nodes: int):
+    """The points of the interfaces inside every tetrahedron (Wu and Sullivan's multi-material marching
+    tetrahedra), each tagged with the interface it lies on.
+
+    Between two labels A < B of a tetrahedron the interface polygon has the points of its edges whose
+    ends carry A and B, of its faces that carry A, B and a third label, and its own point when it carries
+    four labels (3 or 4 points). Returns, per tagged point: the tetrahedron, A, B, the point's kind
+    (0 edge, 1 face, 2 tetrahedron) and key (sorted node ids, or the tetrahedron).
+    """
+    L = lab[tets]  # (t, 4)
+    t_all = np.arange(len(tets))
+    rec = []
+    for i, j in _PAIRS:  # edges: one interface, their ends' labels
+        a, b = L[:, i], L[:, j]
+        sel = a != b
+        u, v = tets[sel, i], tets[sel, j]
+        rec.append((t_all[sel], np.minimum(a, b)[sel], np.maximum(a, b)[sel], np.zeros(sel.sum(), np.int64),
+                    np.minimum(u, v) * n_nodes + np.maximum(u, v)))
+    for f in _FACES:  # faces with three labels: the three interfaces between them
+        la = L[:, list(f)]
+        ls = np.sort(la, axis=1)
+        sel = (ls[:, 0] != ls[:, 1]) & (ls[:, 1] != ls[:, 2])
+        key = _key(tets[sel][:, list(f)], n_nodes)
+        for x, y in ((0, 1), (0, 2), (1, 2)):
+            rec.append((t_all[sel], ls[sel, x], ls[sel, y], np.ones(sel.sum(), np.int64), key))
+    Ls = np.sort(L, axis=1)
+    four = (Ls[:, 0] != Ls[:, 1]) & (Ls[:, 1] != Ls[:, 2]) & (Ls[:, 2] != Ls[:, 3])
+    for x, y in _PAIRS:
+        rec.append((t_all[four], Ls[four, x], Ls[four, y], np.full(four.sum(), 2, np.int64), t_all[four]))
+    return [np.concatenate(c) for c in zip(*rec)]
+
+
+def _mean_preferring(P: np.ndarray, groups: np.ndarray, prefer: np.ndarray) -> np.ndarray:
+    """Per row of ``groups`` (crossing ids), the mean of its preferred crossings, or of all when it has
+    none."""
+    if not len(groups):
+        return np.zeros((0, 3))
+    w = prefer[groups].astype(np.float64)
+    w[w.sum(axis=1) == 0] = 1.0
+    return np.einsum("gk,gki->gi", w, P[groups]) / w.sum(axis=1)[:, None]
+
+
+def _positions(crossing, nodes, lab, edge_keys, face_keys, tet_ids, tets, n_nodes):
+    """Points of the edges (``crossing``, kept :data:`_NODE_GAP` from the nodes), faces and tetrahedra
+    (the mean of their edges' crossings, of those on B where they have some: :func:`_mean_preferring`)."""
+    u, v = edge_keys // n_nodes, edge_keys % n_nodes
+    P0, P1 = nodes[u], nodes[v]
+    t = np.asarray(crossing(P0, P1, lab[u], lab[v]), np.float64)
+    # no point on a node: a triangle with two points there would have no area
+    t = np.clip(t, _NODE_GAP, 1.0 - _NODE_GAP)
+    PE = P0 + t[:, None] * (P1 - P0)
+
+    def edge(x, y):  # the crossing ids of edges x - y (edge_keys is sorted)
+        return np.searchsorted(edge_keys, np.minimum(x, y) * n_nodes + np.maximum(x, y))
+
+    a, b, c = face_keys // (n_nodes * n_nodes), (face_keys // n_nodes) % n_nodes, face_keys % n_nodes
+    Fg = np.stack([edge(a, b), edge(a, c), edge(b, c)], 1)
+    # a tetrahedron with four labels: its six edges all cross
+    T = tets[tet_ids]
+    Tg = np.stack([edge(T[:, i], T[:, j]) for i, j in _PAIRS], 1).reshape(-1, 6)
+    outside = (lab[u] == 0) | (lab[v] == 0)
+    return PE, _mean_preferring(PE, Fg, outside), _mean_preferring(PE, Tg, outside)
+
+
+def contour_labels(label: np.ndarray, origin, spacing, crossing) -> LabelContour:
+    """The interfaces between the labels of a grid (module notes).
+
+    ``label`` is ``(nx, ny, nz)`` int, 0 outside the object and ``p + 1`` in
+    piece ``p``, on the nodes ``origin + (i, j, k) * spacing``.
+    ``crossing(P0, P1, la, lb)`` gives, per grid edge from ``P0`` (label ``la``)
+    to ``P1`` (label ``lb != la``), where along it (0 at ``P0``, 1 at ``P1``)
+    the interface crosses it.
+    """
+    shape = label.shape
+    lab = label.ravel()
+    n_nodes = lab.size
+    tets = _mixed_tets(label)
+    tet, A, B, kind, val = _interfaces(tets, lab, n_nodes)
+    edge_keys, face_keys, tet_ids = (np.unique(val[kind == k]) for k in range(3))
+    grid = np.stack(np.unravel_index(np.arange(n_nodes), shape), 1)
+    nodes = np.asarray(origin, np.float64) + grid * np.asarray(spacing, np.float64)
+    PE, PF, PT = _positions(crossing, nodes, lab, edge_keys, face_keys, tet_ids, tets, n_nodes)
+    X = np.concatenate([PE, PF, PT])
+    index = np.empty(len(val), np.int64)
+    start = 0
+    for k, table in enumerate((edge_keys, face_keys, tet_ids)):
+        sel = kind == k
+        index[sel] = start + np.searchsorted(table, val[sel])
+        start += len(table)
+    # the points' places before they were moved onto the surfaces, for the order around each polygon
+    eu, ev = edge_keys // n_nodes, edge_keys % n_nodes
+    fa, fb, fc = face_keys // (n_nodes * n_nodes), (face_keys // n_nodes) % n_nodes, face_keys % n_nodes
+    X0 = np.concatenate([0.5 * (nodes[eu] + nodes[ev]), (nodes[fa] + nodes[fb] + nodes[fc]) / 3,
+                         nodes[tets[tet_ids]].mean(axis=1)])
+
+    # group the tagged points by polygon (tetrahedron, A, B)
+    n_lab = int(lab.max()) + 1
+    poly = (tet * n_lab + A) * n_lab + B
+    order = np.argsort(poly, kind="stable")
+    poly, index, tet, A, B = poly[order], index[order], tet[order], A[order], B[order]
+    first = np.flatnonzero(np.r_[True, poly[1:] != poly[:-1]])
+    size = np.diff(np.r_[first, len(poly)])
+    # the axis of each polygon: from its tetrahedron's A corners to its B corners
+    corner = nodes[tets[tet[first]]]  # (p, 4, 3)
+    cl = lab[tets[tet[first]]]
+    isA = (cl == A[first, None])[..., None]
+    isB = (cl == B[first, None])[..., None]
+    axis = (corner * isB).sum(1) / isB.sum(1) - (corner * isA).sum(1) / isA.sum(1)
+    helper = np.where((np.abs(axis[:, 0]) < 0.9 * np.linalg.norm(axis, axis=1))[:, None], [1.0, 0.0, 0.0],
+                      [0.0, 1.0, 0.0])
+    e1 = np.cross(axis, helper)
+    e2 = np.cross(axis, e1)
+    owner = np.repeat(np.arange(len(first)), size)
+    Q = X0[index] - np.add.reduceat(X0[index], first)[owner] / size[owner, None]
+    ang = np.arctan2(np.einsum("ij,ij->i", Q, e2[owner]), np.einsum("ij,ij->i", Q, e1[owner]))
+    order = np.lexsort((ang, owner))
+    index = index[order]
+    tris, tri_poly = [], []
+    for m in (3, 4):
+        sel = np.flatnonzero(size == m)
+        if not len(sel):
+            continue
+        ids = index[first[sel, None] + np.arange(m)]  # (p, m), counter-clockwise around the axis
+        for j in range(1, m - 1):
+            tris.append(ids[:, [0, j, j + 1]])
+            tri_poly.append(sel)
+    if (size < 3).any() or (size > 4).any():
+        raise AssertionError("marching tetrahedra: an interface polygon without 3 or 4 points")
+    T = np.concatenate(tris)
+    tp = np.concatenate(tri_poly)
+    TA, TB = A[first][tp], B[first][tp]
+    outside = TA == 0  # (0, piece): B, facing the piece; turn it to face the outside
+    T[outside] = T[outside][:, ::-1]
+    fracture = ~outside
+    return LabelContour(X, T[fracture], np.stack([TA, TB], 1)[fracture] - 1, T[outside], TB[outside] - 1)
