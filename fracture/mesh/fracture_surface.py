@@ -46,6 +46,10 @@ class FractureSurface:
     label : (n,) int
         Creation order of every vertex (a permutation of ``0..n-1``; the
         identity unless :meth:`reorder` was called).
+    base : csr (n_coarse, k) or None
+        Where the first ``n_coarse`` vertices are not the coarse surface's own
+        ``k`` vertices but a surface found from it (the global search): each
+        one's barycentric weights on the coarse vertices.
     """
 
     V: np.ndarray
@@ -56,6 +60,7 @@ class FractureSurface:
     weights: list = field(default_factory=list)
     created: list = field(default_factory=list)
     label: np.ndarray | None = None
+    base: sp.csr_matrix | None = None
 
     def __post_init__(self):
         if self.label is None:
@@ -138,7 +143,8 @@ class FractureSurface:
 
     def tree_matrix(self) -> sp.csr_matrix:
         """Sparse ``(n, n_coarse)`` map from the coarse vertices (in creation order) to every vertex
-        (in the current order); rows sum to 1.
+        (in the current order); rows sum to 1. With a ``base``, the map from the coarse surface's
+        vertices through it, ``(n, k)``.
 
         Row by row in creation order, each new vertex's row the weighted sum of its parents' rows
         (:func:`_tree_rows`, compiled: composing batch by batch with sparse products re-stacked the
@@ -151,7 +157,15 @@ class FractureSurface:
         W = sp.csr_matrix((data, indices, indptr), shape=(n, self.n_coarse))
         if not np.array_equal(self.label, np.arange(len(self.label))):
             W = W[self.label]
+        if self.base is not None:
+            W = (W @ self.base).tocsr()
         return W
+
+    def replace(self, other: "FractureSurface") -> None:
+        """Take ``other``'s vertices, triangles, sides and tree, in place (a new surface found from this
+        one, which callers hold)."""
+        for f in ("V", "F", "sides", "n_coarse", "parents", "weights", "created", "label", "base"):
+            setattr(self, f, getattr(other, f))
 
 
 @numba.njit(cache=True)

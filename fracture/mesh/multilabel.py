@@ -146,19 +146,28 @@ def _positions(crossing, nodes, lab, edge_keys, face_keys, tet_ids, tets, n_node
     return PE, _mean_preferring(PE, Fg, outside), _mean_preferring(PE, Tg, outside)
 
 
-def contour_labels(label: np.ndarray, origin, spacing, crossing) -> LabelContour:
+def contour_labels(label: np.ndarray, origin, spacing, crossing, pieces_only: bool = False) -> LabelContour:
     """The interfaces between the labels of a grid (module notes).
 
     ``label`` is ``(nx, ny, nz)`` int, 0 outside the object and ``p + 1`` in
     piece ``p``, on the nodes ``origin + (i, j, k) * spacing``.
     ``crossing(P0, P1, la, lb)`` gives, per grid edge from ``P0`` (label ``la``)
     to ``P1`` (label ``lb != la``), where along it (0 at ``P0``, 1 at ``P1``)
-    the interface crosses it.
+    the interface crosses it. ``pieces_only`` contours only the tetrahedra
+    that hold two pieces or more: the fracture triangles are the same, and of B
+    only the polygons beside them are made (and their edges' crossings asked for).
     """
     shape = label.shape
     lab = label.ravel()
     n_nodes = lab.size
     tets = _mixed_tets(label)
+    if pieces_only:
+        Ls = np.sort(lab[tets], axis=1)
+        pieces = (Ls[:, 0] > 0).astype(np.int64) + ((Ls[:, 1:] != Ls[:, :-1]) & (Ls[:, 1:] > 0)).sum(axis=1)
+        tets = tets[pieces >= 2]
+    if not len(tets):
+        none = np.zeros((0, 3), np.int64)
+        return LabelContour(np.zeros((0, 3)), none, np.zeros((0, 2), np.int64), none, np.zeros(0, np.int64))
     tet, A, B, kind, val = _interfaces(tets, lab, n_nodes)
     edge_keys, face_keys, tet_ids = (np.unique(val[kind == k]) for k in range(3))
     grid = np.stack(np.unravel_index(np.arange(n_nodes), shape), 1)

@@ -1,0 +1,394 @@
+"""The global search: the paper's functional minimised over a band around the coarse fracture surface by
+a minimum cut, before the flow polishes the result.
+
+The functional ``E(S) = integral of psi over S`` (psi shifted positive as the
+flow's is, Sec. 4.3) is a weighted area, and a surface that separates the
+pieces is a labelling of space by piece. On the field grid:
+
+1. **Band.** Nodes inside B within ``band`` cells of the coarse surface are
+   free; the others keep the piece they lie in (the side of the coarse
+   surface they see: the nearest of points just off both faces of every
+   coarse triangle). A piece also keeps its core, the nodes farther from the
+   coarse surface than half its depth (its largest distance to it): a
+   minimum cut favours small regions, and a piece that kept only a few nodes
+   would be cut down to them.
+2. **Cut.** Neighbouring nodes of two pieces cost ``psi`` at their middle
+   times the edge's area weight (:mod:`fracture.refine.cut_weights`: the 26
+   neighbours, so that a cut measures area at every orientation, not a
+   staircase's); with a grain (anisotropic strength) the weight depends on
+   the surface's normal there. Labels minimising the sum are found by
+   alpha-expansion (:mod:`fracture.refine.expansion`; a minimum cut, the global
+   minimum with two pieces). Edges to nodes outside B cost nothing: the
+   surface slides along B freely, as the flow's boundary does.
+3. **Pieces stay whole.** A region of a piece that the cut separates from
+   the piece's kept nodes (an island) is given back its coarse labels; a
+   piece that would vanish keeps the coarse surface. What was kept is said.
+4. **Surface.** The labels are contoured by multi-material marching
+   tetrahedra (:mod:`fracture.mesh.multilabel`: two pieces' edges cross in
+   their middle, a piece's edge to the outside where it leaves B), and the
+   terraces of the grid are smoothed away (Taubin's lambda-mu smoothing
+   with the sheets' rims and junctions held). Each new vertex hangs in the
+   barycentric tree from the nearest coarse triangle between the same two
+   pieces, which carries the coarse animation to it (Section 5).
+
+The result replaces the coarse surface only if it lowers the functional
+(the same quadrature as the flow's); the flow then refines and polishes it.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import igl
+import numpy as np
+import scipy.sparse as sp
+from scipy import ndimage
+from scipy.spatial import cKDTree
+
+from fracture.mesh.exterior import Exterior
+from fracture.mesh.fracture_surface import FractureSurface
+from fracture.mesh.intersect import self_intersections
+from fracture.mesh.multilabel import contour_labels
+from fracture.mesh.topology import barycentric_weights, face_frames, unique_edges
+from fracture.refine.cut_weights import OFFSETS, area_weights
+from fracture.refine.expansion import PottsGraph, expand
+from fracture.refine.flow import energy
+
+# Points just off each face of the coarse surface, per unit area (in cells^-2), that tell a node its side.
+_SIDE_DENSITY = 16.0
+# ... this far off the face (cells).
+_SIDE_OFFSET = 0.1
+# Taubin smoothing of the contour: passes and the two factors.
+_SMOOTH_PASSES = 10
+_LAMBDA, _MU = 0.5, -0.53
+# Rounds of giving islands back their coarse labels.
+_ISLAND_ROUNDS = 3
+
+
+@dataclass
+class SearchResult:
+    """What :func:`graph_cut_search` found.
+
+    ``surface`` is the new fracture surface, or None when the coarse one is
+    kept (``notes`` say why). Energies are the cut's (the grid's quadrature of
+    the shifted psi); ``functional`` the flow's integral of the shifted psi
+    over the coarse surface and over the new one.
+    """
+
+    surface: FractureSurface | None
+    free_nodes: int = 0
+    labels_changed: int = 0
+    cut_energy: tuple[float, float] = (0.0, 0.0)
+    functional: tuple[float, float] = (0.0, 0.0)
+    seconds: dict = field(default_factory=dict)
+    notes: list = field(default_factory=list)
+
+
+def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, tension: float,
+                     distance: np.ndarray | None = None, grain=None) -> SearchResult:
+    """Search the band of ``band`` grid cells around ``mesh`` (the coarse surface) for the labelling of
+    least weighted area (module notes).
+
+    ``pyramid`` gives the grid and psi (level 0), shifted so its minimum is ``tension`` of its range;
+    ``distance`` (optional) is the distance of every grid node to the coarse surface; ``grain``
+    (optional) gives per node the 13 edge weights of an anisotropic strength
+    (:meth:`~fields.grain.GrainField.edge_weights`).
+    """
+    clock = time.perf_counter()
+    seconds: dict[str, float] = {}
+
+    def tick(name):
+        nonlocal clock
+        now = time.perf_counter()
+        seconds[name] = seconds.get(name, 0.0) + now - clock
+        clock = now
+
+    grid = pyramid.grid
+    h = float(np.min(grid.spacing))
+    psi = pyramid.levels[0]
+    lowest, span = float(psi.min()), float(np.ptp(psi))
+    shifted = psi + (tension * span - lowest)
+    V0, F0, S0 = mesh.V, mesh.F, mesh.sides
+    n_pieces = int(S0.max()) + 1
+
+    # 1. the band: nodes near the coarse surface, their side of it, free or kept
+    reach = (band + 2.0) * h
+    box = _node_box(grid, V0.min(axis=0) - reach, V0.max(axis=0) + reach)
+    sub = _BoxGrid(grid, box)
+    P = sub.points()
+    if distance is not None:
+        d = distance[box].ravel()
+    else:
+        d = np.sqrt(np.maximum(igl.point_mesh_squared_distance(P, V0, F0)[0], 0.0))
+    near = np.flatnonzero(d <= reach)
+    near = near[B.inside(P[near])]
+    if not len(near):
+        return SearchResult(None, notes=[f"search: the band of {band:g} cells holds no grid node inside the object; "
+                                         "the coarse surface is kept (refine.band)"], seconds=seconds)
+    coarse = _sides(V0, F0, S0, P[near], h)
+    tick("band")
+
+    # every piece keeps the nodes beyond the band and its core
+    dn = d[near]
+    depth = _depths(B, V0, F0, S0, h, n_pieces)
+    keep = (dn > band * h) | (dn > 0.5 * depth[coarse])
+    if keep.all():
+        return SearchResult(None, notes=[f"search: the band of {band:g} cells holds no free grid node inside the "
+                                         "object; the coarse surface is kept (refine.band)"], seconds=seconds)
+    missing = [c for c in range(n_pieces) if c in set(S0.ravel().tolist()) and not (coarse == c).any()]
+    if missing:
+        return SearchResult(None, seconds=seconds, notes=[
+            f"search: piece{'s' if len(missing) > 1 else ''} {', '.join(map(str, missing))} hold no grid node "
+            "(thinner than a cell): the coarse surface is kept"])
+
+    # 2. the cut
+    graph = _graph(sub, near, keep, shifted[box].ravel(), grain, box)
+    free = ~keep
+    reach_of = _reach(sub, near, coarse, band)
+    labels, log = expand(graph, coarse, free, reach_of)
+    tick("cut")
+
+    # 3. islands go back to their coarse labels
+    notes: list[str] = []
+    labels, islands = _whole_pieces(sub, near, labels, coarse, keep, n_pieces)
+    if islands is None:
+        return SearchResult(None, free_nodes=int(free.sum()), seconds=seconds, notes=[
+            "search: the coarse labels themselves leave a piece in parts; the coarse surface is kept"])
+    if islands:
+        notes.append(f"search: {islands} grid nodes cut off from their piece kept their coarse piece")
+    present = np.bincount(labels, minlength=n_pieces) > 0
+    lost = [c for c in range(n_pieces) if (coarse == c).any() and not present[c]]
+    if lost:
+        return SearchResult(None, free_nodes=int(free.sum()), seconds=seconds, notes=[
+            f"search: piece{'s' if len(lost) > 1 else ''} {', '.join(map(str, lost))} would vanish; the coarse "
+            "surface is kept"])
+    tick("pieces")
+
+    # 4. the surface
+    V, F, sides = _contour(sub, near, labels, B)
+    if not len(F):
+        return SearchResult(None, seconds=seconds, notes=["search: the cut left no fracture surface; the coarse "
+                                                          "surface is kept"])
+    V = _smooth(V, F)
+    tick("contour")
+    base = _tree_base(V, F, sides, V0, F0, S0)
+    surface = FractureSurface(V, F, sides, n_coarse=len(V), base=base)
+    before = energy(V0, F0, pyramid.value(V0) + (tension * span - lowest))
+    after = energy(V, F, pyramid.value(V) + (tension * span - lowest))
+    tick("tree")
+    result = SearchResult(surface, free_nodes=int(free.sum()), labels_changed=int((labels != coarse).sum()),
+                          cut_energy=(log.energy[0], graph.energy(labels)), functional=(before, after),
+                          seconds=seconds, notes=notes)
+    if after >= before:
+        result.surface = None
+        result.notes.append(f"search: the cut's surface does not lower the functional ({after:.6g} against the "
+                            f"coarse {before:.6g}); the coarse surface is kept")
+    return result
+
+
+# -- the band ---------------------------------------------------------------------------------------------
+def _node_box(grid, lo, hi) -> tuple[slice, slice, slice]:
+    """The slices of the grid's nodes inside the box ``[lo, hi]`` (one node of margin)."""
+    a = np.floor((np.asarray(lo) - grid.origin) / grid.spacing).astype(int) - 1
+    b = np.ceil((np.asarray(hi) - grid.origin) / grid.spacing).astype(int) + 2
+    return tuple(slice(max(int(x), 0), min(int(y), n)) for x, y, n in zip(a, b, grid.shape))
+
+
+class _BoxGrid:
+    """A box of the field grid: its shape, nodes and their points."""
+
+    def __init__(self, grid, box):
+        self.grid, self.box = grid, box
+        self.shape = tuple(s.stop - s.start for s in box)
+        self.origin = grid.origin + grid.spacing * np.array([s.start for s in box])
+        self.spacing = grid.spacing
+
+    @property
+    def size(self) -> int:
+        return int(np.prod(self.shape))
+
+    def points(self) -> np.ndarray:
+        idx = np.stack(np.unravel_index(np.arange(self.size), self.shape), 1)
+        return self.origin + idx * self.spacing
+
+
+def _sides(V, F, sides, P, h) -> np.ndarray:
+    """The piece each point lies in: that of the nearest of points just off both faces of every coarse
+    triangle (robust at junctions, where the nearest triangle's side alone is ambiguous)."""
+    T = V[F]
+    area = 0.5 * np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1)
+    count = np.maximum(np.ceil(_SIDE_DENSITY * area / (h * h)).astype(np.int64), 1)
+    f = np.repeat(np.arange(len(F)), count)
+    rng = np.random.default_rng(0)
+    r1, r2 = rng.random(len(f)), rng.random(len(f))
+    s = np.sqrt(r1)
+    bary = np.column_stack([1.0 - s, s * (1.0 - r2), s * r2])
+    # the triangles' corners too, so that every point of the surface has a sample near it
+    bary = np.concatenate([bary, np.tile(np.eye(3), (len(F), 1))])
+    f = np.concatenate([f, np.repeat(np.arange(len(F)), 3)])
+    X = np.einsum("nk,nkc->nc", bary, T[f])
+    n = face_frames(V, F)[1][f]
+    off = _SIDE_OFFSET * h * n
+    samples = np.concatenate([X - off, X + off])
+    piece = np.concatenate([sides[f, 0], sides[f, 1]])
+    _, j = cKDTree(samples).query(P, workers=-1)
+    return piece[j].astype(np.int64)
+
+
+def _depths(B: Exterior, V0, F0, S0, h, n_pieces) -> np.ndarray:
+    """Each piece's depth: its largest distance to the coarse surface, taken over B's vertices and
+    triangles' middles (a piece is farthest from its cracks on its part of B)."""
+    X = np.concatenate([B.V, B.V[B.F].mean(axis=1)])
+    d = np.sqrt(np.maximum(igl.point_mesh_squared_distance(X, V0, F0)[0], 0.0))
+    depth = np.zeros(n_pieces)
+    np.maximum.at(depth, _sides(V0, F0, S0, X, h), d)
+    return depth
+
+
+def _graph(sub: _BoxGrid, near, keep, shifted, grain, box) -> PottsGraph:
+    """The 26-neighbour edges between nodes of the band (at least one of them free), weighted by the shifted
+    psi at their middle times the area weight of their offset (or the grain's, per node)."""
+    index = np.full(sub.size, -1, np.int64)
+    index[near] = np.arange(len(near))
+    index = index.reshape(sub.shape)
+    free = ~keep
+    w_area = area_weights(sub.spacing) if grain is None else None
+    psi = shifted[near]
+    ps, qs, ws = [], [], []
+    for k, o in enumerate(OFFSETS):
+        a = index[tuple(slice(max(-x, 0), n - max(x, 0)) for x, n in zip(o, sub.shape))]
+        b = index[tuple(slice(max(x, 0), n - max(-x, 0)) for x, n in zip(o, sub.shape))]
+        sel = (a >= 0) & (b >= 0)
+        a, b = a[sel], b[sel]
+        sel = free[a] | free[b]
+        a, b = a[sel], b[sel]
+        if grain is None:
+            w = w_area[k]
+        else:
+            w = 0.5 * (grain(box, near[a], k) + grain(box, near[b], k))
+        ps.append(a)
+        qs.append(b)
+        ws.append(0.5 * (psi[a] + psi[b]) * w)
+    return PottsGraph(len(near), np.concatenate(ps), np.concatenate(qs), np.concatenate(ws))
+
+
+def _reach(sub: _BoxGrid, near, coarse, band) -> dict:
+    """Per piece, the band's nodes within ``band + 1`` cells of its coarse box (where it may grow)."""
+    ijk = np.stack(np.unravel_index(near, sub.shape), 1)
+    out = {}
+    margin = int(np.ceil(band)) + 1
+    for c in np.unique(coarse):
+        mine = ijk[coarse == c]
+        lo, hi = mine.min(axis=0) - margin, mine.max(axis=0) + margin
+        out[int(c)] = np.flatnonzero(np.all((ijk >= lo) & (ijk <= hi), axis=1))
+    return out
+
+
+def _whole_pieces(sub: _BoxGrid, near, labels, coarse, keep, n_pieces):
+    """Give the nodes of every piece's regions that hold none of its kept nodes back their coarse labels,
+    until none is left (a few rounds); returns the labels and how many nodes went back, or None when the
+    coarse labels themselves have such regions."""
+    labels = labels.copy()
+    back = 0
+    for _ in range(_ISLAND_ROUNDS + 1):
+        lost = np.zeros(len(near), bool)
+        vol = np.full(sub.size, -1, np.int64)
+        vol[near] = labels
+        vol = vol.reshape(sub.shape)
+        kept = np.zeros(sub.size, bool)
+        kept[near[keep]] = True
+        kept = kept.reshape(sub.shape)
+        for c in np.unique(labels):
+            parts, count = ndimage.label(vol == c)
+            if count <= 1:
+                continue
+            anchored = np.unique(parts[kept & (vol == c)])
+            orphan = ~np.isin(parts.ravel()[near], anchored) & (labels == c)
+            lost |= orphan
+        if not lost.any():
+            return labels, back
+        if (labels[lost] == coarse[lost]).all():
+            return labels, None
+        back += int((labels[lost] != coarse[lost]).sum())
+        labels[lost] = coarse[lost]
+    return labels, None
+
+
+# -- the surface -------------------------------------------------------------------------------------------
+def _contour(sub: _BoxGrid, near, labels, B: Exterior):
+    """Fracture triangles between the labels (module notes); the box's nodes off the band take the label of
+    the nearest band node (they lie in the middle of one piece), those outside B label 0."""
+    known = np.zeros(sub.size, bool)
+    known[near] = True
+    vol = np.zeros(sub.size, np.int64)
+    vol[near] = labels + 1
+    vol = vol.reshape(sub.shape)
+    _, nearest = ndimage.distance_transform_edt(~known.reshape(sub.shape), return_indices=True)
+    filled = vol[tuple(nearest)]
+    inside = B.inside(sub.points()).reshape(sub.shape)
+    vol = np.where(known.reshape(sub.shape), vol, np.where(inside, filled, 0))
+
+    def crossing(P0, P1, la, lb):
+        t = np.full(len(P0), 0.5)
+        out = (la == 0) | (lb == 0)
+        if out.any():  # where the edge leaves B, by bisection of B's winding number
+            A, C = P0[out], P1[out]
+            a_in = la[out] > 0
+            lo, hi = np.zeros(len(A)), np.ones(len(A))
+            for _ in range(10):
+                mid = 0.5 * (lo + hi)
+                ins = B.inside(A + mid[:, None] * (C - A))
+                toward = ins == a_in  # still on the first end's side
+                lo, hi = np.where(toward, mid, lo), np.where(toward, hi, mid)
+            t[out] = 0.5 * (lo + hi)
+        return t
+
+    c = contour_labels(vol, sub.origin, sub.spacing, crossing, pieces_only=True)
+    used, inv = np.unique(c.fracture_F, return_inverse=True)
+    return c.V[used], inv.reshape(-1, 3).astype(np.int64), c.sides.astype(np.int64)
+
+
+def _smooth(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Taubin's lambda-mu smoothing of the contour's terraces with the rims (boundary edges) and junctions
+    (edges of three or more triangles) held; a smoothing that makes triangles cross is not taken.
+
+    Written here because the surface is non-manifold along its junctions, which pymeshlab's and libigl's
+    smoothing filters do not take."""
+    e, count = unique_edges(F)
+    held = np.zeros(len(V), bool)
+    held[e[count != 2].ravel()] = True
+    both = np.concatenate([e, e[:, ::-1]])
+    A = sp.csr_matrix((np.ones(len(both)), (both[:, 0], both[:, 1])), shape=(len(V), len(V)))
+    deg = np.asarray(A.sum(axis=1)).ravel()
+    move = (~held) & (deg > 0)
+    X = V.copy()
+    for _ in range(_SMOOTH_PASSES):
+        for f in (_LAMBDA, _MU):
+            lap = (A @ X) / np.maximum(deg, 1)[:, None] - X
+            X[move] += f * lap[move]
+    if self_intersections(X, F) > self_intersections(V, F):
+        return V
+    return X
+
+
+def _tree_base(V, F, sides, V0, F0, S0) -> sp.csr_matrix:
+    """Each new vertex as barycentric weights of its closest point on the nearest coarse triangle between
+    the same two pieces (on any triangle where those two never met), ``(len(V), len(V0))``."""
+    key0 = np.sort(S0, axis=1) @ np.array([1 << 20, 1])
+    key = np.sort(sides, axis=1) @ np.array([1 << 20, 1])
+    tri = np.full(len(V), -1, np.int64)
+    C = np.zeros_like(V)
+    for k in np.unique(key):
+        ids = np.unique(F[key == k])
+        ids = ids[tri[ids] < 0]
+        if not len(ids):
+            continue
+        faces = np.flatnonzero(key0 == k)
+        if not len(faces):
+            faces = np.arange(len(F0))
+        _, t, C[ids] = igl.point_mesh_squared_distance(V[ids], V0, F0[faces])
+        tri[ids] = faces[t]
+    W = barycentric_weights(C, V0[F0[tri]])
+    rows = np.repeat(np.arange(len(V)), 3)
+    return sp.csr_matrix((W.ravel(), (rows, F0[tri].ravel())), shape=(len(V), len(V0)))
