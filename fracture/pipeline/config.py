@@ -82,7 +82,8 @@ SCHEMA: dict[str, Any] = {
         "sigma": Param(1.0, lo=0.01, hi=64.0, doc="width of level 1 in voxels; doubles per level"),
     },
     "refine": {
-        **{name: Param(default, "int" if kind is int else "float", lo=m["lo"], hi=m["hi"], doc=m["doc"])
+        **{name: (Param(default, "str", choices=m["choices"], doc=m["doc"]) if kind is str else
+                  Param(default, "int" if kind is int else "float", lo=m["lo"], hi=m["hi"], doc=m["doc"]))
            for name, kind, default, m in described_fields()},  # the code's own parameter type
         "snapshots": Param(True, "bool", doc="save every iteration for the viewer (refined/iterations.*)"),
     },

@@ -2,6 +2,10 @@
 
 The refiner composes the parts, each in its own module:
 
+* the global search before the flow (:mod:`fracture.refine.search`, the
+  ``search`` seam): a minimum cut of the functional over a band around the
+  coarse surface, which makes the large moves and the turns the flow cannot
+  walk; the flow then polishes its surface on the finest level alone;
 * the flow of Eq. 3 (:mod:`fracture.refine.flow`);
 * the split plan of Sec. 4.4 (:mod:`fracture.refine.remesh`);
 * the step control: implicit area term, move limits, step size
@@ -63,7 +67,8 @@ One iteration:
    then the surface stays where it is);
 4. safe edge flips remove slim triangles.
 
-The log holds, from iteration 0 (the coarse surface), the stage, the
+The log holds, from iteration 0 (the coarse surface; with the search,
+iteration 1 is its surface, stage -1), the stage, the
 minimised functional before and after each step, the plain E(S) = integral
 of psi, the area, triangles, mean and largest move, and ``tau``.
 """
@@ -88,6 +93,7 @@ from fracture.refine.order import spatial_order
 from fracture.mesh.fracture_surface import FractureSurface
 from fracture.refine.params import RefineParams
 from fracture.refine.remesh import plan_chord_splits, plan_splits
+from fracture.refine.search import SearchResult, graph_cut_search
 from fracture.refine.state import VertexState
 from fracture.refine.step import (BOUNDARY_MOVE, ImplicitStep, StepSize, cotangent_weights, limit_by_shortest_edge,
                                   limit_moves)
@@ -102,6 +108,8 @@ _ATTEMPTS = 4
 _CHORD_RESERVE = 50
 # Rounds of chord splits per iteration (fit_chords).
 _CHORD_ROUNDS = 3
+# The stage of the search's entry in the log.
+SEARCH_STAGE = -1
 # A stage has settled when its moves are small and an iteration splits at most this share of the triangles.
 _FEW_SPLITS = 0.005
 # ... and its moves are small, or its step lowered the functional by less than this fraction.
@@ -130,6 +138,7 @@ class IterationLog:
     stopped: list = field(default_factory=list)  # vertices stopped by collisions
     seconds: dict = field(default_factory=dict)  # time per phase, summed over iterations
     stop: str = ""  # why the iterations ended
+    search: SearchResult | None = None  # what the search found (None: no search)
 
     def tick(self, phase: str, since: float) -> float:
         now = time.perf_counter()
@@ -147,12 +156,16 @@ class Refiner:
     ``collisions`` is the collision step (default
     :func:`~fracture.refine.collide.stop_collisions`, same signature): a seam for
     another collision response, or for a test that blocks a vertex.
+    ``search(mesh, pyramid, B) -> SearchResult`` is the global search before the
+    flow (default: :func:`default_search` of the parameters; None: none).
     """
 
     def __init__(self, mesh: FractureSurface, pyramid, BV: np.ndarray, BF: np.ndarray, params: RefineParams,
-                 rng: np.random.Generator, *, collisions=stop_collisions):
+                 rng: np.random.Generator, *, collisions=stop_collisions, search="default"):
         self.mesh, self.pyramid, self.params, self.rng = mesh, pyramid, params, rng
         self.stop_collisions = collisions
+        self.search = default_search(params) if search == "default" else search
+        self.searched = False  # the search's surface replaced the coarse one
         self.h = float(np.min(pyramid.grid.spacing))
         self.on_b = tol.on_b * self.h  # a boundary vertex this close to B is on it
         self.log = IterationLog()
@@ -170,6 +183,8 @@ class Refiner:
     def stages(self) -> list[tuple[int, int]]:
         """``(first, count)`` of each stage's field, coarse to fine: the mean of pyramid levels
         ``first .. first+count-1`` (module notes)."""
+        if self.searched:  # the search made the large moves: the flow polishes on psi itself
+            return [(0, 1)]
         n = self.pyramid.n_levels
         c = min(max(self.params.coarse_levels, 1), n)
         if c == n:  # the paper's field: one stage on every level
@@ -511,9 +526,43 @@ class Refiner:
         log.max_move.append(float(moved.max() / self.h) if len(moved) else 0.0)
         return (float(moved.mean() / self.h) if len(moved) else 0.0), made
 
-    def _record(self, move: float, boundary_error: float) -> None:
+    def run_search(self, callback=None) -> SearchResult:
+        """The global search (:mod:`fracture.refine.search`); its surface, if it lowers the functional,
+        replaces the mesh (in place) and is the log's next entry, with ``callback(-1, self)``."""
+        clock = time.perf_counter()
         log = self.log
-        log.stage.append(self.first)
+        result = self.search(self.mesh, self.pyramid, self.B)
+        log.search = result
+        if result.surface is None:
+            log.tick("search", clock)
+            return result
+        before = log.functional[-1]
+        self.mesh.replace(result.surface)
+        self.searched = True
+        self.state = VertexState.empty(len(self.mesh.V))
+        self._ordered = 0
+        self.off_b = np.zeros(0, np.int64)
+        self.begin_stage(*self.stages()[0])
+        self.boundary = self.boundary_vertices()
+        log.functional_before.append(before)
+        log.functional.append(self.functional())
+        log.tau.append(0.0)
+        log.retries.append(0)
+        log.splits.append(0)
+        log.stopped.append(0)
+        # how far the surface went: the new vertices' distances to the coarse surface
+        travel = result.travel
+        log.max_move.append(float(travel.max() / self.h) if len(travel) else 0.0)
+        self._record(float(travel.mean() / self.h) if len(travel) else 0.0, self.boundary_error(self.boundary),
+                     stage=SEARCH_STAGE)
+        log.tick("search", clock)
+        if callback is not None:
+            callback(-1, self)
+        return result
+
+    def _record(self, move: float, boundary_error: float, stage: int | None = None) -> None:
+        log = self.log
+        log.stage.append(self.first if stage is None else stage)
         log.energy.append(self.plain_energy())
         log.area.append(float(energy(self.mesh.V, self.mesh.F, np.ones(len(self.mesh.V)))))
         log.triangles.append(len(self.mesh.F))
@@ -540,7 +589,9 @@ class Refiner:
         log.stopped.append(0)
         self.boundary = self.boundary_vertices()
         self._record(0.0, self.boundary_error(self.boundary))
-        if log.boundary_error[0] > self.on_b:  # the coarse surface onto B before the flow starts
+        if self.search is not None:
+            self.run_search(callback)
+        if log.boundary_error[-1] > self.on_b:  # the surface onto B before the flow starts
             self.settle_boundary()
         self.fit_chords(self.edges())
         done, unsettled = 0, []
@@ -587,6 +638,18 @@ class Refiner:
             log.stop += f"; {which} off B (up to {off_b / self.h:.3g} grid cells): collisions block the way"
         self._renumber(self.mesh.creation_order())  # the tree's order, coarse vertices first
         return self.log
+
+
+def default_search(params: RefineParams, distance: np.ndarray | None = None):
+    """The search the parameters ask for, as the refiner's ``search`` seam (None for ``search: none``);
+    ``distance`` (optional) are the grid nodes' distances to the coarse surface, known to the fields."""
+    if params.search == "none":
+        return None
+
+    def search(mesh, pyramid, B):
+        return graph_cut_search(mesh, pyramid, B, params.band, params.tension, distance=distance)
+
+    return search
 
 
 def clearance(F: np.ndarray, X: np.ndarray, at: np.ndarray, d2: np.ndarray, ids: np.ndarray) -> np.ndarray:

@@ -11,10 +11,19 @@ def _p(default, lo, hi, doc):
     return field(default=default, metadata=dict(lo=lo, hi=hi, doc=doc))
 
 
+def _choice(default, choices, doc):
+    return field(default=default, metadata=dict(lo=None, hi=None, doc=doc, choices=choices))
+
+
 @dataclass(frozen=True)
 class RefineParams:
     """Thresholds of the refinement (Sections 4.3, 4.4); see each field's ``doc``."""
 
+    search: str = _choice("graphcut", ("graphcut", "none"),
+                          "graphcut: before the flow, the band around the coarse surface is searched for the surface "
+                          "of least integral of psi by a minimum cut (fracture/refine/search.py), and the flow polishes "
+                          "it on the finest level alone; none: the flow alone, coarse to fine")
+    band: float = _p(10.0, 1.0, 200.0, "the search moves the surface at most this far from the coarse one (grid cells)")
     iterations: int = _p(60, 0, 10000, "largest number of iterations of the flow, all stages")
     stage_iterations: int = _p(15, 1, 10000, "largest number of iterations of one stage of the coarse-to-fine schedule")
     coarse_levels: int = _p(2, 1, 8, "every stage follows the mean of this many consecutive pyramid levels: the "
@@ -39,6 +48,6 @@ class RefineParams:
 
 def described_fields() -> list[tuple[str, type, object, dict]]:
     """``(name, type, default, metadata)`` of every parameter, in order."""
-    types = {"int": int, "float": float}
+    types = {"int": int, "float": float, "str": str}
     return [(f.name, types[f.type] if isinstance(f.type, str) else f.type, f.default, dict(f.metadata))
             for f in fields(RefineParams)]

@@ -12,8 +12,10 @@ pieces is a labelling of space by piece. On the field grid:
    coarse surface than half its depth (its largest distance to it): a
    minimum cut favours small regions, and a piece that kept only a few nodes
    would be cut down to them.
-2. **Cut.** Neighbouring nodes of two pieces cost ``psi`` at their middle
-   times the edge's area weight (:mod:`fracture.refine.cut_weights`: the 26
+2. **Cut.** Neighbouring nodes of two pieces cost the lesser ``psi`` of the
+   two (the contour puts the surface where psi is least along the edge: a
+   thin weak layer on one node's side is where it goes, and the mean of the
+   two would charge it the strong side's psi) times the edge's area weight (:mod:`fracture.refine.cut_weights`: the 26
    neighbours, so that a cut measures area at every orientation, not a
    staircase's); with a grain (anisotropic strength) the weight depends on
    the surface's normal there. Labels minimising the sum are found by
@@ -24,9 +26,11 @@ pieces is a labelling of space by piece. On the field grid:
    the piece's kept nodes (an island) is given back its coarse labels; a
    piece that would vanish keeps the coarse surface. What was kept is said.
 4. **Surface.** The labels are contoured by multi-material marching
-   tetrahedra (:mod:`fracture.mesh.multilabel`: two pieces' edges cross in
-   their middle, a piece's edge to the outside where it leaves B), and the
-   terraces of the grid are smoothed away (Taubin's lambda-mu smoothing
+   tetrahedra (:mod:`fracture.mesh.multilabel`: an edge between two pieces
+   is crossed where psi is least along it, within the cell the cut resolved;
+   a piece's edge to the outside where it leaves B; the sheets' rims on B
+   then move along B, across their sheet, to where psi is least within a
+   cell), and the terraces of the grid are smoothed away (Taubin's lambda-mu smoothing
    with the sheets' rims and junctions held). Each new vertex hangs in the
    barycentric tree from the nearest coarse triangle between the same two
    pieces, which carries the coarse animation to it (Section 5).
@@ -77,6 +81,8 @@ class SearchResult:
     """
 
     surface: FractureSurface | None
+    travel: np.ndarray = field(default_factory=lambda: np.zeros(0))  # the new vertices' distances to the coarse
+    cell: float = 1.0  # the grid's finest spacing
     free_nodes: int = 0
     labels_changed: int = 0
     cut_energy: tuple[float, float] = (0.0, 0.0)
@@ -166,18 +172,19 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
     tick("pieces")
 
     # 4. the surface
-    V, F, sides = _contour(sub, near, labels, B)
+    V, F, sides = _contour(sub, near, labels, B, pyramid.value)
     if not len(F):
         return SearchResult(None, seconds=seconds, notes=["search: the cut left no fracture surface; the coarse "
                                                           "surface is kept"])
+    V = _rim_to_least(V, F, B, pyramid.value, h)
     V = _smooth(V, F)
     tick("contour")
-    base = _tree_base(V, F, sides, V0, F0, S0)
+    base, travel = _tree_base(V, F, sides, V0, F0, S0)
     surface = FractureSurface(V, F, sides, n_coarse=len(V), base=base)
     before = energy(V0, F0, pyramid.value(V0) + (tension * span - lowest))
     after = energy(V, F, pyramid.value(V) + (tension * span - lowest))
     tick("tree")
-    result = SearchResult(surface, free_nodes=int(free.sum()), labels_changed=int((labels != coarse).sum()),
+    result = SearchResult(surface, travel=travel, cell=h, free_nodes=int(free.sum()), labels_changed=int((labels != coarse).sum()),
                           cut_energy=(log.energy[0], graph.energy(labels)), functional=(before, after),
                           seconds=seconds, notes=notes)
     if after >= before:
@@ -269,7 +276,7 @@ def _graph(sub: _BoxGrid, near, keep, shifted, grain, box) -> PottsGraph:
             w = 0.5 * (grain(box, near[a], k) + grain(box, near[b], k))
         ps.append(a)
         qs.append(b)
-        ws.append(0.5 * (psi[a] + psi[b]) * w)
+        ws.append(np.minimum(psi[a], psi[b]) * w)
     return PottsGraph(len(near), np.concatenate(ps), np.concatenate(qs), np.concatenate(ws))
 
 
@@ -316,7 +323,7 @@ def _whole_pieces(sub: _BoxGrid, near, labels, coarse, keep, n_pieces):
 
 
 # -- the surface -------------------------------------------------------------------------------------------
-def _contour(sub: _BoxGrid, near, labels, B: Exterior):
+def _contour(sub: _BoxGrid, near, labels, B: Exterior, psi_at):
     """Fracture triangles between the labels (module notes); the box's nodes off the band take the label of
     the nearest band node (they lie in the middle of one piece), those outside B label 0."""
     known = np.zeros(sub.size, bool)
@@ -330,8 +337,9 @@ def _contour(sub: _BoxGrid, near, labels, B: Exterior):
     vol = np.where(known.reshape(sub.shape), vol, np.where(inside, filled, 0))
 
     def crossing(P0, P1, la, lb):
-        t = np.full(len(P0), 0.5)
         out = (la == 0) | (lb == 0)
+        t = np.full(len(P0), 0.5)
+        t[~out] = _least_along(P0[~out], P1[~out], psi_at)
         if out.any():  # where the edge leaves B, by bisection of B's winding number
             A, C = P0[out], P1[out]
             a_in = la[out] > 0
@@ -347,6 +355,49 @@ def _contour(sub: _BoxGrid, near, labels, B: Exterior):
     c = contour_labels(vol, sub.origin, sub.spacing, crossing, pieces_only=True)
     used, inv = np.unique(c.fracture_F, return_inverse=True)
     return c.V[used], inv.reshape(-1, 3).astype(np.int64), c.sides.astype(np.int64)
+
+
+def _least_along(P0: np.ndarray, P1: np.ndarray, psi_at, samples: int = 9) -> np.ndarray:
+    """Where along each segment ``P0 -> P1`` psi is least (0 at ``P0``): the least of ``samples`` evenly
+    spaced values, moved to the vertex of the parabola through it and its two neighbours."""
+    if not len(P0):
+        return np.zeros(0)
+    u = np.linspace(0.0, 1.0, samples)
+    X = P0[:, None, :] + u[None, :, None] * (P1 - P0)[:, None, :]
+    f = psi_at(X.reshape(-1, 3)).reshape(len(P0), samples)
+    k = np.clip(np.argmin(f, axis=1), 1, samples - 2)
+    rows = np.arange(len(P0))
+    a, b, c = f[rows, k - 1], f[rows, k], f[rows, k + 1]
+    curve = a - 2 * b + c
+    shift = np.where(curve > 0, 0.5 * (a - c) / np.where(curve > 0, curve, 1.0), 0.0)
+    return np.clip(u[k] + np.clip(shift, -1.0, 1.0) * (u[1] - u[0]), 0.0, 1.0)
+
+
+def _rim_to_least(V: np.ndarray, F: np.ndarray, B: Exterior, psi_at, h: float, samples: int = 9) -> np.ndarray:
+    """The sheets' rim vertices (on boundary edges) moved along B across their sheet, within a cell either
+    side, to where psi is least: the contour puts a rim point between two nodes, where the cut's labels
+    change, which the psi of a thin layer on B does not see."""
+    e, count = unique_edges(F)
+    rim = np.unique(e[count == 1])
+    if not len(rim):
+        return V
+    _, n = face_frames(V, F)
+    normal = np.zeros_like(V)
+    np.add.at(normal, F.ravel(), np.repeat(n, 3, axis=0))
+    _, tri, _ = B.closest(V[rim])
+    nb = B.normals[tri]
+    t = normal[rim] - np.einsum("ij,ij->i", normal[rim], nb)[:, None] * nb
+    length = np.linalg.norm(t, axis=1)
+    ok = length > 1e-12
+    rim, t = rim[ok], t[ok] / length[ok, None]
+    u = np.linspace(-h, h, samples)
+    X = (V[rim][:, None, :] + u[None, :, None] * t[:, None, :]).reshape(-1, 3)
+    X = B.closest(X)[2]
+    f = psi_at(X).reshape(len(rim), samples)
+    best = np.argmin(f, axis=1)
+    out = V.copy()
+    out[rim] = X.reshape(len(rim), samples, 3)[np.arange(len(rim)), best]
+    return out
 
 
 def _smooth(V: np.ndarray, F: np.ndarray) -> np.ndarray:
@@ -372,13 +423,15 @@ def _smooth(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     return X
 
 
-def _tree_base(V, F, sides, V0, F0, S0) -> sp.csr_matrix:
+def _tree_base(V, F, sides, V0, F0, S0) -> tuple[sp.csr_matrix, np.ndarray]:
     """Each new vertex as barycentric weights of its closest point on the nearest coarse triangle between
-    the same two pieces (on any triangle where those two never met), ``(len(V), len(V0))``."""
+    the same two pieces (on any triangle where those two never met), ``(len(V), len(V0))``, and its
+    distance to that point."""
     key0 = np.sort(S0, axis=1) @ np.array([1 << 20, 1])
     key = np.sort(sides, axis=1) @ np.array([1 << 20, 1])
     tri = np.full(len(V), -1, np.int64)
     C = np.zeros_like(V)
+    d2 = np.zeros(len(V))
     for k in np.unique(key):
         ids = np.unique(F[key == k])
         ids = ids[tri[ids] < 0]
@@ -387,8 +440,8 @@ def _tree_base(V, F, sides, V0, F0, S0) -> sp.csr_matrix:
         faces = np.flatnonzero(key0 == k)
         if not len(faces):
             faces = np.arange(len(F0))
-        _, t, C[ids] = igl.point_mesh_squared_distance(V[ids], V0, F0[faces])
+        d2[ids], t, C[ids] = igl.point_mesh_squared_distance(V[ids], V0, F0[faces])
         tri[ids] = faces[t]
     W = barycentric_weights(C, V0[F0[tri]])
     rows = np.repeat(np.arange(len(V)), 3)
-    return sp.csr_matrix((W.ravel(), (rows, F0[tri].ravel())), shape=(len(V), len(V0)))
+    return sp.csr_matrix((W.ravel(), (rows, F0[tri].ravel())), shape=(len(V), len(V0))), np.sqrt(d2)

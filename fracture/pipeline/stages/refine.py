@@ -24,7 +24,7 @@ import numpy as np
 from fracture.io.ply import write_ply
 from fracture.refine import kernels_cached
 from fracture.mesh.intersect import self_intersections
-from fracture.refine.engine import Refiner
+from fracture.refine.engine import Refiner, default_search
 from fracture.mesh.fracture_surface import FractureSurface
 from fracture.pipeline.context import RunContext
 from fracture.pipeline.typed import refine_params
@@ -39,8 +39,8 @@ def refine_stage(ctx: RunContext) -> None:
     params = refine_params(config)
     mesh = FractureSurface.from_coarse(cf.V, cf.F, cf.sides)
     BV, BF = ctx.products.exterior
-    refiner = Refiner(mesh, fs.pyramid, BV, BF, params,
-                      np.random.default_rng(config.seed))
+    refiner = Refiner(mesh, fs.pyramid, BV, BF, params, np.random.default_rng(config.seed),
+                      search=default_search(params, distance=fs.field("distance")))
     snaps = Snapshots() if config.refine.snapshots else None
     if snaps is not None:
         snaps.add(refiner)
@@ -102,9 +102,28 @@ def refine_stage(ctx: RunContext) -> None:
         "max_boundary_distance": float(log.boundary_error[-1] if log.boundary_error else refiner.boundary_error()),
         "self_intersecting_pairs": int(crossings),
         "phase_seconds": {k: round(v, 4) for k, v in log.seconds.items()},
+        "search": _search_stats(log.search),
     }
+    if log.search is not None:
+        ctx.notes.extend(log.search.notes)
     if crossings:
         ctx.notes.append(f"refine: {crossings} pairs of refined triangles intersect")
+
+
+def _search_stats(result) -> dict | None:
+    """The manifest's record of the global search (None when there was none)."""
+    if result is None:
+        return None
+    return {
+        "replaced_coarse_surface": result.surface is not None,
+        "free_nodes": result.free_nodes,
+        "labels_changed": result.labels_changed,
+        "cut_energy": [float(e) for e in result.cut_energy],
+        "functional_coarse_and_searched": [float(e) for e in result.functional],
+        "travel_mean_cells": float(result.travel.mean() / result.cell) if len(result.travel) else 0.0,
+        "seconds": {k: round(v, 4) for k, v in result.seconds.items()},
+        "notes": list(result.notes),
+    }
 
 
 class Snapshots:
