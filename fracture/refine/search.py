@@ -21,10 +21,14 @@ pieces is a labelling of space by piece. On the field grid:
    the surface's normal there. Labels minimising the sum are found by
    alpha-expansion (:mod:`fracture.refine.expansion`; a minimum cut, the global
    minimum with two pieces). Edges to nodes outside B cost nothing: the
-   surface slides along B freely, as the flow's boundary does.
+   surface slides along B freely, as the flow's boundary does. A node may
+   take only the pieces on either side of the coarse sheets within the band
+   of it: a sheet moves, but two pieces that the coarse animation separates
+   keep their sheet (a shorter network that merged sheets would have less
+   area, and so a lower functional, and would drop cracks the animation has).
 3. **Pieces stay whole.** A region of a piece that the cut separates from
-   the piece's kept nodes (an island) is given back its coarse labels; a
-   piece that would vanish keeps the coarse surface. What was kept is said.
+   the piece's kept nodes (an island) joins the piece around it; a piece
+   that would vanish keeps the coarse surface. What was done is said.
 4. **Surface.** The labels are contoured by multi-material marching
    tetrahedra (:mod:`fracture.mesh.multilabel`: an edge between two pieces
    is crossed where psi is least along it, within the cell the cut resolved;
@@ -66,7 +70,11 @@ _SIDE_OFFSET = 0.1
 # Taubin smoothing of the contour: passes and the two factors.
 _SMOOTH_PASSES = 10
 _LAMBDA, _MU = 0.5, -0.53
-# Rounds of giving islands back their coarse labels.
+# Nodes closer than this to B (cells) count as outside.
+_ON_B = 0.05
+# A piece keeps the nodes farther from the coarse surface than this fraction of its depth.
+_CORE = 0.25
+# Rounds of joining islands to the pieces around them.
 _ISLAND_ROUNDS = 3
 
 
@@ -129,19 +137,24 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
         d = np.sqrt(np.maximum(igl.point_mesh_squared_distance(P, V0, F0)[0], 0.0))
     near = np.flatnonzero(d <= reach)
     near = near[B.inside(P[near])]
+    # a node on B is outside: a sheet's crossing of B then lies inside an edge (its winding number is
+    # anything from 0 to 1 there)
+    on_b = near[B.closest(P[near])[0] < (_ON_B * h) ** 2]
+    near = np.setdiff1d(near, on_b)
     if not len(near):
         return SearchResult(None, notes=[f"search: the band of {band:g} cells holds no grid node inside the object; "
                                          "the coarse surface is kept (refine.band)"], seconds=seconds)
     coarse = _sides(V0, F0, S0, P[near], h)
     tick("band")
 
-    # every piece keeps the nodes beyond the band and its core
+    # every piece keeps the nodes beyond the band and its core (what a node may become: see _reach)
     dn = d[near]
     depth = _depths(B, V0, F0, S0, h, n_pieces)
-    keep = (dn > band * h) | (dn > 0.5 * depth[coarse])
+    keep = (dn > band * h) | (dn > _CORE * depth[coarse])
     if keep.all():
         return SearchResult(None, notes=[f"search: the band of {band:g} cells holds no free grid node inside the "
                                          "object; the coarse surface is kept (refine.band)"], seconds=seconds)
+    coarse, mended = _mend(sub, near, coarse, keep)
     missing = [c for c in range(n_pieces) if c in set(S0.ravel().tolist()) and not (coarse == c).any()]
     if missing:
         return SearchResult(None, seconds=seconds, notes=[
@@ -151,18 +164,25 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
     # 2. the cut
     graph = _graph(sub, near, keep, shifted[box].ravel(), grain, box)
     free = ~keep
-    reach_of = _reach(sub, near, coarse, band)
+    reach_of = _reach(P[near], V0, F0, S0, band * h + h)
     labels, log = expand(graph, coarse, free, reach_of)
     tick("cut")
 
-    # 3. islands go back to their coarse labels
+    # 3. islands join the piece around them
     notes: list[str] = []
-    labels, islands = _whole_pieces(sub, near, labels, coarse, keep, n_pieces)
-    if islands is None:
-        return SearchResult(None, free_nodes=int(free.sum()), seconds=seconds, notes=[
-            "search: the coarse labels themselves leave a piece in parts; the coarse surface is kept"])
+    islands = 0
+    for _ in range(_ISLAND_ROUNDS):
+        labels, count = _mend(sub, near, labels, keep)
+        islands += count
+        if not count:
+            break
+    else:
+        if _islands(sub, near, labels, keep).any():
+            return SearchResult(None, free_nodes=int(free.sum()), seconds=seconds, notes=[
+                "search: the cut leaves a piece in parts; the coarse surface is kept"])
     if islands:
-        notes.append(f"search: {islands} grid nodes cut off from their piece kept their coarse piece")
+        notes.append(f"search: {islands} grid nodes the cut had cut off from their piece joined the piece around "
+                     "them")
     present = np.bincount(labels, minlength=n_pieces) > 0
     lost = [c for c in range(n_pieces) if (coarse == c).any() and not present[c]]
     if lost:
@@ -172,12 +192,15 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
     tick("pieces")
 
     # 4. the surface
-    V, F, sides = _contour(sub, near, labels, B, pyramid.value)
+    V, F, sides = _contour(sub, near, on_b, labels, B, pyramid.value)
     if not len(F):
         return SearchResult(None, seconds=seconds, notes=["search: the cut left no fracture surface; the coarse "
                                                           "surface is kept"])
-    V = _rim_to_least(V, F, B, pyramid.value, h)
-    V = _smooth(V, F)
+    crossings = self_intersections(V, F)
+    moved = _rim_to_least(V, F, B, pyramid.value, h)
+    if self_intersections(moved, F) <= crossings:
+        V = moved
+    V = _smooth(V, F, crossings)
     tick("contour")
     base, travel = _tree_base(V, F, sides, V0, F0, S0)
     surface = FractureSurface(V, F, sides, n_coarse=len(V), base=base)
@@ -280,50 +303,61 @@ def _graph(sub: _BoxGrid, near, keep, shifted, grain, box) -> PottsGraph:
     return PottsGraph(len(near), np.concatenate(ps), np.concatenate(qs), np.concatenate(ws))
 
 
-def _reach(sub: _BoxGrid, near, coarse, band) -> dict:
-    """Per piece, the band's nodes within ``band + 1`` cells of its coarse box (where it may grow)."""
-    ijk = np.stack(np.unravel_index(near, sub.shape), 1)
-    out = {}
-    margin = int(np.ceil(band)) + 1
-    for c in np.unique(coarse):
-        mine = ijk[coarse == c]
-        lo, hi = mine.min(axis=0) - margin, mine.max(axis=0) + margin
-        out[int(c)] = np.flatnonzero(np.all((ijk >= lo) & (ijk <= hi), axis=1))
-    return out
+def _reach(P: np.ndarray, V0, F0, S0, radius: float) -> dict:
+    """Per piece, the band's nodes (points ``P``) within ``radius`` of a coarse sheet of that piece: where
+    it may grow."""
+    out: dict[int, list] = {}
+    pair = np.sort(S0, axis=1)
+    key = pair[:, 0] * (int(S0.max()) + 1) + pair[:, 1]
+    for k in np.unique(key):
+        faces = np.flatnonzero(key == k)
+        T = V0[F0[faces]].reshape(-1, 3)
+        lo, hi = T.min(axis=0) - radius, T.max(axis=0) + radius
+        ids = np.flatnonzero(np.all((P >= lo) & (P <= hi), axis=1))
+        if not len(ids):
+            continue
+        d2 = igl.point_mesh_squared_distance(P[ids], V0, F0[faces])[0]
+        ids = ids[d2 <= radius * radius]
+        for c in pair[faces[0]]:
+            out.setdefault(int(c), []).append(ids)
+    return {c: np.unique(np.concatenate(v)) for c, v in out.items()}
 
 
-def _whole_pieces(sub: _BoxGrid, near, labels, coarse, keep, n_pieces):
-    """Give the nodes of every piece's regions that hold none of its kept nodes back their coarse labels,
-    until none is left (a few rounds); returns the labels and how many nodes went back, or None when the
-    coarse labels themselves have such regions."""
-    labels = labels.copy()
-    back = 0
-    for _ in range(_ISLAND_ROUNDS + 1):
-        lost = np.zeros(len(near), bool)
-        vol = np.full(sub.size, -1, np.int64)
-        vol[near] = labels
-        vol = vol.reshape(sub.shape)
-        kept = np.zeros(sub.size, bool)
-        kept[near[keep]] = True
-        kept = kept.reshape(sub.shape)
-        for c in np.unique(labels):
-            parts, count = ndimage.label(vol == c)
-            if count <= 1:
-                continue
-            anchored = np.unique(parts[kept & (vol == c)])
-            orphan = ~np.isin(parts.ravel()[near], anchored) & (labels == c)
-            lost |= orphan
-        if not lost.any():
-            return labels, back
-        if (labels[lost] == coarse[lost]).all():
-            return labels, None
-        back += int((labels[lost] != coarse[lost]).sum())
-        labels[lost] = coarse[lost]
-    return labels, None
+def _islands(sub: _BoxGrid, near, labels, keep) -> np.ndarray:
+    """Which band nodes lie in a region of their label (6-connected) that holds none of its kept nodes."""
+    vol = np.full(sub.size, -1, np.int64)
+    vol[near] = labels
+    vol = vol.reshape(sub.shape)
+    kept = np.zeros(sub.size, bool)
+    kept[near[keep]] = True
+    kept = kept.reshape(sub.shape)
+    lost = np.zeros(len(near), bool)
+    for c in np.unique(labels):
+        parts, count = ndimage.label(vol == c)
+        anchored = np.unique(parts[kept & (vol == c)])
+        lost |= ~np.isin(parts.ravel()[near], anchored) & (labels == c)
+    return lost
+
+
+def _mend(sub: _BoxGrid, near, labels, keep) -> tuple[np.ndarray, int]:
+    """The coarse labels with their islands (a few nodes a junction's sampling put on the wrong side, the
+    tip of a piece the band cuts off) given the label of the nearest node outside them; and how many."""
+    lost = _islands(sub, near, labels, keep)
+    if not lost.any():
+        return labels, 0
+    mask = np.ones(sub.size, bool)  # True: no label to take
+    mask[near[~lost]] = False
+    _, nearest = ndimage.distance_transform_edt(mask.reshape(sub.shape), return_indices=True)
+    source = np.ravel_multi_index(tuple(n.ravel()[near[lost]] for n in nearest), sub.shape)
+    where = np.full(sub.size, -1, np.int64)
+    where[near] = np.arange(len(near))
+    out = labels.copy()
+    out[lost] = labels[where[source]]
+    return out, int(lost.sum())
 
 
 # -- the surface -------------------------------------------------------------------------------------------
-def _contour(sub: _BoxGrid, near, labels, B: Exterior, psi_at):
+def _contour(sub: _BoxGrid, near, on_b, labels, B: Exterior, psi_at):
     """Fracture triangles between the labels (module notes); the box's nodes off the band take the label of
     the nearest band node (they lie in the middle of one piece), those outside B label 0."""
     known = np.zeros(sub.size, bool)
@@ -333,7 +367,9 @@ def _contour(sub: _BoxGrid, near, labels, B: Exterior, psi_at):
     vol = vol.reshape(sub.shape)
     _, nearest = ndimage.distance_transform_edt(~known.reshape(sub.shape), return_indices=True)
     filled = vol[tuple(nearest)]
-    inside = B.inside(sub.points()).reshape(sub.shape)
+    inside = B.inside(sub.points())
+    inside[on_b] = False
+    inside = inside.reshape(sub.shape)
     vol = np.where(known.reshape(sub.shape), vol, np.where(inside, filled, 0))
 
     def crossing(P0, P1, la, lb):
@@ -400,12 +436,12 @@ def _rim_to_least(V: np.ndarray, F: np.ndarray, B: Exterior, psi_at, h: float, s
     return out
 
 
-def _smooth(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+def _smooth(V: np.ndarray, F: np.ndarray, crossings: int) -> np.ndarray:
     """Taubin's lambda-mu smoothing of the contour's terraces with the rims (boundary edges) and junctions
     (edges of three or more triangles) held; a smoothing that makes triangles cross is not taken.
 
     Written here because the surface is non-manifold along its junctions, which pymeshlab's and libigl's
-    smoothing filters do not take."""
+    smoothing filters do not take. ``crossings``: the crossing pairs of triangles before (the contour's)."""
     e, count = unique_edges(F)
     held = np.zeros(len(V), bool)
     held[e[count != 2].ravel()] = True
@@ -418,7 +454,7 @@ def _smooth(V: np.ndarray, F: np.ndarray) -> np.ndarray:
         for f in (_LAMBDA, _MU):
             lap = (A @ X) / np.maximum(deg, 1)[:, None] - X
             X[move] += f * lap[move]
-    if self_intersections(X, F) > self_intersections(V, F):
+    if self_intersections(X, F) > crossings:
         return V
     return X
 

@@ -1,0 +1,88 @@
+"""The global search (fracture/refine/search.py): turned weak sheets that the flow cannot walk to are
+reached, pieces stay whole, the tree carries the coarse vertices to the new surface, bad bands are said."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fields.grid import Grid
+from fields.pyramid import StrengthPyramid
+from fracture.coarse.scenes.weak_sheets import TURNED, weak_sheet_case
+from fracture.fidelity import area_samples
+from fracture.mesh.exterior import Exterior
+from fracture.mesh.fracture_surface import FractureSurface
+from fracture.mesh.intersect import self_intersections
+from fracture.refine.engine import SEARCH_STAGE, RefineParams, Refiner
+from fracture.refine.search import _BoxGrid, _mend, graph_cut_search
+
+
+def _coarse(case):
+    return FractureSurface.from_coarse(case.cut_V, case.cut_F, np.tile([0, 1], (len(case.cut_F), 1)))
+
+
+def _refine(case, **params):
+    pyramid = StrengthPyramid(case.grid, case.zeta, levels=5, sigma=1.0)
+    r = Refiner(_coarse(case), pyramid, case.BV, case.BF, RefineParams(max_triangles=40000, **params),
+                np.random.default_rng(0))
+    return r, r.run()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("angle, band", [(30, 16), (45, 24), (60, 40)])
+def test_a_turned_weak_sheet_is_found_whole(angle, band):
+    case = weak_sheet_case(TURNED, 4.0, angle=angle)
+    r, log = _refine(case, band=band)
+    d = case.distance_to_sheet(area_samples(r.mesh.V, r.mesh.F))
+    assert np.mean(d < 1.0) >= 0.9
+    assert log.stage[1] == SEARCH_STAGE and log.search.surface is not None
+    assert log.functional[-1] < log.functional[0]
+    assert self_intersections(r.mesh.V, r.mesh.F) == 0
+    if angle >= 45:  # the flow alone stays across the strong material for most of it
+        alone, _ = _refine(case, search="none")
+        assert np.mean(case.distance_to_sheet(area_samples(alone.mesh.V, alone.mesh.F)) < 1.0) < 0.8
+
+
+def test_the_search_lowers_the_functional_and_hangs_every_vertex_on_the_coarse_surface():
+    case = weak_sheet_case("curved", 6.0)
+    pyramid = StrengthPyramid(case.grid, case.zeta, levels=5, sigma=1.0)
+    mesh = _coarse(case)
+    res = graph_cut_search(mesh, pyramid, Exterior(case.BV, case.BF), band=10, tension=0.05)
+    S = res.surface
+    assert S is not None and res.functional[1] < 0.5 * res.functional[0]
+    assert res.cut_energy[1] < res.cut_energy[0]
+    W = S.tree_matrix()
+    assert W.shape == (len(S.V), len(case.cut_V))
+    np.testing.assert_allclose(np.asarray(W.sum(axis=1)).ravel(), 1.0, atol=1e-12)
+    # every new vertex's tree position is its closest point on the coarse cut (the plane x = const)
+    np.testing.assert_allclose((W @ case.cut_V)[:, 0], case.cut_V[0, 0], atol=1e-12)
+    d = case.distance_to_sheet(area_samples(S.V, S.F))
+    assert np.mean(d < 1.0) > 0.95
+    assert (np.sort(S.sides, axis=1) == [0, 1]).all()
+    assert self_intersections(S.V, S.F) == 0
+
+
+def test_a_band_with_no_grid_node_keeps_the_coarse_surface_and_says_so():
+    case = weak_sheet_case("flat", 4.0)
+    far = Grid.from_bounds([5, 5, 5], [6, 6, 6], (8, 8, 8))  # nowhere near the object
+    pyramid = StrengthPyramid(far, np.ones(far.shape), levels=2, sigma=1.0)
+    res = graph_cut_search(_coarse(case), pyramid, Exterior(case.BV, case.BF), band=3, tension=0.05)
+    assert res.surface is None
+    assert len(res.notes) == 1 and "refine.band" in res.notes[0] and "no grid node" in res.notes[0]
+
+
+def test_an_island_cut_off_from_its_piece_joins_the_piece_around_it():
+    sub = _BoxGrid(Grid.from_bounds([0, 0, 0], [1, 1, 1], (6, 6, 6)), (slice(0, 6),) * 3)
+    near = np.arange(sub.size)
+    ijk = np.stack(np.unravel_index(near, sub.shape), 1)
+    coarse = (ijk[:, 0] >= 3).astype(np.int64)
+    keep = (ijk[:, 0] == 0) | (ijk[:, 0] == 5)
+    labels = coarse.copy()
+    island = np.all(ijk == [4, 2, 2], axis=1) | np.all(ijk == [4, 2, 3], axis=1)
+    labels[island] = 0  # two nodes of piece 0 inside piece 1, apart from piece 0's kept nodes
+    out, count = _mend(sub, near, labels, keep)
+    assert count == 2 and (out == coarse).all()
+    grown = coarse.copy()
+    grown[(ijk[:, 0] == 3) & (ijk[:, 1] < 3)] = 0  # piece 0 grows: still one region with its kept nodes
+    out, count = _mend(sub, near, grown, keep)
+    assert count == 0 and (out == grown).all()
