@@ -80,3 +80,21 @@ def test_closed_oriented_asks_every_edge_once_each_way():
     assert not closed_oriented(np.r_[tet[:3], tet[3:, ::-1]])  # a face turned
     assert not closed_oriented(np.r_[tet, tet[:1]])  # a face twice
     assert closed_oriented(np.zeros((0, 3), np.int64))
+
+
+def test_nearly_coplanar_triangles_side_by_side_do_not_cross():
+    """Two triangles a hundred-billionth of their size off one plane, side by side: an edge whose one end
+    lies within the tolerance of the other's plane touches it there, not on its extension."""
+    from fracture.mesh.intersect import self_intersections
+
+    T1 = [[0.49947789920479796, 0.3094645672319407, 0.26985823162203876],
+          [0.4994778991950582, 0.30592707550088083, 0.25592440253973936],
+          [0.49947789920261376, 0.3217045037131283, 0.2664440247211729]]
+    T2 = [[0.49947789920330465, 0.29538871462488125, 0.266444024719279],
+          [0.49947789921152225, 0.30592707556480125, 0.28224018895123504],
+          [0.49947789921067415, 0.29185122304348604, 0.2788259819290885]]
+    V = np.array(T1 + T2)
+    assert self_intersections(V, np.array([[0, 1, 2], [3, 4, 5]])) == 0
+    c = V[:3].mean(axis=0)  # a triangle through the first one's middle, across its plane: crossing
+    V[3:] = c + np.array([[1e-3, 0.0, -2e-3], [-1e-3, 0.0, -2e-3], [0.0, 0.0, 2e-3]])
+    assert self_intersections(V, np.array([[0, 1, 2], [3, 4, 5]])) == 1

@@ -68,7 +68,10 @@ def segment_hits_triangle(p, q, a, e1, e2, n, nn, eps):
     op, oq = vec.dot(n, vec.sub(p, a)), vec.dot(n, vec.sub(q, a))
     if (op > tol and oq > tol) or (op < -tol and oq < -tol) or (abs(op) <= tol and abs(oq) <= tol):
         return False
-    t = op / (op - oq)
+    # one end within the tolerance of the plane and the other off it: the segment touches the plane at
+    # that end, not beyond it (t outside [0, 1] put the point on the segment's extension, so two nearly
+    # coplanar triangles side by side counted as crossing)
+    t = min(max(op / (op - oq), 0.0), 1.0)
     x = vec.sub(vec.lerp(p, q, t), a)
     # barycentric coordinates of x in the triangle's plane
     d00, d01, d11 = vec.dot(e1, e1), vec.dot(e1, e2), vec.dot(e2, e2)

@@ -146,7 +146,8 @@ def _positions(crossing, nodes, lab, edge_keys, face_keys, tet_ids, tets, n_node
     return PE, _mean_preferring(PE, Fg, outside), _mean_preferring(PE, Tg, outside)
 
 
-def contour_labels(label: np.ndarray, origin, spacing, crossing, pieces_only: bool = False) -> LabelContour:
+def contour_labels(label: np.ndarray, origin, spacing, crossing, pieces_only: bool = False,
+                   order_by_points: bool = False) -> LabelContour:
     """The interfaces between the labels of a grid (module notes).
 
     ``label`` is ``(nx, ny, nz)`` int, 0 outside the object and ``p + 1`` in
@@ -156,6 +157,10 @@ def contour_labels(label: np.ndarray, origin, spacing, crossing, pieces_only: bo
     the interface crosses it. ``pieces_only`` contours only the tetrahedra
     that hold two pieces or more: the fracture triangles are the same, and of B
     only the polygons beside them are made (and their edges' crossings asked for).
+    A polygon's points are put in order around it by where the grid's edges,
+    faces and tetrahedra have their middles, or, with ``order_by_points``, by
+    the points themselves (crossings far from their edges' middles would
+    otherwise fold a polygon over itself).
     """
     shape = label.shape
     lab = label.ravel()
@@ -204,7 +209,8 @@ def contour_labels(label: np.ndarray, origin, spacing, crossing, pieces_only: bo
     e1 = np.cross(axis, helper)
     e2 = np.cross(axis, e1)
     owner = np.repeat(np.arange(len(first)), size)
-    Q = X0[index] - np.add.reduceat(X0[index], first)[owner] / size[owner, None]
+    Xo = X if order_by_points else X0
+    Q = Xo[index] - np.add.reduceat(Xo[index], first)[owner] / size[owner, None]
     ang = np.arctan2(np.einsum("ij,ij->i", Q, e2[owner]), np.einsum("ij,ij->i", Q, e1[owner]))
     order = np.lexsort((ang, owner))
     index = index[order]

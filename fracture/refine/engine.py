@@ -647,7 +647,7 @@ def default_search(params: RefineParams, distance: np.ndarray | None = None):
         return None
 
     def search(mesh, pyramid, B):
-        return graph_cut_search(mesh, pyramid, B, params.band, params.tension, distance=distance)
+        return graph_cut_search(mesh, pyramid, B, params.band, params.tension, distance=distance, core=params.core)
 
     return search
 

@@ -19,11 +19,6 @@ def _choice(default, choices, doc):
 class RefineParams:
     """Thresholds of the refinement (Sections 4.3, 4.4); see each field's ``doc``."""
 
-    search: str = _choice("graphcut", ("graphcut", "none"),
-                          "graphcut: before the flow, the band around the coarse surface is searched for the surface "
-                          "of least integral of psi by a minimum cut (fracture/refine/search.py), and the flow polishes "
-                          "it on the finest level alone; none: the flow alone, coarse to fine")
-    band: float = _p(10.0, 1.0, 200.0, "the search moves the surface at most this far from the coarse one (grid cells)")
     iterations: int = _p(60, 0, 10000, "largest number of iterations of the flow, all stages")
     stage_iterations: int = _p(15, 1, 10000, "largest number of iterations of one stage of the coarse-to-fine schedule")
     coarse_levels: int = _p(2, 1, 8, "every stage follows the mean of this many consecutive pyramid levels: the "
@@ -44,6 +39,14 @@ class RefineParams:
     max_triangles: int = _p(200000, 10, 20_000_000, "no splits beyond this many triangles")
     thickness: float = _p(1e-6, 0.0, 1.0, "closer than this counts as a collision (grid cells)")
     hold: int = _p(3, 0, 100, "iterations a vertex stopped by a collision stays stopped")
+    search: str = _choice("none", ("graphcut", "none"),
+                          "graphcut: before the flow, the band around the coarse surface is searched for the surface "
+                          "of least integral of psi by a minimum cut (fracture/refine/search.py), and the flow polishes "
+                          "it on the finest level alone (experimental: see the README); none: the flow alone, coarse to fine")
+    band: float = _p(10.0, 1.0, 200.0, "the search moves the surface at most this far from the coarse one (grid cells)")
+    core: float = _p(0.25, 0.0, 1.0, "the search leaves each piece the grid nodes farther from the coarse surface than "
+                     "this fraction of the piece's depth (a minimum cut favours small pieces: without a core a small "
+                     "piece could be cut down to a sliver)")
 
 
 def described_fields() -> list[tuple[str, type, object, dict]]:

@@ -9,7 +9,8 @@ pieces is a labelling of space by piece. On the field grid:
    free; the others keep the piece they lie in (the side of the coarse
    surface they see: the nearest of points just off both faces of every
    coarse triangle). A piece also keeps its core, the nodes farther from the
-   coarse surface than half its depth (its largest distance to it): a
+   coarse surface than ``core`` (a quarter) of its depth (its largest
+   distance to it): a
    minimum cut favours small regions, and a piece that kept only a few nodes
    would be cut down to them.
 2. **Cut.** Neighbouring nodes of two pieces cost the lesser ``psi`` of the
@@ -70,10 +71,10 @@ _SIDE_OFFSET = 0.1
 # Taubin smoothing of the contour: passes and the two factors.
 _SMOOTH_PASSES = 10
 _LAMBDA, _MU = 0.5, -0.53
+# Crossings keep this fraction of their edge from its nodes.
+_NODE_GAP = 0.15
 # Nodes closer than this to B (cells) count as outside.
 _ON_B = 0.05
-# A piece keeps the nodes farther from the coarse surface than this fraction of its depth.
-_CORE = 0.25
 # Rounds of joining islands to the pieces around them.
 _ISLAND_ROUNDS = 3
 
@@ -100,11 +101,12 @@ class SearchResult:
 
 
 def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, tension: float,
-                     distance: np.ndarray | None = None, grain=None) -> SearchResult:
+                     distance: np.ndarray | None = None, grain=None, core: float = 0.25) -> SearchResult:
     """Search the band of ``band`` grid cells around ``mesh`` (the coarse surface) for the labelling of
     least weighted area (module notes).
 
     ``pyramid`` gives the grid and psi (level 0), shifted so its minimum is ``tension`` of its range;
+    ``core`` is the fraction of each piece's depth beyond which its nodes are kept;
     ``distance`` (optional) is the distance of every grid node to the coarse surface; ``grain``
     (optional) gives per node the 13 edge weights of an anisotropic strength
     (:meth:`~fields.grain.GrainField.edge_weights`).
@@ -150,7 +152,7 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
     # every piece keeps the nodes beyond the band and its core (what a node may become: see _reach)
     dn = d[near]
     depth = _depths(B, V0, F0, S0, h, n_pieces)
-    keep = (dn > band * h) | (dn > _CORE * depth[coarse])
+    keep = (dn > band * h) | (dn > core * depth[coarse])
     if keep.all():
         return SearchResult(None, notes=[f"search: the band of {band:g} cells holds no free grid node inside the "
                                          "object; the coarse surface is kept (refine.band)"], seconds=seconds)
@@ -386,9 +388,11 @@ def _contour(sub: _BoxGrid, near, on_b, labels, B: Exterior, psi_at):
                 toward = ins == a_in  # still on the first end's side
                 lo, hi = np.where(toward, mid, lo), np.where(toward, hi, mid)
             t[out] = 0.5 * (lo + hi)
-        return t
+        # no point near a node: the polygons of the tetrahedra around it would leave slivers (an edge of a
+        # hundredth of a cell) that the flow's collision tests cannot keep apart
+        return np.clip(t, _NODE_GAP, 1.0 - _NODE_GAP)
 
-    c = contour_labels(vol, sub.origin, sub.spacing, crossing, pieces_only=True)
+    c = contour_labels(vol, sub.origin, sub.spacing, crossing, pieces_only=True, order_by_points=True)
     used, inv = np.unique(c.fracture_F, return_inverse=True)
     return c.V[used], inv.reshape(-1, 3).astype(np.int64), c.sides.astype(np.int64)
 
