@@ -85,7 +85,9 @@ def run_figures(out: str | Path) -> dict:
 
     Returns ``coarse`` and ``refined`` (:func:`surface_figures`; the refined
     surface's distances are to the coarse one), the refined ``triangles``,
-    ``iterations``, the refine stage's ``seconds`` and why it stopped (``stop``).
+    ``iterations``, the refine stage's ``seconds``, why it stopped (``stop``),
+    the ``functional`` of its last stage, the ``area_ratio`` refined / coarse,
+    whether the search's surface was taken (``searched``) and its ``search_seconds``.
     """
     out = Path(out)
     manifest = json.loads((out / "manifest.json").read_text())
@@ -99,5 +101,10 @@ def run_figures(out: str | Path) -> dict:
     coarse = surface_figures(CV, CF, grid, zeta, thresholds, psi)
     refined = surface_figures(RV, RF, grid, zeta, thresholds, psi, reference=(CV, CF))
     stats = manifest["stats"]["refine"]
+    search = stats.get("search") or {}
     return dict(coarse=coarse, refined=refined, triangles=len(RF), iterations=len(stats["functional"]) - 1,
-                seconds=manifest["stages"]["refine"]["seconds"], stop=stats["stopped_because"])
+                seconds=manifest["stages"]["refine"]["seconds"], stop=stats["stopped_because"],
+                # what the last stage (level 0 for the flow alone and for the polish) minimises
+                functional=float(stats["functional"][-1]), area_ratio=float(stats["area"][-1] / stats["area"][0]),
+                searched=bool(search.get("replaced_coarse_surface", False)),
+                search_seconds=float(sum(search.get("seconds", {}).values())))

@@ -96,3 +96,16 @@ def test_an_island_cut_off_from_its_piece_joins_the_piece_around_it():
     grown[(ijk[:, 0] == 3) & (ijk[:, 1] < 3)] = 0  # piece 0 grows: still one region with its kept nodes
     out, count = _mend(sub, near, grown, keep)
     assert count == 0 and (out == grown).all()
+
+
+def test_the_viewer_names_the_searched_step():
+    from types import SimpleNamespace
+
+    from viewer.looks import iteration_caption
+
+    faces = {"faces": np.zeros((4, 3), int)}
+    run = SimpleNamespace(energy=[1.0, 0.5, 0.4], stages=[3, -1, 0], iterations=[faces] * 3)
+    assert [iteration_caption(run, k).split(",")[0] for k in range(3)] == [
+        "iteration 0 / 2 (coarse)", "iteration 1 / 2 (searched)", "iteration 2 / 2 (polished)"]
+    flow = SimpleNamespace(energy=[1.0, 0.5], stages=[3, 3], iterations=[faces] * 2)
+    assert iteration_caption(flow, 1).startswith("iteration 1 / 1, 4 triangles")

@@ -242,6 +242,11 @@ class RunData:
         """The functional the flow minimises at each snapshot, the first (the coarse surface) included."""
         return list(self.manifest.get("stats", {}).get("refine", {}).get("functional", []))
 
+    @property
+    def stages(self) -> list[int]:
+        """The refinement's stage at each snapshot (-1: the global search's surface)."""
+        return list(self.manifest.get("stats", {}).get("refine", {}).get("stage", []))
+
     @cached_property
     def iteration_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """The box holding the fracture surface at every iteration."""

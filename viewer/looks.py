@@ -260,10 +260,15 @@ def slice_title(view: View) -> str:
 
 
 def iteration_caption(run: RunData, k: int) -> str:
-    """``iteration k / n, m triangles, E = e`` (iteration 0: the coarse surface)."""
+    """``iteration k / n (what it is), m triangles, E = e``: iteration 0 is the coarse surface, an iteration
+    of stage -1 the global search's surface (coarse -> searched -> polished)."""
     e = run.energy[k] if 0 <= k < len(run.energy) else None
-    return (f"iteration {k} / {len(run.iterations) - 1}, {len(run.iterations[k]['faces']):,} triangles"
-            + (f", E = {e:.4g}" if e is not None else ""))
+    stages = run.stages
+    searched = -1 in stages
+    what = ("coarse" if k == 0 else "searched" if 0 <= k < len(stages) and stages[k] == -1
+            else "polished" if searched else "")
+    return (f"iteration {k} / {len(run.iterations) - 1}" + (f" ({what})" if what else "")
+            + f", {len(run.iterations[k]['faces']):,} triangles" + (f", E = {e:.4g}" if e is not None else ""))
 
 
 def show_stage(scene: rendering.Open3DScene, run: RunData) -> None:

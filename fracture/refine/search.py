@@ -13,10 +13,11 @@ pieces is a labelling of space by piece. On the field grid:
    distance to it): a
    minimum cut favours small regions, and a piece that kept only a few nodes
    would be cut down to them.
-2. **Cut.** Neighbouring nodes of two pieces cost the lesser ``psi`` of the
-   two (the contour puts the surface where psi is least along the edge: a
-   thin weak layer on one node's side is where it goes, and the mean of the
-   two would charge it the strong side's psi) times the edge's area weight (:mod:`fracture.refine.cut_weights`: the 26
+2. **Cut.** Neighbouring nodes of two pieces cost the least ``psi`` along
+   the edge where the contour can put the surface, a sixth of the edge from
+   either node (it crosses the edge where psi is least: a thin weak layer on
+   one node's side is where it goes, and the mean of the two nodes would
+   charge it the strong side's psi), times the edge's area weight (:mod:`fracture.refine.cut_weights`: the 26
    neighbours, so that a cut measures area at every orientation, not a
    staircase's); with a grain (anisotropic strength) the weight depends on
    the surface's normal there. Labels minimising the sum are found by
@@ -65,16 +66,21 @@ from fracture.refine.expansion import PottsGraph, expand
 from fracture.refine.flow import energy
 
 # Points just off each face of the coarse surface, per unit area (in cells^-2), that tell a node its side.
-_SIDE_DENSITY = 16.0
+_SIDE_DENSITY = 4.0
 # ... this far off the face (cells).
 _SIDE_OFFSET = 0.1
+# B's points at most that a piece's depth is measured at.
+_DEPTH_SAMPLES = 20000
 # Taubin smoothing of the contour: passes and the two factors.
-_SMOOTH_PASSES = 10
+_SMOOTH_PASSES = 30
 _LAMBDA, _MU = 0.5, -0.53
 # Crossings keep this fraction of their edge from its nodes.
 _NODE_GAP = 0.15
 # Nodes closer than this to B (cells) count as outside.
 _ON_B = 0.05
+# Cycles of expansion moves over the pieces (the first does most: on the collapsing wall the next two lower
+# the cut by 0.02 % and take half as long again)
+_CYCLES = 2
 # Rounds of joining islands to the pieces around them.
 _ISLAND_ROUNDS = 3
 
@@ -146,12 +152,13 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
     if not len(near):
         return SearchResult(None, notes=[f"search: the band of {band:g} cells holds no grid node inside the object; "
                                          "the coarse surface is kept (refine.band)"], seconds=seconds)
-    coarse = _sides(V0, F0, S0, P[near], h)
+    side_of = _SideOf(V0, F0, S0, h)
+    coarse = side_of(P[near])
     tick("band")
 
     # every piece keeps the nodes beyond the band and its core (what a node may become: see _reach)
     dn = d[near]
-    depth = _depths(B, V0, F0, S0, h, n_pieces)
+    depth = _depths(B, V0, F0, side_of, n_pieces)
     keep = (dn > band * h) | (dn > core * depth[coarse])
     if keep.all():
         return SearchResult(None, notes=[f"search: the band of {band:g} cells holds no free grid node inside the "
@@ -167,7 +174,7 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
     graph = _graph(sub, near, keep, shifted[box].ravel(), grain, box)
     free = ~keep
     reach_of = _reach(P[near], V0, F0, S0, band * h + h)
-    labels, log = expand(graph, coarse, free, reach_of)
+    labels, log = expand(graph, coarse, free, reach_of, cycles=_CYCLES)
     tick("cut")
 
     # 3. islands join the piece around them
@@ -199,10 +206,8 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
         return SearchResult(None, seconds=seconds, notes=["search: the cut left no fracture surface; the coarse "
                                                           "surface is kept"])
     crossings = self_intersections(V, F)
-    moved = _rim_to_least(V, F, B, pyramid.value, h)
-    if self_intersections(moved, F) <= crossings:
-        V = moved
-    V = _smooth(V, F, crossings)
+    V = _uncrossed(V, _rim_to_least(V, F, B, pyramid.value, h), F, crossings)
+    V = _uncrossed(V, _smooth(V, F), F, crossings)
     tick("contour")
     base, travel = _tree_base(V, F, sides, V0, F0, S0)
     surface = FractureSurface(V, F, sides, n_coarse=len(V), base=base)
@@ -245,36 +250,40 @@ class _BoxGrid:
         return self.origin + idx * self.spacing
 
 
-def _sides(V, F, sides, P, h) -> np.ndarray:
-    """The piece each point lies in: that of the nearest of points just off both faces of every coarse
-    triangle (robust at junctions, where the nearest triangle's side alone is ambiguous)."""
-    T = V[F]
-    area = 0.5 * np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1)
-    count = np.maximum(np.ceil(_SIDE_DENSITY * area / (h * h)).astype(np.int64), 1)
-    f = np.repeat(np.arange(len(F)), count)
-    rng = np.random.default_rng(0)
-    r1, r2 = rng.random(len(f)), rng.random(len(f))
-    s = np.sqrt(r1)
-    bary = np.column_stack([1.0 - s, s * (1.0 - r2), s * r2])
-    # the triangles' corners too, so that every point of the surface has a sample near it
-    bary = np.concatenate([bary, np.tile(np.eye(3), (len(F), 1))])
-    f = np.concatenate([f, np.repeat(np.arange(len(F)), 3)])
-    X = np.einsum("nk,nkc->nc", bary, T[f])
-    n = face_frames(V, F)[1][f]
-    off = _SIDE_OFFSET * h * n
-    samples = np.concatenate([X - off, X + off])
-    piece = np.concatenate([sides[f, 0], sides[f, 1]])
-    _, j = cKDTree(samples).query(P, workers=-1)
-    return piece[j].astype(np.int64)
+class _SideOf:
+    """The piece points lie in: that of the nearest of points just off both faces of every coarse triangle
+    (robust at junctions, where the nearest triangle's side alone is ambiguous)."""
+
+    def __init__(self, V, F, sides, h):
+        T = V[F]
+        area = 0.5 * np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1)
+        count = np.maximum(np.ceil(_SIDE_DENSITY * area / (h * h)).astype(np.int64), 1)
+        f = np.repeat(np.arange(len(F)), count)
+        rng = np.random.default_rng(0)
+        r1, r2 = rng.random(len(f)), rng.random(len(f))
+        s = np.sqrt(r1)
+        bary = np.column_stack([1.0 - s, s * (1.0 - r2), s * r2])
+        # the triangles' corners too, so that every point of the surface has a sample near it
+        bary = np.concatenate([bary, np.tile(np.eye(3), (len(F), 1))])
+        f = np.concatenate([f, np.repeat(np.arange(len(F)), 3)])
+        X = np.einsum("nk,nkc->nc", bary, T[f])
+        off = _SIDE_OFFSET * h * face_frames(V, F)[1][f]
+        self.tree = cKDTree(np.concatenate([X - off, X + off]))
+        self.piece = np.concatenate([sides[f, 0], sides[f, 1]]).astype(np.int64)
+
+    def __call__(self, P: np.ndarray) -> np.ndarray:
+        return self.piece[self.tree.query(P, workers=-1)[1]]
 
 
-def _depths(B: Exterior, V0, F0, S0, h, n_pieces) -> np.ndarray:
+def _depths(B: Exterior, V0, F0, side_of, n_pieces) -> np.ndarray:
     """Each piece's depth: its largest distance to the coarse surface, taken over B's vertices and
     triangles' middles (a piece is farthest from its cracks on its part of B)."""
     X = np.concatenate([B.V, B.V[B.F].mean(axis=1)])
+    if len(X) > _DEPTH_SAMPLES:  # evenly thinned: a piece's far corner has many of B's points near it
+        X = X[:: -(-len(X) // _DEPTH_SAMPLES)]
     d = np.sqrt(np.maximum(igl.point_mesh_squared_distance(X, V0, F0)[0], 0.0))
     depth = np.zeros(n_pieces)
-    np.maximum.at(depth, _sides(V0, F0, S0, X, h), d)
+    np.maximum.at(depth, side_of(X), d)
     return depth
 
 
@@ -301,7 +310,11 @@ def _graph(sub: _BoxGrid, near, keep, shifted, grain, box) -> PottsGraph:
             w = 0.5 * (grain(box, near[a], k) + grain(box, near[b], k))
         ps.append(a)
         qs.append(b)
-        ws.append(np.minimum(psi[a], psi[b]) * w)
+        # psi where the contour can put the surface on this edge: linear between the nodes, the least of
+        # it within _NODE_GAP of either end
+        near_a = (1.0 - _NODE_GAP) * psi[a] + _NODE_GAP * psi[b]
+        near_b = _NODE_GAP * psi[a] + (1.0 - _NODE_GAP) * psi[b]
+        ws.append(np.minimum(near_a, near_b) * w)
     return PottsGraph(len(near), np.concatenate(ps), np.concatenate(qs), np.concatenate(ws))
 
 
@@ -440,12 +453,28 @@ def _rim_to_least(V: np.ndarray, F: np.ndarray, B: Exterior, psi_at, h: float, s
     return out
 
 
-def _smooth(V: np.ndarray, F: np.ndarray, crossings: int) -> np.ndarray:
+def _uncrossed(V: np.ndarray, X: np.ndarray, F: np.ndarray, crossings: int, rounds: int = 8) -> np.ndarray:
+    """``X`` (moved vertices of ``V``) with the vertices of triangles that cross where they did not cross in
+    ``V`` (which had ``crossings`` pairs) back where they were, with their neighbours, until no more pairs
+    cross than before (at worst ``V`` itself)."""
+    X = X.copy()
+    for _ in range(rounds):
+        count, pairs = self_intersections(X, F, report=100000)
+        if count <= crossings:
+            return X
+        back = np.unique(F[pairs.ravel()].ravel())
+        ring = np.isin(F, back).any(axis=1)
+        back = np.unique(F[ring].ravel())
+        X[back] = V[back]
+    return X if self_intersections(X, F) <= crossings else V
+
+
+def _smooth(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     """Taubin's lambda-mu smoothing of the contour's terraces with the rims (boundary edges) and junctions
-    (edges of three or more triangles) held; a smoothing that makes triangles cross is not taken.
+    (edges of three or more triangles) held (:func:`_uncrossed` takes back what makes triangles cross).
 
     Written here because the surface is non-manifold along its junctions, which pymeshlab's and libigl's
-    smoothing filters do not take. ``crossings``: the crossing pairs of triangles before (the contour's)."""
+    smoothing filters do not take."""
     e, count = unique_edges(F)
     held = np.zeros(len(V), bool)
     held[e[count != 2].ravel()] = True
@@ -458,8 +487,6 @@ def _smooth(V: np.ndarray, F: np.ndarray, crossings: int) -> np.ndarray:
         for f in (_LAMBDA, _MU):
             lap = (A @ X) / np.maximum(deg, 1)[:, None] - X
             X[move] += f * lap[move]
-    if self_intersections(X, F) > crossings:
-        return V
     return X
 
 
