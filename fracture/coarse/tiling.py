@@ -39,9 +39,10 @@ from scipy import ndimage
 
 from fracture.coarse.pinholes import PINHOLE, close_pinholes
 from fracture.mesh.multilabel import contour_labels
+from fracture.mesh.sheets import coarsen_sheets
 from fracture.errors import InputError
 from fracture.tolerances import tol
-from fracture.mesh.topology import closed_oriented, fan, unique_edges
+from fracture.mesh.topology import closed_oriented, fan
 
 # Cells along the object's largest extent.
 DEFAULT_CELLS = 32
@@ -162,73 +163,6 @@ def _winding_crossing(pieces, h: float):
     return crossing
 
 
-def _simplify_sheets(X: np.ndarray, FF: np.ndarray, sides: np.ndarray):
-    """Coarsen every sheet (the triangles between one pair of pieces) with pymeshlab's quadric edge
-    collapse, keeping its boundary (its junctions with other sheets and its curve on B) vertex for
-    vertex, so the sheets still meet each other and B exactly. Cell Fracture's sheets are flat
-    (bisector planes of its cells): a few triangles per boundary vertex describe them.
-
-    Returns the new points (``X`` followed by the sheets' new inner vertices) and triangles.
-    """
-    import pymeshlab
-
-    n = len(X)
-    out_X, out_F, out_S = [X], [np.zeros((0, 3), np.int64)], [np.zeros((0, 2), np.int64)]
-    pair = sides[:, 0] * (sides.max(initial=0) + 1) + sides[:, 1]
-    for k in np.unique(pair):
-        sel = np.flatnonzero(pair == k)
-        used, inv = np.unique(FF[sel], return_inverse=True)
-        local = inv.reshape(-1, 3)
-        e, c = unique_edges(local)
-        rim = np.unique(e[c == 1])
-        ms = pymeshlab.MeshSet()
-        ms.add_mesh(pymeshlab.Mesh(X[used], local))
-        ms.meshing_decimation_quadric_edge_collapse(
-            targetfacenum=max(2 * len(rim), 4), preserveboundary=True, boundaryweight=1000.0, preservenormal=True,
-            preservetopology=True, planarquadric=True, qualitythr=0.3, autoclean=False)
-        m = ms.current_mesh()
-        VD, FD = m.vertex_matrix(), m.face_matrix().astype(np.int64)
-        # kept vertices sit exactly where they were: back to their global ids, the others are new
-        lookup = {tuple(p): g for p, g in zip(X[used].tolist(), used.tolist())}
-        ids = np.empty(len(VD), np.int64)
-        fresh = []
-        for i, p in enumerate(VD.tolist()):
-            g = lookup.get(tuple(p))
-            if g is None:
-                g = n
-                n += 1
-                fresh.append(p)
-            ids[i] = g
-        kept_rim = np.isin(used[rim], ids)
-        if not kept_rim.all():
-            raise AssertionError("sheet simplification moved a boundary vertex")
-        out_X.append(np.asarray(fresh, np.float64).reshape(-1, 3))
-        out_F.append(ids[FD])
-        out_S.append(np.repeat(sides[sel[:1]], len(FD), axis=0))
-    return np.concatenate(out_X), np.concatenate(out_F), np.concatenate(out_S)
-
-
-def _simplified(X: np.ndarray, FF: np.ndarray, sides: np.ndarray):
-    """:func:`_simplify_sheets`, except for sheets whose coarsened triangles would cross another sheet:
-    those keep their triangles from the contouring (which never cross)."""
-    from fracture.mesh.intersect import self_intersections
-
-    keep = np.zeros(len(FF), bool)
-    base = sides.max(initial=0) + 1
-    pair = sides[:, 0] * base + sides[:, 1]
-    for _ in range(4):
-        XS, FS, SS = _simplify_sheets(X, FF[~keep], sides[~keep])
-        XS_all = XS
-        F_all = np.concatenate([FS, FF[keep]])
-        S_all = np.concatenate([SS, sides[keep]])
-        count, pairs = self_intersections(XS_all, F_all, report=100000)
-        if not count:
-            return XS_all, F_all, S_all
-        hit = np.unique(S_all[pairs.ravel()][:, 0] * base + S_all[pairs.ravel()][:, 1])
-        keep |= np.isin(pair, hit)
-    return X, FF, sides
-
-
 def _check_tiling(label, overlap, gaps, names, h, where) -> str | None:
     """Refuse pieces that overlap by more than :data:`_OVERLAP` cells on average (the overlap's volume
     over the smaller piece's volume to the power 2/3, an area); returns a note on the widest slit that
@@ -299,7 +233,7 @@ def label_tiling(V: np.ndarray, polygons: list[list[np.ndarray]], names: list[st
             h, ", ".join(repr(names[p]) for p in np.flatnonzero(~present))))
     c = contour_labels(label, origin, np.full(3, h), _winding_crossing(pieces, h))
     X, FF, sides, BF, bpiece = c.V, c.fracture_F, c.sides, c.exterior_F, c.exterior_piece
-    X, FF, sides = _simplified(X, FF, sides)
+    X, FF, sides = coarsen_sheets(X, FF, sides)
     X, FF, sides, BF, bpiece, pinholes = close_pinholes(X, FF, sides, BF, bpiece, h)
     if pinholes:
         notes.append(f"closed {pinholes} pinhole{'s' if pinholes > 1 else ''}: a piece reached the surface through "

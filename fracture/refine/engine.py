@@ -536,7 +536,6 @@ class Refiner:
         if result.surface is None:
             log.tick("search", clock)
             return result
-        before = log.functional[-1]
         self.mesh.replace(result.surface)
         self.searched = True
         self.state = VertexState.empty(len(self.mesh.V))
@@ -544,7 +543,8 @@ class Refiner:
         self.off_b = np.zeros(0, np.int64)
         self.begin_stage(*self.stages()[0])
         self.boundary = self.boundary_vertices()
-        log.functional_before.append(before)
+        # both on the polish's field (level 0): the coarse surface's functional there, and the new one's
+        log.functional_before.append(result.functional[0])
         log.functional.append(self.functional())
         log.tau.append(0.0)
         log.retries.append(0)

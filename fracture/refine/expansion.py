@@ -25,6 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+
+from fracture.tolerances import tol
 from scipy.sparse.csgraph import breadth_first_order, maximum_flow
 
 # Integer capacities: the largest total flow (the sum of the source's arcs) is scaled to this.
@@ -137,7 +139,7 @@ def min_cut(n: int, p: np.ndarray, q: np.ndarray, cap: np.ndarray, source: np.nd
     rows = np.concatenate([p, np.full(n, s), np.arange(n)])
     cols = np.concatenate([q, np.arange(n), np.full(n, t)])
     caps = np.concatenate([cap, source, sink])
-    total = max(float(source.sum()), float(sink.sum()), float(caps.max(initial=0.0)), 1e-300)
+    total = max(float(source.sum()), float(sink.sum()), float(caps.max(initial=0.0)), tol.tiny)
     caps = np.floor(caps * (_FLOW_RANGE / total) + 0.5).astype(np.int64)
     keep = caps > 0
     G = sp.csr_matrix((caps[keep].astype(np.int32), (rows[keep], cols[keep])), shape=(n + 2, n + 2))

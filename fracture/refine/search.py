@@ -36,10 +36,13 @@ pieces is a labelling of space by piece. On the field grid:
    is crossed where psi is least along it, within the cell the cut resolved;
    a piece's edge to the outside where it leaves B; the sheets' rims on B
    then move along B, across their sheet, to where psi is least within a
-   cell), and the terraces of the grid are smoothed away (Taubin's lambda-mu smoothing
-   with the sheets' rims and junctions held). Each new vertex hangs in the
-   barycentric tree from the nearest coarse triangle between the same two
-   pieces, which carries the coarse animation to it (Section 5).
+   cell), the terraces of the grid are smoothed away (Taubin's lambda-mu
+   smoothing with the sheets' rims and junctions held), and each sheet is
+   coarsened to triangles of about two cells (:mod:`fracture.mesh.sheets`:
+   the flow refines where psi varies; a plane needs no grid-fine triangles).
+   Each new vertex hangs in the barycentric tree from the nearest coarse
+   triangle between the same two pieces, which carries the coarse animation
+   to it (Section 5).
 
 The result replaces the coarse surface only if it lowers the functional
 (the same quadrature as the flow's); the flow then refines and polishes it.
@@ -60,10 +63,12 @@ from fracture.mesh.exterior import Exterior
 from fracture.mesh.fracture_surface import FractureSurface
 from fracture.mesh.intersect import self_intersections
 from fracture.mesh.multilabel import contour_labels
+from fracture.mesh.sheets import coarsen_sheets
 from fracture.mesh.topology import barycentric_weights, face_frames, unique_edges
 from fracture.refine.cut_weights import OFFSETS, area_weights
 from fracture.refine.expansion import PottsGraph, expand
 from fracture.refine.flow import energy
+from fracture.tolerances import tol
 
 # Points just off each face of the coarse surface, per unit area (in cells^-2), that tell a node its side.
 _SIDE_DENSITY = 4.0
@@ -208,6 +213,7 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
     crossings = self_intersections(V, F)
     V = _uncrossed(V, _rim_to_least(V, F, B, pyramid.value, h), F, crossings)
     V = _uncrossed(V, _smooth(V, F), F, crossings)
+    V, F, sides = coarsen_sheets(V, F, sides, cell=h)
     tick("contour")
     base, travel = _tree_base(V, F, sides, V0, F0, S0)
     surface = FractureSurface(V, F, sides, n_coarse=len(V), base=base)
@@ -401,9 +407,11 @@ def _contour(sub: _BoxGrid, near, on_b, labels, B: Exterior, psi_at):
                 toward = ins == a_in  # still on the first end's side
                 lo, hi = np.where(toward, mid, lo), np.where(toward, hi, mid)
             t[out] = 0.5 * (lo + hi)
-        # no point near a node: the polygons of the tetrahedra around it would leave slivers (an edge of a
-        # hundredth of a cell) that the flow's collision tests cannot keep apart
-        return np.clip(t, _NODE_GAP, 1.0 - _NODE_GAP)
+        # no point between two pieces near a node: the polygons of the tetrahedra around it would leave
+        # slivers (an edge of a hundredth of a cell) that the flow's collision tests cannot keep apart (a
+        # crossing of B stays on B: no node lies on B, _ON_B)
+        t[~out] = np.clip(t[~out], _NODE_GAP, 1.0 - _NODE_GAP)
+        return t
 
     c = contour_labels(vol, sub.origin, sub.spacing, crossing, pieces_only=True, order_by_points=True)
     used, inv = np.unique(c.fracture_F, return_inverse=True)
@@ -441,7 +449,7 @@ def _rim_to_least(V: np.ndarray, F: np.ndarray, B: Exterior, psi_at, h: float, s
     nb = B.normals[tri]
     t = normal[rim] - np.einsum("ij,ij->i", normal[rim], nb)[:, None] * nb
     length = np.linalg.norm(t, axis=1)
-    ok = length > 1e-12
+    ok = length > tol.tiny
     rim, t = rim[ok], t[ok] / length[ok, None]
     u = np.linspace(-h, h, samples)
     X = (V[rim][:, None, :] + u[None, :, None] * t[:, None, :]).reshape(-1, 3)

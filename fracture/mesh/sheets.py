@@ -1,0 +1,91 @@
+"""Coarsening of the sheets of a conforming non-manifold fracture surface (each sheet: the triangles
+between one pair of pieces) with pymeshlab's quadric edge collapse, each sheet's boundary (its
+junctions with other sheets and its curve on B) kept vertex for vertex, so the sheets still meet each
+other and B exactly. Contoured sheets (a label grid's marching tetrahedra) have triangles of a
+fraction of a cell: Cell Fracture's flat sheets (bisector planes of its cells) need only a few
+triangles per boundary vertex, the global search's curved ones about one per two cells of area (the
+flow refines them where psi varies).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fracture.mesh.intersect import self_intersections
+from fracture.mesh.topology import unique_edges
+
+# A coarsened curved sheet keeps about one triangle per this many cells of its area.
+_CELLS_PER_TRIANGLE = 2.0
+
+
+def _simplify_sheets(X: np.ndarray, FF: np.ndarray, sides: np.ndarray, cell: float | None):
+    """Coarsen every sheet (module notes); returns the new points (``X`` followed by the sheets' new inner
+    vertices) and triangles."""
+    import pymeshlab
+
+    n = len(X)
+    out_X, out_F, out_S = [X], [np.zeros((0, 3), np.int64)], [np.zeros((0, 2), np.int64)]
+    pair = sides[:, 0] * (sides.max(initial=0) + 1) + sides[:, 1]
+    for k in np.unique(pair):
+        sel = np.flatnonzero(pair == k)
+        used, inv = np.unique(FF[sel], return_inverse=True)
+        local = inv.reshape(-1, 3)
+        e, c = unique_edges(local)
+        rim = np.unique(e[c == 1])
+        ms = pymeshlab.MeshSet()
+        ms.add_mesh(pymeshlab.Mesh(X[used], local))
+        target = max(2 * len(rim), 4)
+        if cell is not None:  # triangles of about two cells' area
+            T = X[used][local]
+            area = 0.5 * np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1).sum()
+            target = max(target, int(area / (_CELLS_PER_TRIANGLE * cell * cell)))
+        if target >= len(local):
+            out_X.append(np.zeros((0, 3)))
+            out_F.append(FF[sel])
+            out_S.append(sides[sel])
+            continue
+        ms.meshing_decimation_quadric_edge_collapse(
+            targetfacenum=target, preserveboundary=True, boundaryweight=1000.0, preservenormal=True,
+            preservetopology=True, planarquadric=cell is None, qualitythr=0.3, autoclean=False)
+        m = ms.current_mesh()
+        VD, FD = m.vertex_matrix(), m.face_matrix().astype(np.int64)
+        # kept vertices sit exactly where they were: back to their global ids, the others are new
+        lookup = {tuple(p): g for p, g in zip(X[used].tolist(), used.tolist())}
+        ids = np.empty(len(VD), np.int64)
+        fresh = []
+        for i, p in enumerate(VD.tolist()):
+            g = lookup.get(tuple(p))
+            if g is None:
+                g = n
+                n += 1
+                fresh.append(p)
+            ids[i] = g
+        kept_rim = np.isin(used[rim], ids)
+        if not kept_rim.all():
+            raise AssertionError("sheet simplification moved a boundary vertex")
+        out_X.append(np.asarray(fresh, np.float64).reshape(-1, 3))
+        out_F.append(ids[FD])
+        out_S.append(np.repeat(sides[sel[:1]], len(FD), axis=0))
+    return np.concatenate(out_X), np.concatenate(out_F), np.concatenate(out_S)
+
+
+def coarsen_sheets(X: np.ndarray, FF: np.ndarray, sides: np.ndarray, cell: float | None = None):
+    """Coarsened sheets (module notes), except for sheets whose coarsened triangles would cross another
+    sheet (or themselves): those keep their triangles. Without ``cell``, a few triangles per rim vertex
+    (flat sheets); with it, triangles of about two cells' area (curved ones). Returns the points (``X``
+    followed by the new inner vertices), triangles and sides."""
+    keep = np.zeros(len(FF), bool)
+    base = sides.max(initial=0) + 1
+    pair = sides[:, 0] * base + sides[:, 1]
+    before = self_intersections(X, FF)
+    for _ in range(4):
+        XS, FS, SS = _simplify_sheets(X, FF[~keep], sides[~keep], cell)
+        XS_all = XS
+        F_all = np.concatenate([FS, FF[keep]])
+        S_all = np.concatenate([SS, sides[keep]])
+        count, pairs = self_intersections(XS_all, F_all, report=100000)
+        if count <= before:
+            return XS_all, F_all, S_all
+        hit = np.unique(S_all[pairs.ravel()][:, 0] * base + S_all[pairs.ravel()][:, 1])
+        keep |= np.isin(pair, hit)
+    return X, FF, sides
