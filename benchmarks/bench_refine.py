@@ -33,7 +33,7 @@ PAPER = {"bunny": (174_000, 11.7), "branch": (123_000, 5.0), "wall": (208_000, 1
          "clay": (40_000, 3.0), "jello": (32_000, 3.0)}
 
 
-def run_scene(name: str, iterations: int | None, repeat: int, cores: int | None, out) -> None:
+def run_scene(name: str, iterations: int | None, repeat: int, cores: int | None, sets: list, out) -> None:
     import copy
     import os
 
@@ -42,7 +42,7 @@ def run_scene(name: str, iterations: int | None, repeat: int, cores: int | None,
 
     from fracture.mesh.intersect import self_intersections
 
-    over = ["input.frames=8", f"refine.max_triangles={PAPER[name][0]}"]
+    over = ["input.frames=8", f"refine.max_triangles={PAPER[name][0]}", *sets]
     if iterations is not None:
         over.append(f"refine.iterations={iterations}")
     cfg, cf, fs = scene_with_fields(name, over)
@@ -58,6 +58,7 @@ def run_scene(name: str, iterations: int | None, repeat: int, cores: int | None,
         runs.append((time.perf_counter() - t1, log.seconds.get("collisions", 0.0)))
     seconds, collisions = min(runs)
     out.put(dict(coarse=len(cf.F), refined=len(mesh.F), seconds=seconds, slowest=max(runs)[0], first=first,
+                 search=log.seconds.get("search", 0.0), searched=log.search is not None and log.search.surface is not None,
                  iterations=log.iterations, collisions=collisions, crossings=self_intersections(mesh.V, mesh.F),
                  peak_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0))
 
@@ -69,29 +70,31 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=1, help="refinements per scene and process; the fastest is shown")
     ap.add_argument("--rounds", type=int, default=1, help="runs of the whole scene list, a new process per scene each")
     ap.add_argument("--cores", type=int, default=None, help="pin each scene's process to this many cores (default: all)")
+    ap.add_argument("--set", action="append", default=[], help="config override, key=value (e.g. refine.search=none)")
     args = ap.parse_args()
     for flag in ("repeat", "rounds", "cores"):
         if getattr(args, flag) is not None and getattr(args, flag) < 1:
             ap.error(f"--{flag} must be at least 1, got {getattr(args, flag)}")
     t0 = time.perf_counter()
-    for _ in in_processes(run_scene, ["jello"], 2, 1, args.cores):  # compiles the kernels, or loads them from the cache
+    for _ in in_processes(run_scene, ["jello"], 2, 1, args.cores, args.set):  # compiles the kernels, or loads them from the cache
         pass
     print(f"(kernels ready in {time.perf_counter() - t0:.1f} s, not timed below)\n")
     best = {}
     for _ in range(args.rounds):
-        for name, r in in_processes(run_scene, args.scenes, args.iterations, args.repeat, args.cores):
+        for name, r in in_processes(run_scene, args.scenes, args.iterations, args.repeat, args.cores, args.set):
             old = best.get(name, r)
             best[name] = dict(min(old, r, key=lambda x: x["seconds"]), slowest=max(old["slowest"], r["slowest"]),
                               first=min(old["first"], r["first"]), peak_mb=max(old["peak_mb"], r["peak_mb"]))
             print(f"  {name}: {r['seconds']:.2f} s", file=sys.stderr, flush=True)
-    print("| scene | coarse tris | refined tris | iterations | seconds | of which collisions | tris/s "
-          "| paper tris/s | ratio to paper | self-intersections | peak MB | first call s | spread |")
-    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+    print("| scene | coarse tris | refined tris | iterations | seconds | of which search | of which collisions "
+          "| tris/s | paper tris/s | ratio to paper | self-intersections | peak MB | first call s | spread |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     for name, r in best.items():
         r["spread"] = r["slowest"] / r["seconds"]
         rate = r["refined"] / r["seconds"]
         paper_rate = PAPER[name][0] / PAPER[name][1]
-        print(f"| {name} | {r['coarse']} | {r['refined']} | {r['iterations']} | {r['seconds']:.2f} "
+        search = f"{r['search']:.2f}" + ("" if r["searched"] or not r["search"] else " (kept coarse)")
+        print(f"| {name} | {r['coarse']} | {r['refined']} | {r['iterations']} | {r['seconds']:.2f} | {search} "
               f"| {r['collisions']:.2f} | {rate:,.0f} | {paper_rate:,.0f} | {rate / paper_rate:.2f} "
               f"| {r['crossings']} | {r['peak_mb']:.0f} | {r['first']:.2f} | {r['spread']:.2f} |", flush=True)
 

@@ -27,13 +27,14 @@ def refine(cfg, cf, fs):
     """Refine the coarse fracture surface of ``cf``; returns the mesh and the iteration log."""
     import numpy as np
 
-    from fracture.refine.engine import Refiner
+    from fracture.refine.engine import Refiner, default_search
     from fracture.mesh.fracture_surface import FractureSurface
     from fracture.pipeline.typed import refine_params
 
     mesh = FractureSurface.from_coarse(cf.V, cf.F, cf.sides)
-    log = Refiner(mesh, fs.pyramid, cf.exterior_V, cf.exterior_F, refine_params(cfg),
-                  np.random.default_rng(cfg["seed"])).run()
+    params = refine_params(cfg)
+    log = Refiner(mesh, fs.pyramid, cf.exterior_V, cf.exterior_F, params, np.random.default_rng(cfg["seed"]),
+                  search=default_search(params, distance=fs.field("distance"))).run()
     return mesh, log
 
 

@@ -97,6 +97,9 @@ def _error(tmp_path, text, overrides=()):
     ("input: 3\n", "input", "expected a mapping"),
     ("name: ../../elsewhere\n", "name", "is not a plain name"),
     ("name: /tmp/elsewhere\n", "name", "is not a plain name"),
+    ("refine: {search: fast}\n", "refine.search", "got 'fast' (str), expected one of 'graphcut', 'none'"),
+    ("refine: {band: 0}\n", "refine.band", "expected a number in [1, 200]"),
+    ("refine: {core: .nan}\n", "refine.core", "expected a number"),
 ])
 def test_config_errors_name_file_key_given_and_expected(tmp_path, text, key, words):
     message, path = _error(tmp_path, text)

@@ -640,14 +640,16 @@ class Refiner:
         return self.log
 
 
-def default_search(params: RefineParams, distance: np.ndarray | None = None):
+def default_search(params: RefineParams, distance: np.ndarray | None = None, names: list[str] | None = None):
     """The search the parameters ask for, as the refiner's ``search`` seam (None for ``search: none``);
-    ``distance`` (optional) are the grid nodes' distances to the coarse surface, known to the fields."""
+    ``distance`` (optional) are the grid nodes' distances to the coarse surface, known to the fields,
+    ``names`` the pieces' names for its notes."""
     if params.search == "none":
         return None
 
     def search(mesh, pyramid, B):
-        return graph_cut_search(mesh, pyramid, B, params.band, params.tension, distance=distance, core=params.core)
+        return graph_cut_search(mesh, pyramid, B, params.band, params.tension, distance=distance, core=params.core,
+                                names=names)
 
     return search
 

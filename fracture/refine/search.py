@@ -112,12 +112,14 @@ class SearchResult:
 
 
 def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, tension: float,
-                     distance: np.ndarray | None = None, grain=None, core: float = 0.25) -> SearchResult:
+                     distance: np.ndarray | None = None, grain=None, core: float = 0.25,
+                     names: list[str] | None = None) -> SearchResult:
     """Search the band of ``band`` grid cells around ``mesh`` (the coarse surface) for the labelling of
     least weighted area (module notes).
 
     ``pyramid`` gives the grid and psi (level 0), shifted so its minimum is ``tension`` of its range;
-    ``core`` is the fraction of each piece's depth beyond which its nodes are kept;
+    ``core`` is the fraction of each piece's depth beyond which its nodes are kept; ``names`` the pieces'
+    names, for the notes;
     ``distance`` (optional) is the distance of every grid node to the coarse surface; ``grain``
     (optional) gives per node the 13 edge weights of an anisotropic strength
     (:meth:`~fields.grain.GrainField.edge_weights`).
@@ -172,7 +174,7 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
     missing = [c for c in range(n_pieces) if c in set(S0.ravel().tolist()) and not (coarse == c).any()]
     if missing:
         return SearchResult(None, seconds=seconds, notes=[
-            f"search: piece{'s' if len(missing) > 1 else ''} {', '.join(map(str, missing))} hold no grid node "
+            f"search: piece{'s' if len(missing) > 1 else ''} {_named(missing, names)} hold no grid node "
             "(thinner than a cell): the coarse surface is kept"])
 
     # 2. the cut
@@ -201,7 +203,7 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
     lost = [c for c in range(n_pieces) if (coarse == c).any() and not present[c]]
     if lost:
         return SearchResult(None, free_nodes=int(free.sum()), seconds=seconds, notes=[
-            f"search: piece{'s' if len(lost) > 1 else ''} {', '.join(map(str, lost))} would vanish; the coarse "
+            f"search: piece{'s' if len(lost) > 1 else ''} {_named(lost, names)} would vanish; the coarse "
             "surface is kept"])
     tick("pieces")
 
@@ -228,6 +230,10 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
         result.notes.append(f"search: the cut's surface does not lower the functional ({after:.6g} against the "
                             f"coarse {before:.6g}); the coarse surface is kept")
     return result
+
+
+def _named(pieces, names) -> str:
+    return ", ".join(repr(names[c]) if names is not None and c < len(names) else str(c) for c in pieces)
 
 
 # -- the band ---------------------------------------------------------------------------------------------

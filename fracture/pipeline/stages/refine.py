@@ -40,7 +40,7 @@ def refine_stage(ctx: RunContext) -> None:
     mesh = FractureSurface.from_coarse(cf.V, cf.F, cf.sides)
     BV, BF = ctx.products.exterior
     refiner = Refiner(mesh, fs.pyramid, BV, BF, params, np.random.default_rng(config.seed),
-                      search=default_search(params, distance=fs.field("distance")))
+                      search=default_search(params, distance=fs.field("distance"), names=cf.names))
     snaps = Snapshots() if config.refine.snapshots else None
     if snaps is not None:
         snaps.add(refiner)
