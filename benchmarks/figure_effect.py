@@ -75,13 +75,15 @@ def panel(ax, grid: Grid, zeta: np.ndarray, axis: int, surfaces, title: str, sol
     ax.set_yticks([])
 
 
-def sheet_panel(ax, kind: str, offset: float) -> None:
-    case = weak_sheet_case(kind, offset)
+def sheet_panel(ax, kind: str, offset: float, angle: float = 0.0, **params) -> None:
+    case = weak_sheet_case(kind, offset, angle=angle)
     pyramid = StrengthPyramid(case.grid, case.zeta, levels=5, sigma=1.0)
     mesh = FractureSurface.from_coarse(case.cut_V, case.cut_F, np.tile([0, 1], (len(case.cut_F), 1)))
-    Refiner(mesh, pyramid, case.BV, case.BF, RefineParams(max_triangles=20000), np.random.default_rng(0)).run()
+    Refiner(mesh, pyramid, case.BV, case.BF, RefineParams(max_triangles=20000, **params),
+            np.random.default_rng(0)).run()
+    what = f"sheet turned {angle:g} deg (search)" if angle else f"{kind} weak sheet"
     panel(ax, case.grid, case.zeta, 2, [(case.cut_V, case.cut_F), (mesh.V, mesh.F)],
-          f"{kind} weak sheet, cut {offset:g} voxels off")
+          f"{what}, cut {offset:g} voxels off")
 
 
 def scene_panel(ax, name: str, title: str, axis: int = 2) -> None:
@@ -106,7 +108,7 @@ def main(argv=None) -> None:
     scene_panel(fig.add_subplot(grid[0, :2]), "example", "example wall (one crack), mid-plane")
     scene_panel(fig.add_subplot(grid[0, 2:]), "wall", "collapsing wall (12 pieces), mid-plane")
     sheet_panel(fig.add_subplot(grid[1, 0]), "curved", 8.0)
-    sheet_panel(fig.add_subplot(grid[1, 1]), "tilted", 4.0)
+    sheet_panel(fig.add_subplot(grid[1, 1]), "turned", 4.0, angle=45.0, search="graphcut", band=24.0, core=0.5)
     scene_panel(fig.add_subplot(grid[1, 2]), "bunny", "marble bunny (7 pieces): soft veins dark")
     scene_panel(fig.add_subplot(grid[1, 3]), "branch", "branch, along its axis: soft core dark", axis=0)
     fig.tight_layout()
