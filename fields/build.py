@@ -9,7 +9,8 @@ import numpy as np
 
 from fields.grid import Grid, grid_shape_for_box
 from fields.pyramid import StrengthPyramid
-from fields.strength import strength_field
+from fields.grain import Grain
+from fields.strength import grain_of, strength_field
 from fields.stress import distance_to_surface, modified_strength, stress_from_distance
 
 
@@ -30,6 +31,8 @@ class FieldSet:
         Modified strength, ``strength_weight * zeta - stress_weight * xi``.
     pyramid : StrengthPyramid
         Levels of psi and the level-averaged gradient.
+    grain : Grain or None
+        The fibres of a grain layer (:mod:`fields.grain`).
     """
 
     grid: Grid
@@ -38,6 +41,7 @@ class FieldSet:
     xi: np.ndarray
     psi: np.ndarray
     pyramid: StrengthPyramid
+    grain: Grain | None = None
 
     def field(self, name: str) -> np.ndarray:
         """``zeta``, ``xi``, ``psi`` or ``distance`` by name."""
@@ -143,4 +147,4 @@ def build_fields(
     make = pyramids or (lambda name, g, values: StrengthPyramid(g, values, levels=levels, sigma=sigma))
     pyramid = StrengthPyramid.combine([(strength_weight, make("zeta", grid, zeta)), (-stress_weight, make("xi", grid, xi))])
     step("pyramid")
-    return FieldSet(grid, zeta, distance, xi, psi, pyramid)
+    return FieldSet(grid, zeta, distance, xi, psi, pyramid, grain_of(layers, (obj_lo, obj_hi)))

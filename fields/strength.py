@@ -155,6 +155,13 @@ def radial(U, frame, rng, *, axis, center, radius, inner, outer, exponent):
     return inner + (outer - inner) * np.minimum(r, 1.0) ** exponent
 
 
+def grain(U, frame, rng, *, fibres, axis, center, ratio):
+    """Grain (:mod:`fields.grain`): fibres along or around an axis that make a crack across them ``ratio``
+    times dearer than one along them. It adds nothing to zeta (its weight does not matter): the fields
+    take it out of the layers with :func:`grain_of`."""
+    return np.zeros(U.shape[0])
+
+
 def bricks(U, frame, rng, *, length_axis, height_axis, brick_length, brick_height, mortar, brick_strength,
            mortar_strength, interface_strength, interface_width, noise_contrast, noise_frequency):
     """Running-bond brick wall: strong bricks and mortar, weak interfaces (Figure 10).
@@ -312,6 +319,12 @@ KINDS: dict[str, tuple[Callable, dict[str, Spec]]] = {
         "noise_contrast": _p(0.05, **_STRENGTH),
         "noise_frequency": _p(6.0, lo=0.0, hi=400.0),
     }),
+    "grain": (grain, {
+        "fibres": _p("along", "str", choices=("along", "around"), doc="the fibres run along the axis or around it"),
+        "axis": _p("z", "str", choices=_AXES),
+        "center": _p(None, "vec3", nullable=True, doc="around: a point on the axis (unit coordinates); null: box centre"),
+        "ratio": _p(3.0, lo=1.0, hi=20.0, doc="cost of a crack across the fibres over one along them"),
+    }),
     "volume": (volume, {
         "path": _p(None, "path", doc=".npy file with a 3D array of strengths"),
         "bounds": _p(None, "bounds", nullable=True, doc="material-space box of the volume; null: the object's box"),
@@ -376,6 +389,23 @@ def strength_field(X: np.ndarray, bounds, layers: list, seed: int, normalize: bo
     if normalize:
         zeta = normalize01(zeta)
     return zeta
+
+
+def grain_of(layers: list, bounds):
+    """The :class:`~fields.grain.Grain` of the layers (None without a grain layer); more than one is
+    refused."""
+    from fields.grain import Grain
+
+    found = [(i, layer) for i, layer in enumerate(map(as_layer, layers)) if layer.kind == "grain"]
+    if not found:
+        return None
+    if len(found) > 1:
+        raise InputError(f"strength.layers[{found[1][0]}]: a second grain layer; expected at most one (the fibres "
+                         f"of layer {found[0][0]})")
+    _, layer = found[0]
+    frame = UnitFrame(*(np.asarray(b, np.float64) for b in bounds))
+    c = 0.5 * frame.extent if layer.center is None else np.asarray(layer.center, np.float64)
+    return Grain(float(layer.ratio), layer.fibres, np.eye(3)[_axis(layer.axis)], frame.to_material(c))
 
 
 def normalize01(values: np.ndarray) -> np.ndarray:

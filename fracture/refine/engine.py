@@ -87,7 +87,7 @@ from fracture.refine.collide import stop_collisions
 from fracture.refine.crossings_on_b import candidate_pairs, close_pairs
 from fracture.refine.fans import closed_vertices
 from fracture.refine.flips import flip_edges
-from fracture.refine.flow import energy, energy_gradient
+from fracture.refine.flow import energy, energy_gradient, face_terms
 from fracture.mesh.edges import edge_table, EdgeTable, row_edges
 from fracture.refine.order import spatial_order
 from fracture.mesh.fracture_surface import FractureSurface
@@ -158,13 +158,17 @@ class Refiner:
     another collision response, or for a test that blocks a vertex.
     ``search(mesh, pyramid, B) -> SearchResult`` is the global search before the
     flow (default: :func:`default_search` of the parameters; None: none).
+    ``grain`` (a :class:`fields.grain.Grain`) makes the functional the integral
+    of psi g(n): the flow, the splits and the step's acceptance use it (the
+    implicit area term takes each triangle's g(n) as a factor of its weight).
     """
 
     def __init__(self, mesh: FractureSurface, pyramid, BV: np.ndarray, BF: np.ndarray, params: RefineParams,
-                 rng: np.random.Generator, *, collisions=stop_collisions, search="default"):
+                 rng: np.random.Generator, *, collisions=stop_collisions, search="default", grain=None):
         self.mesh, self.pyramid, self.params, self.rng = mesh, pyramid, params, rng
+        self.grain = grain
         self.stop_collisions = collisions
-        self.search = default_search(params) if search == "default" else search
+        self.search = default_search(params, grain=grain) if search == "default" else search
         self.searched = False  # the search's surface replaced the coarse one
         self.h = float(np.min(pyramid.grid.spacing))
         self.on_b = tol.on_b * self.h  # a boundary vertex this close to B is on it
@@ -240,11 +244,11 @@ class Refiner:
 
     def functional(self) -> float:
         """E_s of the current surface: what the flow minimises (module notes)."""
-        return energy(self.mesh.V, self.mesh.F, self.vertex_field()[1] + self.offset)
+        return energy(self.mesh.V, self.mesh.F, self.vertex_field()[1] + self.offset, self.grain)
 
     def plain_energy(self) -> float:
-        """E(S) = integral of psi (level 0, unshifted) over the surface."""
-        return energy(self.mesh.V, self.mesh.F, self.vertex_field()[0])
+        """E(S) = integral of psi (level 0, unshifted; times g(n) with a grain) over the surface."""
+        return energy(self.mesh.V, self.mesh.F, self.vertex_field()[0], self.grain)
 
     # -- memory order -----------------------------------------------------------------------
     def _renumber(self, vorder: np.ndarray, forder: np.ndarray | None = None) -> None:
@@ -411,7 +415,7 @@ class Refiner:
         m = self.mesh
         _, psibar, grad = self.vertex_field()
         w = psibar + self.offset
-        dE, area = energy_gradient(m.V, m.F, w, grad)
+        dE, area = energy_gradient(m.V, m.F, w, grad, self.grain)
         v = -dE / np.maximum(area, tol.tiny)[:, None]
         rows = table.boundary_rows
         if not len(rows):
@@ -439,7 +443,7 @@ class Refiner:
         v, w, area, boundary, frames = self._velocity(table)
         clock = log.tick("flow", clock)
         plan = plan_splits(m.V, m.F, table, v, w, self.step.start, self.field, self.rng, near=self.near,
-                           far=p.split_distance * self.h, off_b=self.off_b,
+                           far=p.split_distance * self.h, off_b=self.off_b, grain=self.grain,
                            budget=p.max_triangles - p.max_triangles // _CHORD_RESERVE - len(m.F))
         self.full |= plan.full
         made = plan.apply(m)
@@ -461,8 +465,11 @@ class Refiner:
             v, w, area, boundary, frames = self._velocity(table)
             clock = log.tick("flow", clock)
         s.velocity = v
-        before = energy(m.V, m.F, w)
+        before = energy(m.V, m.F, w, self.grain)
         wf = w[m.F].mean(axis=1)
+        if self.grain is not None:  # the implicit area term: each triangle's weight times its g(n)
+            A, G, _ = face_terms(m.V, m.F, self.grain)
+            wf = wf * G / np.maximum(A, tol.tiny)
         held = s.hold > 0
         s.hold = np.maximum(s.hold - 1, 0)
         closed = closed_vertices(m.F, len(m.V), table)  # for the collision step and the flips
@@ -488,7 +495,7 @@ class Refiner:
             fresh = self.pyramid.coarse_field(self.first, trial[went], self.count)
             psibar1 = s.psibar.copy()
             psibar1[went] = fresh[1]
-            value = energy(trial, m.F, psibar1 + self.offset)
+            value = energy(trial, m.F, psibar1 + self.offset, self.grain)
             clock = log.tick("step", clock)
             if value <= before + tol.functional_rise * abs(before):
                 hit, _, grid = self.stop_collisions(m.V, trial, m.F, p.thickness * self.h, table, return_grid=True,
@@ -498,7 +505,7 @@ class Refiner:
                     moved = (trial[went] != m.V[went]).any(axis=1)
                     went, fresh = went[moved], tuple(f[moved] for f in fresh)
                     psibar1[hit] = s.psibar[hit]
-                    value = energy(trial, m.F, psibar1 + self.offset)
+                    value = energy(trial, m.F, psibar1 + self.offset, self.grain)
                     clock = log.tick("step", clock)
             if value <= before + tol.functional_rise * abs(before):
                 X1, after, stopped = trial, value, hit
@@ -640,16 +647,17 @@ class Refiner:
         return self.log
 
 
-def default_search(params: RefineParams, distance: np.ndarray | None = None, names: list[str] | None = None):
+def default_search(params: RefineParams, distance: np.ndarray | None = None, names: list[str] | None = None,
+                   grain=None):
     """The search the parameters ask for, as the refiner's ``search`` seam (None for ``search: none``);
     ``distance`` (optional) are the grid nodes' distances to the coarse surface, known to the fields,
-    ``names`` the pieces' names for its notes."""
+    ``names`` the pieces' names for its notes, ``grain`` the fibres of an anisotropic strength."""
     if params.search == "none":
         return None
 
     def search(mesh, pyramid, B):
         return graph_cut_search(mesh, pyramid, B, params.band, params.tension, distance=distance, core=params.core,
-                                names=names)
+                                names=names, grain=grain)
 
     return search
 

@@ -139,7 +139,9 @@ def min_cut(n: int, p: np.ndarray, q: np.ndarray, cap: np.ndarray, source: np.nd
     rows = np.concatenate([p, np.full(n, s), np.arange(n)])
     cols = np.concatenate([q, np.arange(n), np.full(n, t)])
     caps = np.concatenate([cap, source, sink])
-    total = max(float(source.sum()), float(sink.sum()), float(caps.max(initial=0.0)), tol.tiny)
+    total = max(float(source.sum()), float(sink.sum()), float(caps.max(initial=0.0)))
+    if not total > tol.tiny:  # nothing costs anything: every node may stay on the source's side
+        return np.zeros(n, bool)
     caps = np.floor(caps * (_FLOW_RANGE / total) + 0.5).astype(np.int64)
     keep = caps > 0
     G = sp.csr_matrix((caps[keep].astype(np.int32), (rows[keep], cols[keep])), shape=(n + 2, n + 2))

@@ -18,6 +18,11 @@ in-plane gradient it vanishes, as the paper notes. The sum runs over every
 triangle at a vertex, however many sheets meet there, so vertices on
 non-manifold junctions move once and consistently for every component.
 
+With a grain (:mod:`fields.grain`) a triangle's area ``A_j`` becomes its
+anisotropic area ``A_j g(n_j)`` and ``n_j`` in ``dA_j/dx_i`` becomes
+``m_j = M n_j / g(n_j)``, the gradient of the anisotropic area in the area
+vector: the same sums with two per-triangle terms (:func:`face_terms`).
+
 Section 4.4 moves a sample point ``p`` inside a triangle by the same Eq. 3
 with the triangle as its neighbourhood: ``p`` splits it into three triangles
 and the sum runs over them. One compiled helper, :func:`_corner_term`, gives a
@@ -50,16 +55,17 @@ def _corner_term(area, pbar, nx, ny, nz, ex, ey, ez, gx, gy, gz):
 
 
 @numba.njit(cache=True)
-def _energy_gradient(V, F, psi, grad):
+def _energy_gradient(V, F, psi, grad, A, G, N):
+    # A: the triangles' areas (the vertices' masses), G their (anisotropic) areas in the energy, N the
+    # gradients of those in the area vector (unit normals without a grain)
     n = V.shape[0]
     dE = np.zeros((n, 3))
     area = np.zeros(n)
-    A, N = face_geometry(V, F)
     for f in range(F.shape[0]):
         pb = (psi[F[f, 0]] + psi[F[f, 1]] + psi[F[f, 2]]) / 3.0
         for k in range(3):
             i, j, l = F[f, k], F[f, (k + 1) % 3], F[f, (k + 2) % 3]
-            x, y, z = _corner_term(A[f], pb, N[f, 0], N[f, 1], N[f, 2], V[l, 0] - V[j, 0], V[l, 1] - V[j, 1],
+            x, y, z = _corner_term(G[f], pb, N[f, 0], N[f, 1], N[f, 2], V[l, 0] - V[j, 0], V[l, 1] - V[j, 1],
                                    V[l, 2] - V[j, 2], grad[i, 0], grad[i, 1], grad[i, 2])
             dE[i, 0] += x
             dE[i, 1] += y
@@ -69,8 +75,7 @@ def _energy_gradient(V, F, psi, grad):
 
 
 @numba.njit(cache=True)
-def _energy(V, F, psi):
-    A, _ = face_geometry(V, F)
+def _energy(F, psi, A):
     total = 0.0
     for f in range(F.shape[0]):
         total += A[f] * (psi[F[f, 0]] + psi[F[f, 1]] + psi[F[f, 2]]) / 3.0
@@ -78,7 +83,8 @@ def _energy(V, F, psi):
 
 
 @numba.njit(cache=True)
-def _sample_displacement(P, T, psi_p, grad_p, psi_T, dt):
+def _sample_displacement(P, T, psi_p, grad_p, psi_T, dt, G, M):
+    # G, M: per sample, its triangle's grain factor g(n) and the direction m (module notes); M zero: none
     k = P.shape[0]
     out = np.zeros((k, 3))
     for s in range(k):
@@ -88,6 +94,8 @@ def _sample_displacement(P, T, psi_p, grad_p, psi_T, dt):
         if t == 0.0:
             continue
         nx, ny, nz = n[0] / t, n[1] / t, n[2] / t
+        if M[s, 0] != 0.0 or M[s, 1] != 0.0 or M[s, 2] != 0.0:
+            nx, ny, nz = M[s, 0], M[s, 1], M[s, 2]
         gx = gy = gz = 0.0
         area = 0.0
         for c in range(3):  # sub-triangle with p in place of corner c; its edge opposite p is T's edge opposite c
@@ -97,7 +105,7 @@ def _sample_displacement(P, T, psi_p, grad_p, psi_T, dt):
             sub = 0.5 * vec.norm(vec.cross(bb, cc))
             pb = (psi_p[s] + psi_T[s, b] + psi_T[s, e]) / 3.0
             edge = vec.sub(cc, bb)
-            x, y, z = _corner_term(sub, pb, nx, ny, nz, edge[0], edge[1], edge[2],
+            x, y, z = _corner_term(sub * G[s], pb, nx, ny, nz, edge[0], edge[1], edge[2],
                                    grad_p[s, 0], grad_p[s, 1], grad_p[s, 2])
             gx += x
             gy += y
@@ -108,7 +116,17 @@ def _sample_displacement(P, T, psi_p, grad_p, psi_T, dt):
     return out
 
 
-def energy_gradient(V: np.ndarray, F: np.ndarray, psi: np.ndarray, grad: np.ndarray
+def face_terms(V: np.ndarray, F: np.ndarray, grain=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per triangle: its area, its area in the energy (``A g(n)`` with a grain, else ``A``) and that
+    area's gradient direction in the area vector (``m``, else the unit normal)."""
+    A, N = face_geometry(*_prepare(V, F))
+    if grain is None or not len(F):
+        return A, A, N
+    g, m = grain.metric(N, V[F].mean(axis=1))
+    return A, A * g, np.ascontiguousarray(m)
+
+
+def energy_gradient(V: np.ndarray, F: np.ndarray, psi: np.ndarray, grad: np.ndarray, grain=None
                     ) -> tuple[np.ndarray, np.ndarray]:
     """dE/dx_i and the barycentric vertex areas.
 
@@ -119,6 +137,7 @@ def energy_gradient(V: np.ndarray, F: np.ndarray, psi: np.ndarray, grad: np.ndar
         psi at the vertices.
     grad : (n, 3) float
         grad psi at the vertices.
+    grain : :class:`fields.grain.Grain`, optional
 
     Returns
     -------
@@ -126,22 +145,22 @@ def energy_gradient(V: np.ndarray, F: np.ndarray, psi: np.ndarray, grad: np.ndar
     area : (n,) float
         Barycentric area of every vertex (0 for unused vertices).
     """
-    return _energy_gradient(*_prepare(V, F), _f64(psi), _f64(grad))
+    return _energy_gradient(*_prepare(V, F), _f64(psi), _f64(grad), *face_terms(V, F, grain))
 
 
-def velocity(V: np.ndarray, F: np.ndarray, psi: np.ndarray, grad: np.ndarray) -> np.ndarray:
+def velocity(V: np.ndarray, F: np.ndarray, psi: np.ndarray, grad: np.ndarray, grain=None) -> np.ndarray:
     """Eq. 3: the velocity ``-dE/dx_i / A_i`` of every vertex, ``(n, 3)``."""
-    dE, area = energy_gradient(V, F, psi, grad)
+    dE, area = energy_gradient(V, F, psi, grad, grain)
     return -dE / np.maximum(area, _TINY)[:, None]
 
 
-def energy(V: np.ndarray, F: np.ndarray, psi: np.ndarray) -> float:
-    """E(S): psi integrated over the surface (linear in each triangle)."""
-    return float(_energy(*_prepare(V, F), _f64(psi)))
+def energy(V: np.ndarray, F: np.ndarray, psi: np.ndarray, grain=None) -> float:
+    """E(S): psi (times the grain's g(n), with one) integrated over the surface (linear in each triangle)."""
+    return float(_energy(np.ascontiguousarray(F, np.int64), _f64(psi), face_terms(V, F, grain)[1]))
 
 
 def sample_displacement(P: np.ndarray, T: np.ndarray, psi_p: np.ndarray, grad_p: np.ndarray,
-                        psi_T: np.ndarray, dt: float) -> np.ndarray:
+                        psi_T: np.ndarray, dt: float, grain=None) -> np.ndarray:
     """Displacement in one step of points inside triangles, each with its triangle as neighbourhood.
 
     The point ``p`` splits its triangle ``(a, b, c)`` into ``(p, b, c)``,
@@ -152,8 +171,17 @@ def sample_displacement(P: np.ndarray, T: np.ndarray, psi_p: np.ndarray, grad_p:
     P : (k, 3) sample points; T : (k, 3, 3) corners of their triangles.
     psi_p, grad_p : psi and grad psi at the samples.
     psi_T : (k, 3) psi at the corners.
+    grain : :class:`fields.grain.Grain`, optional
     """
-    return _sample_displacement(_f64(P), _f64(T), _f64(psi_p), _f64(grad_p), _f64(psi_T), float(dt))
+    k = len(P)
+    G, M = np.ones(k), np.zeros((k, 3))
+    if grain is not None and k:
+        n = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
+        length = np.linalg.norm(n, axis=1)
+        ok = length > 0.0
+        G[ok], M[ok] = grain.metric(n[ok] / length[ok, None], T[ok].mean(axis=1))
+    return _sample_displacement(_f64(P), _f64(T), _f64(psi_p), _f64(grad_p), _f64(psi_T), float(dt), G,
+                                np.ascontiguousarray(M))
 
 
 def _f64(a):

@@ -107,7 +107,8 @@ def split_folds(T: np.ndarray, k: np.ndarray, Q: np.ndarray, N: np.ndarray) -> n
     return (np.einsum("ij,ij->i", n1, N) <= 0.0) | (np.einsum("ij,ij->i", n2, N) <= 0.0)
 
 
-def plan_splits(V, F, table: EdgeTable, v, psi, tau, field, rng, *, near, far, budget, off_b) -> SplitPlan:
+def plan_splits(V, F, table: EdgeTable, v, psi, tau, field, rng, *, near, far, budget, off_b,
+                grain=None) -> SplitPlan:
     """The split plan of one round (module notes).
 
     Parameters
@@ -146,7 +147,7 @@ def plan_splits(V, F, table: EdgeTable, v, psi, tau, field, rng, *, near, far, b
     bary[rows, (k_edge[rows] + 1) % 3] = t[rows]
     P = np.einsum("fk,fkc->fc", bary, T)
     psi_P, grad_P = field(P)
-    d = sample_displacement(P, T, psi_P, grad_P, psi[F], tau)
+    d = sample_displacement(P, T, psi_P, grad_P, psi[F], tau, grain)
     want, _ = split_wanted(T, P, bary, d, v, F, tau, k_edge, has_edge, near * near, far, _MIN_QUALITY)
     beside = None
     if len(off_b):

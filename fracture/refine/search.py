@@ -121,8 +121,8 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
     ``core`` is the fraction of each piece's depth beyond which its nodes are kept; ``names`` the pieces'
     names, for the notes;
     ``distance`` (optional) is the distance of every grid node to the coarse surface; ``grain``
-    (optional) gives per node the 13 edge weights of an anisotropic strength
-    (:meth:`~fields.grain.GrainField.edge_weights`).
+    (optional, a :class:`fields.grain.Grain`) makes the cost of a surface element depend on its normal
+    (per node the edge weights of :meth:`~fields.grain.Grain.edge_weights`).
     """
     clock = time.perf_counter()
     seconds: dict[str, float] = {}
@@ -178,7 +178,8 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
             "(thinner than a cell): the coarse surface is kept"])
 
     # 2. the cut
-    graph = _graph(sub, near, keep, shifted[box].ravel(), grain, box)
+    graph = _graph(sub, near, keep, shifted[box].ravel(), None if grain is None else
+                   grain.edge_weights(sub.spacing, P[near]))
     free = ~keep
     reach_of = _reach(P[near], V0, F0, S0, band * h + h)
     labels, log = expand(graph, coarse, free, reach_of, cycles=_CYCLES)
@@ -219,8 +220,8 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
     tick("contour")
     base, travel = _tree_base(V, F, sides, V0, F0, S0)
     surface = FractureSurface(V, F, sides, n_coarse=len(V), base=base)
-    before = energy(V0, F0, pyramid.value(V0) + (tension * span - lowest))
-    after = energy(V, F, pyramid.value(V) + (tension * span - lowest))
+    before = energy(V0, F0, pyramid.value(V0) + (tension * span - lowest), grain)
+    after = energy(V, F, pyramid.value(V) + (tension * span - lowest), grain)
     tick("tree")
     result = SearchResult(surface, travel=travel, cell=h, free_nodes=int(free.sum()), labels_changed=int((labels != coarse).sum()),
                           cut_energy=(log.energy[0], graph.energy(labels)), functional=(before, after),
@@ -299,14 +300,15 @@ def _depths(B: Exterior, V0, F0, side_of, n_pieces) -> np.ndarray:
     return depth
 
 
-def _graph(sub: _BoxGrid, near, keep, shifted, grain, box) -> PottsGraph:
+def _graph(sub: _BoxGrid, near, keep, shifted, node_weights) -> PottsGraph:
     """The 26-neighbour edges between nodes of the band (at least one of them free), weighted by the shifted
-    psi at their middle times the area weight of their offset (or the grain's, per node)."""
+    psi where the contour can cross them times the area weight of their offset (or, with a grain, the mean
+    of their nodes' ``node_weights`` for it)."""
     index = np.full(sub.size, -1, np.int64)
     index[near] = np.arange(len(near))
     index = index.reshape(sub.shape)
     free = ~keep
-    w_area = area_weights(sub.spacing) if grain is None else None
+    w_area = area_weights(sub.spacing) if node_weights is None else None
     psi = shifted[near]
     ps, qs, ws = [], [], []
     for k, o in enumerate(OFFSETS):
@@ -316,10 +318,10 @@ def _graph(sub: _BoxGrid, near, keep, shifted, grain, box) -> PottsGraph:
         a, b = a[sel], b[sel]
         sel = free[a] | free[b]
         a, b = a[sel], b[sel]
-        if grain is None:
+        if node_weights is None:
             w = w_area[k]
         else:
-            w = 0.5 * (grain(box, near[a], k) + grain(box, near[b], k))
+            w = 0.5 * (node_weights[a, k] + node_weights[b, k])
         ps.append(a)
         qs.append(b)
         # psi where the contour can put the surface on this edge: linear between the nodes, the least of

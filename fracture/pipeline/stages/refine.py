@@ -39,8 +39,9 @@ def refine_stage(ctx: RunContext) -> None:
     params = refine_params(config)
     mesh = FractureSurface.from_coarse(cf.V, cf.F, cf.sides)
     BV, BF = ctx.products.exterior
-    refiner = Refiner(mesh, fs.pyramid, BV, BF, params, np.random.default_rng(config.seed),
-                      search=default_search(params, distance=fs.field("distance"), names=cf.names))
+    grain = getattr(fs, "grain", None)
+    refiner = Refiner(mesh, fs.pyramid, BV, BF, params, np.random.default_rng(config.seed), grain=grain,
+                      search=default_search(params, distance=fs.field("distance"), names=cf.names, grain=grain))
     snaps = Snapshots() if config.refine.snapshots else None
     if snaps is not None:
         snaps.add(refiner)
