@@ -223,7 +223,7 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
                                                           "surface is kept"])
     crossings = self_intersections(V, F)
     V = _uncrossed(V, _rim_to_least(V, F, B, pyramid.value, h), F, crossings)
-    V = _uncrossed(V, _smooth(V, F), F, crossings)
+    V = _uncrossed(V, _smooth(V, F, B), F, crossings)
     V, F, sides = coarsen_sheets(V, F, sides, cell=h)
     tick("contour")
     base, travel = _tree_base(V, F, sides, V0, F0, S0)
@@ -517,24 +517,37 @@ def _uncrossed(V: np.ndarray, X: np.ndarray, F: np.ndarray, crossings: int, roun
     return X if self_intersections(X, F) <= crossings else V
 
 
-def _smooth(V: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """Taubin's lambda-mu smoothing of the contour's terraces with the rims (boundary edges) and junctions
-    (edges of three or more triangles) held (:func:`_uncrossed` takes back what makes triangles cross).
+def _smooth(V: np.ndarray, F: np.ndarray, B: Exterior) -> np.ndarray:
+    """Taubin's lambda-mu smoothing of the contour's terraces, the sheets' feature curves (rims on B:
+    boundary edges; junctions: edges of three or more triangles) smoothed along themselves (a vertex on one
+    curve over its two neighbours on it, a rim vertex then put back on B), the points where curves meet
+    held (:func:`_uncrossed` takes back what makes triangles cross).
 
     Written here because the surface is non-manifold along its junctions, which pymeshlab's and libigl's
     smoothing filters do not take."""
     e, count = unique_edges(F)
-    held = np.zeros(len(V), bool)
-    held[e[count != 2].ravel()] = True
+    feature = count != 2
+    on_feature = np.zeros(len(V), bool)
+    on_feature[e[feature].ravel()] = True
+    # a vertex off the curves takes all its neighbours; one on them, only its neighbours along them
     both = np.concatenate([e, e[:, ::-1]])
+    keep = ~on_feature[both[:, 0]] | np.concatenate([feature, feature])
+    both = both[keep]
     A = sp.csr_matrix((np.ones(len(both)), (both[:, 0], both[:, 1])), shape=(len(V), len(V)))
+    # a vertex on the curves with other than two neighbours along them is where curves meet (or end)
+    held = on_feature & (np.bincount(e[feature].ravel(), minlength=len(V)) != 2)
     deg = np.asarray(A.sum(axis=1)).ravel()
     move = (~held) & (deg > 0)
+    rim = np.zeros(len(V), bool)
+    rim[e[count == 1].ravel()] = True
+    rim &= move
     X = V.copy()
     for _ in range(_SMOOTH_PASSES):
         for f in (_LAMBDA, _MU):
             lap = (A @ X) / np.maximum(deg, 1)[:, None] - X
             X[move] += f * lap[move]
+        if rim.any():
+            X[rim] = B.closest(X[rim])[2]
     return X
 
 
