@@ -75,16 +75,24 @@ def expand(graph: PottsGraph, labels: np.ndarray, free: np.ndarray, reach: dict 
         log.moves = 1
         log.energy.append(graph.energy(labels))
         return labels, log
+    # a label's move is tried again only if a node it reaches changed since its last try: the move sees
+    # only those nodes, the labels of their neighbours and the weights, so it would change nothing
+    step, changed_at, tried_at = 0, np.full(graph.n, -1, np.int64), {}
     for _ in range(cycles):
         changed = False
         for a in np.unique(labels):
-            nodes = every if reach is None else np.asarray(reach.get(int(a), every))
-            nodes = nodes[free[nodes] & (labels[nodes] != a)]
+            region = every if reach is None else np.asarray(reach.get(int(a), every))
+            if int(a) in tried_at and (not len(region) or changed_at[region].max() < tried_at[int(a)]):
+                continue
+            nodes = region[free[region] & (labels[region] != a)]
+            step += 1
+            tried_at[int(a)] = step
             if not len(nodes):
                 continue
             switch = _move(graph, labels, nodes, int(a))
             if switch.any():
                 labels[nodes[switch]] = a
+                changed_at[nodes[switch]] = step
                 changed = True
                 log.moves += 1
         log.energy.append(graph.energy(labels))
