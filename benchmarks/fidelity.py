@@ -74,21 +74,23 @@ def main(argv=None) -> None:
     ap.add_argument("--no-sheets", action="store_true")
     args = ap.parse_args(argv)
     if not args.sheets_only:
-        print("| scene | search | weak 10 % | weak 20 % | weak 30 % | mean zeta | mean psi | distance mean (cells) "
-              "| distance p90 | area refined / coarse | functional | triangles | iterations | seconds (search) |")
-        print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+        print("| scene | search | weak 10 % | weak 20 % | weak 30 % | strong 10 % | mean zeta | mean psi "
+              "| distance mean (cells) | distance p90 | area refined / coarse | functional | triangles | iterations "
+              "| seconds (search) |")
+        print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
         for name in args.scenes:
             for mode in args.search:
                 r = scene_row(name, args.set + [f"refine.search={mode}"])
                 if mode == args.search[0]:
                     f = r["coarse"]
                     print(f"| {name} | coarse | {100 * f['weak_share_10']:.1f} | {100 * f['weak_share_20']:.1f} "
-                          f"| {100 * f['weak_share_30']:.1f} | {f['mean_zeta']:.3f} | {f['mean_psi']:.3f} "
-                          "| | | | | | | |", flush=True)
+                          f"| {100 * f['weak_share_30']:.1f} | {100 * f['strong_share_10']:.1f} | {f['mean_zeta']:.3f} "
+                          f"| {f['mean_psi']:.3f} | | | | | | | |", flush=True)
                 f = r["refined"]
                 label = mode if mode == "none" or r["searched"] else f"{mode} (kept coarse)"
                 print(f"| {name} | {label} | {100 * f['weak_share_10']:.1f} | {100 * f['weak_share_20']:.1f} "
-                      f"| {100 * f['weak_share_30']:.1f} | {f['mean_zeta']:.3f} | {f['mean_psi']:.3f} "
+                      f"| {100 * f['weak_share_30']:.1f} | {100 * f['strong_share_10']:.1f} | {f['mean_zeta']:.3f} "
+                      f"| {f['mean_psi']:.3f} "
                       f"| {f['distance_mean']:.2f} | {f['distance_p90']:.2f} | {r['area_ratio']:.3f} "
                       f"| {r['functional']:.5g} | {r['triangles']} | {r['iterations']} "
                       f"| {r['seconds']:.1f} ({r['search_seconds']:.2f}) |", flush=True)

@@ -7,6 +7,8 @@ material (marble veins, wood grain, brick-mortar boundaries, Figs. 1, 4, 9,
 * ``weak_share[q]``: the share of the surface's area where zeta is below its
   ``q``-th percentile *inside the object* (so 20 % of the object's volume is
   "the weakest 20 %", and a surface placed at random scores about ``q``);
+* ``strong_share_10``: the share where zeta is above its 90th percentile: in
+  the hardest material (the Jell-O's fruit cubes, the bricks' cores);
 * mean zeta and mean psi over the surface (area-weighted);
 * distances from the surface to another (the coarse one) in grid cells: mean
   and 90th percentile.
@@ -28,7 +30,7 @@ from fields.stress import distance_to_surface
 from fracture.mesh.exterior import Exterior
 from fracture.io.ply import read_ply
 
-PERCENTILES = (10, 20, 30)
+PERCENTILES = (10, 20, 30, 90)
 
 
 def area_samples(V: np.ndarray, F: np.ndarray, count: int = 20000, seed: int = 0) -> np.ndarray:
@@ -64,7 +66,9 @@ def surface_figures(V, F, grid: Grid, zeta: np.ndarray, thresholds: dict[int, fl
     """
     P = area_samples(np.asarray(V, np.float64), np.asarray(F, np.int64), count)
     z = trilinear(grid, zeta, P)
-    out = {f"weak_share_{q}": float(np.mean(z < t)) for q, t in thresholds.items()}
+    out = {f"weak_share_{q}": float(np.mean(z < t)) for q, t in thresholds.items() if q < 50}
+    if 90 in thresholds:
+        out["strong_share_10"] = float(np.mean(z > thresholds[90]))
     out["mean_zeta"] = float(z.mean())
     if psi is not None:
         out["mean_psi"] = float(trilinear(grid, psi, P).mean())
