@@ -217,7 +217,7 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
     tick("pieces")
 
     # 4. the surface
-    V, F, sides = _contour(sub, near, on_b, labels, B, pyramid.value)
+    V, F, sides = _contour(sub, near, labels, B, pyramid.value)
     if not len(F):
         return SearchResult(None, seconds=seconds, notes=["search: the cut left no fracture surface; the coarse "
                                                           "surface is kept"])
@@ -418,20 +418,15 @@ def _mend(sub: _BoxGrid, near, labels, keep) -> tuple[np.ndarray, int]:
 
 
 # -- the surface -------------------------------------------------------------------------------------------
-def _contour(sub: _BoxGrid, near, on_b, labels, B: Exterior, psi_at):
-    """Fracture triangles between the labels (module notes); the box's nodes off the band take the label of
-    the nearest band node (they lie in the middle of one piece), those outside B label 0."""
-    known = np.zeros(sub.size, bool)
-    known[near] = True
+def _contour(sub: _BoxGrid, near, labels, B: Exterior, psi_at):
+    """Fracture triangles between the labels (module notes). Only the band's nodes carry their pieces; the
+    rest of the box is label 0, like the outside: the sheets lie within the band, and only tetrahedra with
+    two pieces are contoured, so no sheet meets such a node (a piece's label given to the nodes beyond the
+    band by their nearest band node would be wrong across a gap of the outside, in a concave object, and
+    make sheets there)."""
     vol = np.zeros(sub.size, np.int64)
     vol[near] = labels + 1
     vol = vol.reshape(sub.shape)
-    _, nearest = ndimage.distance_transform_edt(~known.reshape(sub.shape), return_indices=True)
-    filled = vol[tuple(nearest)]
-    inside = B.inside(sub.points())
-    inside[on_b] = False
-    inside = inside.reshape(sub.shape)
-    vol = np.where(known.reshape(sub.shape), vol, np.where(inside, filled, 0))
 
     def crossing(P0, P1, la, lb):
         out = (la == 0) | (lb == 0)
