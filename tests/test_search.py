@@ -109,3 +109,15 @@ def test_the_viewer_names_the_searched_step():
         "iteration 0 / 2 (coarse)", "iteration 1 / 2 (searched)", "iteration 2 / 2 (polished)"]
     flow = SimpleNamespace(energy=[1.0, 0.5], stages=[3, 3], iterations=[faces] * 2)
     assert iteration_caption(flow, 1).startswith("iteration 1 / 1, 4 triangles")
+
+
+def test_moved_vertices_that_meet_another_go_back():
+    from fracture.refine.search import _apart
+
+    V = np.array([[0.0, 0, 0], [1.0, 0, 0], [0.0, 1, 0], [5.0, 5, 5]])
+    X = V.copy()
+    X[0] = [1.0, 0, 0]  # moved onto vertex 1 (two rims put on one point of a crease of B)
+    X[3] = [4.0, 5, 5]  # moved, apart from every other
+    out = _apart(V, X, h=0.1)
+    np.testing.assert_array_equal(out[0], V[0])
+    np.testing.assert_array_equal(out[3], X[3])

@@ -88,6 +88,8 @@ _SMOOTH_PASSES = 30
 _LAMBDA, _MU = 0.5, -0.53
 # Crossings keep this fraction of their edge from its nodes.
 _NODE_GAP = 0.15
+# Moved contour vertices keep this far from every other vertex (cells).
+_APART = 1e-3
 # Nodes closer than this to B (cells) count as outside.
 _ON_B = 0.05
 # Cycles of expansion moves over the pieces (the first does most: on the collapsing wall the next two lower
@@ -222,8 +224,8 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
         return SearchResult(None, seconds=seconds, notes=["search: the cut left no fracture surface; the coarse "
                                                           "surface is kept"])
     crossings = self_intersections(V, F)
-    V = _uncrossed(V, _rim_to_least(V, F, B, pyramid.value, h), F, crossings)
-    V = _uncrossed(V, _smooth(V, F, B), F, crossings)
+    V = _uncrossed(V, _apart(V, _rim_to_least(V, F, B, pyramid.value, h), h), F, crossings)
+    V = _uncrossed(V, _apart(V, _smooth(V, F, B), h), F, crossings)
     V, F, sides = coarsen_sheets(V, F, sides, cell=h)
     tick("contour")
     base, travel = _tree_base(V, F, sides, V0, F0, S0)
@@ -494,6 +496,23 @@ def _rim_to_least(V: np.ndarray, F: np.ndarray, B: Exterior, psi_at, h: float, s
     out = V.copy()
     out[rim] = X.reshape(len(rim), samples, 3)[np.arange(len(rim)), best]
     return out
+
+
+def _apart(V: np.ndarray, X: np.ndarray, h: float) -> np.ndarray:
+    """``X`` (moved vertices of ``V``) with the moved vertices that came within :data:`_APART` cells of
+    another vertex back where they were: rims put on B can meet at one point of a crease, and two vertices
+    in one place leave a piece a hole of no size."""
+    X = X.copy()
+    for _ in range(4):
+        pairs = cKDTree(X).query_pairs(_APART * h, output_type="ndarray")
+        if not len(pairs):
+            break
+        ids = np.unique(pairs.ravel())
+        ids = ids[(X[ids] != V[ids]).any(axis=1)]
+        if not len(ids):
+            break
+        X[ids] = V[ids]
+    return X
 
 
 def _uncrossed(V: np.ndarray, X: np.ndarray, F: np.ndarray, crossings: int, rounds: int = 8) -> np.ndarray:
