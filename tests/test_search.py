@@ -52,6 +52,7 @@ def test_the_search_lowers_the_functional_and_hangs_every_vertex_on_the_coarse_s
     S = res.surface
     assert S is not None and res.functional[1] < 0.5 * res.functional[0]
     assert res.cut_energy[1] < res.cut_energy[0]
+    assert np.unique(S.F).size == len(S.V)  # every vertex in a triangle (the coarsening's leftovers gone)
     W = S.tree_matrix()
     assert W.shape == (len(S.V), len(case.cut_V))
     np.testing.assert_allclose(np.asarray(W.sum(axis=1)).ravel(), 1.0, atol=1e-12)

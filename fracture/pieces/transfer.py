@@ -217,7 +217,10 @@ def build_transfer(cf: CoarseFracture, pieces: Pieces, tree: sp.csr_matrix) -> T
     c_own = rep[c_own]
     is_frac = vertex < nf
     time = np.where(is_frac, vtime[np.minimum(vertex, nf - 1)], 0.0)
-    c_shared_row = np.where(is_frac, rep[shared_comp[np.minimum(vertex, nf - 1)]], rep[comp])
+    # (a fracture vertex no piece holds has the sentinel C: only the rows of fracture vertices, which
+    # pieces hold, read their shared component)
+    c_shared_row = rep[comp].copy()
+    c_shared_row[is_frac] = rep[shared_comp[vertex[is_frac]]]
     # rows whose shared component differs from their own need the shared matrix
     pending = np.flatnonzero((time > 0) & (c_shared_row != rep[comp]))
     in_pending = np.full(len(vertex), -1)

@@ -227,6 +227,8 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
     V = _uncrossed(V, _apart(V, _rim_to_least(V, F, B, pyramid.value, h), h), F, crossings)
     V = _uncrossed(V, _apart(V, _smooth(V, F, B), h), F, crossings)
     V, F, sides = coarsen_sheets(V, F, sides, cell=h)
+    used, inv = np.unique(F, return_inverse=True)  # the vertices the coarsening collapsed away go
+    V, F = V[used], inv.reshape(-1, 3).astype(np.int64)
     tick("contour")
     base, travel = _tree_base(V, F, sides, V0, F0, S0)
     surface = FractureSurface(V, F, sides, n_coarse=len(V), base=base)
