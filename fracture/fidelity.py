@@ -29,20 +29,14 @@ from fields.interpolate import trilinear
 from fields.stress import distance_to_surface
 from fracture.mesh.exterior import Exterior
 from fracture.io.ply import read_ply
+from fracture.mesh.sampling import area_samples as surface_samples
 
 PERCENTILES = (10, 20, 30, 90)
 
 
 def area_samples(V: np.ndarray, F: np.ndarray, count: int = 20000, seed: int = 0) -> np.ndarray:
     """``count`` points spread over the surface with uniform density per area, ``(count, 3)``."""
-    T = V[F]
-    area = 0.5 * np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1)
-    rng = np.random.default_rng(seed)
-    f = rng.choice(len(F), size=count, p=area / area.sum())
-    r1, r2 = rng.random(count), rng.random(count)
-    s = np.sqrt(r1)
-    bary = np.column_stack([1.0 - s, s * (1.0 - r2), s * r2])
-    return np.einsum("nk,nkc->nc", bary, T[f])
+    return surface_samples(V, F, count, np.random.default_rng(seed))[0]
 
 
 def inside_thresholds(grid: Grid, zeta: np.ndarray, BV: np.ndarray, BF: np.ndarray,

@@ -69,22 +69,23 @@ def _simplify_sheets(X: np.ndarray, FF: np.ndarray, sides: np.ndarray, cell: flo
     return np.concatenate(out_X), np.concatenate(out_F), np.concatenate(out_S)
 
 
-def coarsen_sheets(X: np.ndarray, FF: np.ndarray, sides: np.ndarray, cell: float | None = None):
+def coarsen_sheets(X: np.ndarray, FF: np.ndarray, sides: np.ndarray, cell: float | None = None,
+                   crossings: int = 0):
     """Coarsened sheets (module notes), except for sheets whose coarsened triangles would cross another
     sheet (or themselves): those keep their triangles. Without ``cell``, a few triangles per rim vertex
-    (flat sheets); with it, triangles of about two cells' area (curved ones). Returns the points (``X``
-    followed by the new inner vertices), triangles and sides."""
+    (flat sheets); with it, triangles of about two cells' area (curved ones). ``crossings``: the crossing
+    pairs of triangles the sheets have already (none, for a contour), which the result may keep. Returns
+    the points (``X`` followed by the new inner vertices), triangles and sides."""
     keep = np.zeros(len(FF), bool)
     base = sides.max(initial=0) + 1
     pair = sides[:, 0] * base + sides[:, 1]
-    before = self_intersections(X, FF)
     for _ in range(4):
         XS, FS, SS = _simplify_sheets(X, FF[~keep], sides[~keep], cell)
         XS_all = XS
         F_all = np.concatenate([FS, FF[keep]])
         S_all = np.concatenate([SS, sides[keep]])
         count, pairs = self_intersections(XS_all, F_all, report=100000)
-        if count <= before:
+        if count <= crossings:
             return XS_all, F_all, S_all
         hit = np.unique(S_all[pairs.ravel()][:, 0] * base + S_all[pairs.ravel()][:, 1])
         keep |= np.isin(pair, hit)

@@ -550,22 +550,28 @@ class Refiner:
         self.off_b = np.zeros(0, np.int64)
         self.begin_stage(*self.stages()[0])
         self.boundary = self.boundary_vertices()
-        # both on the polish's field (level 0): the coarse surface's functional there, and the new one's
-        log.functional_before.append(result.functional[0])
-        log.functional.append(self.functional())
-        log.tau.append(0.0)
-        log.retries.append(0)
-        log.splits.append(0)
-        log.stopped.append(0)
+        # both on the polish's field (level 0): the coarse surface's functional there, and the new one's;
         # how far the surface went: the new vertices' distances to the coarse surface
         travel = result.travel
-        log.max_move.append(float(travel.max() / self.h) if len(travel) else 0.0)
-        self._record(float(travel.mean() / self.h) if len(travel) else 0.0, self.boundary_error(self.boundary),
+        self._record_step(result.functional[0], self.functional(), float(travel.max()) if len(travel) else 0.0)
+        self._record(float(travel.mean()) if len(travel) else 0.0, self.boundary_error(self.boundary),
                      stage=SEARCH_STAGE)
         log.tick("search", clock)
         if callback is not None:
             callback(-1, self)
         return result
+
+    def _record_step(self, before: float, after: float, max_move: float) -> None:
+        """The log's entry of a change that is not a flow step (the coarse surface, the search's): the
+        functional before and after it and its largest move (cells), no tau, retries, splits or stops."""
+        log = self.log
+        log.functional_before.append(before)
+        log.functional.append(after)
+        log.max_move.append(max_move)
+        log.tau.append(0.0)
+        log.retries.append(0)
+        log.splits.append(0)
+        log.stopped.append(0)
 
     def _record(self, move: float, boundary_error: float, stage: int | None = None) -> None:
         log = self.log
@@ -587,13 +593,8 @@ class Refiner:
         """
         p, log = self.params, self.log
         # iteration 0: the coarse surface
-        log.functional_before.append(self.functional())
-        log.functional.append(log.functional_before[0])
-        for key in ("tau", "max_move"):
-            getattr(log, key).append(0.0)
-        log.retries.append(0)
-        log.splits.append(0)
-        log.stopped.append(0)
+        E = self.functional()
+        self._record_step(E, E, 0.0)
         self.boundary = self.boundary_vertices()
         self._record(0.0, self.boundary_error(self.boundary))
         if self.search is not None:

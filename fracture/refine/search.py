@@ -66,6 +66,7 @@ from fracture.mesh.exterior import Exterior
 from fracture.mesh.fracture_surface import FractureSurface
 from fracture.mesh.intersect import self_intersections
 from fracture.mesh.multilabel import contour_labels
+from fracture.mesh.sampling import area_samples, uniform_barycentric
 from fracture.mesh.sheets import coarsen_sheets
 from fracture.mesh.topology import barycentric_weights, face_frames, unique_edges
 from fracture.refine.cut_weights import OFFSETS, area_weights
@@ -110,8 +111,7 @@ class SearchResult:
     """
 
     surface: FractureSurface | None
-    travel: np.ndarray = field(default_factory=lambda: np.zeros(0))  # the new vertices' distances to the coarse
-    cell: float = 1.0  # the grid's finest spacing
+    travel: np.ndarray = field(default_factory=lambda: np.zeros(0))  # new vertices' distances to the coarse, cells
     free_nodes: int = 0
     labels_changed: int = 0
     cut_energy: tuple[float, float] = (0.0, 0.0)
@@ -146,8 +146,7 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
     grid = pyramid.grid
     h = float(np.min(grid.spacing))
     psi = pyramid.levels[0]
-    lowest, span = float(psi.min()), float(np.ptp(psi))
-    shifted = psi + (tension * span - lowest)
+    offset = tension * float(np.ptp(psi)) - float(psi.min())  # as the flow shifts its field (engine notes)
     V0, F0, S0 = mesh.V, mesh.F, mesh.sides
     n_pieces = int(S0.max()) + 1
 
@@ -180,7 +179,7 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
     if keep.all():
         return SearchResult(None, notes=[f"search: the band of {band:g} cells holds no free grid node inside the "
                                          "object; the coarse surface is kept (refine.band)"], seconds=seconds)
-    coarse, mended = _mend(sub, near, coarse, keep)
+    coarse, _ = _mend(sub, near, coarse, keep)
     missing = [c for c in range(n_pieces) if c in set(S0.ravel().tolist()) and not (coarse == c).any()]
     if missing:
         return SearchResult(None, seconds=seconds, notes=[
@@ -188,7 +187,7 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
             "(thinner than a cell): the coarse surface is kept"])
 
     # 2. the cut
-    graph = _graph(sub, near, keep, shifted[box].ravel(), None if grain is None else
+    graph = _graph(sub, near, keep, (psi[box] + offset).ravel(), None if grain is None else
                    grain.edge_weights(sub.spacing, P[near]))
     free = ~keep
     reach_of = _reach(P[near], V0, F0, S0, band * h + h)
@@ -224,15 +223,14 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
         return SearchResult(None, seconds=seconds, notes=["search: the cut left no fracture surface; the coarse "
                                                           "surface is kept"])
     crossings = self_intersections(V, F)
-    V = _uncrossed(V, _apart(V, _rim_to_least(V, F, B, pyramid.value, h), h), F, crossings)
-    V = _uncrossed(V, _apart(V, _smooth(V, F, B), h), F, crossings)
-    V, F, sides = coarsen_sheets(V, F, sides, cell=h)
+    V, crossings = _uncrossed(V, _apart(V, _rim_to_least(V, F, B, pyramid.value, h), h), F, crossings)
+    V, crossings = _uncrossed(V, _apart(V, _smooth(V, F, B), h), F, crossings)
+    V, F, sides = coarsen_sheets(V, F, sides, cell=h, crossings=crossings)
     used, inv = np.unique(F, return_inverse=True)  # the vertices the coarsening collapsed away go
     V, F = V[used], inv.reshape(-1, 3).astype(np.int64)
     tick("contour")
     base, travel = _tree_base(V, F, sides, V0, F0, S0)
     surface = FractureSurface(V, F, sides, n_coarse=len(V), base=base)
-    offset = tension * span - lowest
     before = energy(V0, F0, pyramid.value(V0) + offset, grain)
     after = energy(V, F, pyramid.value(V) + offset, grain)
     # the surfaces' own quadratures (psi at the corners) flatter a surface whose corners lie in a thin weak
@@ -240,7 +238,7 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
     sampled = (_sampled_functional(V0, F0, pyramid.value, offset, grain, h),
                _sampled_functional(V, F, pyramid.value, offset, grain, h))
     tick("tree")
-    result = SearchResult(surface, travel=travel, cell=h, free_nodes=int(free.sum()),
+    result = SearchResult(surface, travel=travel / h, free_nodes=int(free.sum()),
                           labels_changed=int((labels != coarse).sum()),
                           cut_energy=(log.energy[0], graph.energy(labels)), functional=(before, after),
                           sampled=sampled, seconds=seconds, notes=notes)
@@ -259,12 +257,7 @@ def _sampled_functional(V, F, psi_at, offset, grain, h) -> float:
     if not total > 0.0:
         return 0.0
     count = int(np.clip(_SAMPLES_PER_CELL * total / (h * h), _SAMPLES_MIN, _SAMPLES_MAX))
-    rng = np.random.default_rng(0)
-    f = rng.choice(len(F), size=count, p=A / total)
-    r1, r2 = rng.random(count), rng.random(count)
-    s = np.sqrt(r1)
-    bary = np.column_stack([1.0 - s, s * (1.0 - r2), s * r2])
-    X = np.einsum("nk,nkc->nc", bary, V[F[f]])
+    X, f = area_samples(V, F, count, np.random.default_rng(0))
     factor = G[f] / np.maximum(A[f], tol.tiny)
     return total * float(np.mean((psi_at(X) + offset) * factor))
 
@@ -309,9 +302,7 @@ class _SideOf:
         count = np.maximum(np.ceil(_SIDE_DENSITY * area / (h * h)).astype(np.int64), 1)
         f = np.repeat(np.arange(len(F)), count)
         rng = np.random.default_rng(0)
-        r1, r2 = rng.random(len(f)), rng.random(len(f))
-        s = np.sqrt(r1)
-        bary = np.column_stack([1.0 - s, s * (1.0 - r2), s * r2])
+        bary = uniform_barycentric(rng.random(len(f)), rng.random(len(f)))
         # the triangles' corners too, so that every point of the surface has a sample near it
         bary = np.concatenate([bary, np.tile(np.eye(3), (len(F), 1))])
         f = np.concatenate([f, np.repeat(np.arange(len(F)), 3)])
@@ -517,20 +508,22 @@ def _apart(V: np.ndarray, X: np.ndarray, h: float) -> np.ndarray:
     return X
 
 
-def _uncrossed(V: np.ndarray, X: np.ndarray, F: np.ndarray, crossings: int, rounds: int = 8) -> np.ndarray:
+def _uncrossed(V: np.ndarray, X: np.ndarray, F: np.ndarray, crossings: int, rounds: int = 8
+               ) -> tuple[np.ndarray, int]:
     """``X`` (moved vertices of ``V``) with the vertices of triangles that cross where they did not cross in
     ``V`` (which had ``crossings`` pairs) back where they were, with their neighbours, until no more pairs
-    cross than before (at worst ``V`` itself)."""
+    cross than before (at worst ``V`` itself); and how many pairs cross in the result."""
     X = X.copy()
     for _ in range(rounds):
         count, pairs = self_intersections(X, F, report=100000)
         if count <= crossings:
-            return X
+            return X, count
         back = np.unique(F[pairs.ravel()].ravel())
         ring = np.isin(F, back).any(axis=1)
         back = np.unique(F[ring].ravel())
         X[back] = V[back]
-    return X if self_intersections(X, F) <= crossings else V
+    count = self_intersections(X, F)
+    return (X, count) if count <= crossings else (V, crossings)
 
 
 def _smooth(V: np.ndarray, F: np.ndarray, B: Exterior) -> np.ndarray:
