@@ -110,7 +110,7 @@ def main(argv=None) -> None:
     sheet_panel(fig.add_subplot(grid[1, 0]), "curved", 8.0)
     sheet_panel(fig.add_subplot(grid[1, 1]), "turned", 4.0, angle=45.0, search="graphcut", band=24.0, core=0.5)
     scene_panel(fig.add_subplot(grid[1, 2]), "bunny", "marble bunny (7 pieces): soft veins dark")
-    scene_panel(fig.add_subplot(grid[1, 3]), "branch", "branch, along its axis: soft core dark", axis=0)
+    scene_panel(fig.add_subplot(grid[1, 3]), "branch", "branch, along its axis: fibre bundles (weak: dark)", axis=0)
     fig.tight_layout()
     args.out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(args.out, dpi=90)

@@ -138,6 +138,41 @@ def elongated(U, frame, rng, *, axis, frequency, stretch, octaves, mean, contras
     return mean + contrast * perlin(U, freq, rng, octaves=octaves)
 
 
+def fibres(U, frame, rng, *, axis, bundle_size, interface_width, interface_strength, bundle_strength,
+           defect_length, defect_contrast):
+    """Wood as bundles of fibres along an axis, with weak interfaces between them (the tree branch, Figure 9).
+
+    The bundles are the Voronoi cells of a jittered lattice of seeds of spacing ``bundle_size`` in the
+    section across ``axis`` (a cell is a bundle, constant along the axis). With ``d`` the distance to the
+    bisector between a point's nearest and second nearest seeds (the interface),
+    ``zeta = base - (base - interface_strength) * exp(-(d / interface_width)^2)``, where
+    ``base = bundle_strength + defect_contrast * n_k(u)`` varies along the axis by each bundle's own noise
+    ``n_k`` (its lattice offset drawn per bundle) with features ``defect_length`` long: every bundle has its
+    weak places at other heights. A crack that crosses each bundle where it is weakest and runs between
+    them along the weak interfaces is a splintered one.
+    """
+    from scipy.spatial import cKDTree
+
+    a = _axis(axis)
+    across = [i for i in range(3) if i != a]
+    extent = frame.extent[across]
+    n = np.ceil(extent / bundle_size).astype(int) + 3
+    ii, jj = np.meshgrid(np.arange(n[0]) - 1.0, np.arange(n[1]) - 1.0, indexing="ij")
+    lattice = np.column_stack([ii.ravel(), jj.ravel()])
+    seeds = (lattice + rng.uniform(0.0, 1.0, lattice.shape)) * bundle_size
+    Q = U[:, across]
+    dist, nearest = cKDTree(seeds).query(Q, k=2)
+    s0, s1 = seeds[nearest[:, 0]], seeds[nearest[:, 1]]
+    gap = np.maximum(np.linalg.norm(s1 - s0, axis=1), tol.zero)
+    d = (dist[:, 1] ** 2 - dist[:, 0] ** 2) / (2.0 * gap)  # to the bisector of the two nearest seeds
+    offsets = rng.uniform(0.0, _NOISE_OFFSET_RANGE, (len(seeds), 2))
+    k = nearest[:, 0]
+    phase = np.column_stack([U[:, a] / defect_length, offsets[k]])
+    defect = perlin(phase, 1.0, rng, octaves=2)
+    base = bundle_strength + defect_contrast * defect
+    return base - (base - interface_strength) * np.exp(-((d / interface_width) ** 2))
+
+
 def radial(U, frame, rng, *, axis, center, radius, inner, outer, exponent):
     """Strength growing with the distance from an axis: soft core, hard shell.
 
@@ -286,6 +321,15 @@ KINDS: dict[str, tuple[Callable, dict[str, Spec]]] = {
         "octaves": _p(3, "int", lo=1, hi=8),
         "mean": _p(0.5, **_STRENGTH),
         "contrast": _p(0.5, **_STRENGTH),
+    }),
+    "fibres": (fibres, {
+        "axis": _p("z", "str", choices=_AXES, doc="direction of the fibres"),
+        "bundle_size": _p(0.08, lo=1e-4, hi=10.0, doc="spacing of the fibre bundles across the axis"),
+        "interface_width": _p(0.012, lo=1e-6, hi=1.0, doc="width of the weak layer between two bundles"),
+        "interface_strength": _p(0.0, **_STRENGTH, doc="strength on the interfaces between bundles"),
+        "bundle_strength": _p(1.0, **_STRENGTH, doc="mean strength inside a bundle"),
+        "defect_length": _p(0.1, lo=1e-4, hi=100.0, doc="length along the axis of a bundle's weak and strong places"),
+        "defect_contrast": _p(0.4, **_STRENGTH, doc="how much a bundle's strength varies along the axis"),
     }),
     "radial": (radial, {
         "axis": _p("z", "str", choices=_AXES),

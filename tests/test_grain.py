@@ -91,3 +91,32 @@ def test_the_search_turns_a_cut_across_the_fibres_along_them():
     assert np.average(across, weights=area) < 0.25  # more than halved (the core holds the far ends)
     plain = graph_cut_search(mesh, pyramid, Exterior(BV, BF), band=12, tension=0.05, core=0.5)
     assert plain.surface is None  # without the grain the flat cut is the least already
+
+
+def test_a_cut_across_wood_splinters_along_its_bundles():
+    """A block of wood (fibre bundles along z with weak interfaces, each bundle weak at its own heights)
+    cut flat across the fibres: the search crosses each bundle nearer its weakest place and joins the
+    crossings by walls along the fibres (the branch's splinters, Figure 9). The surface gains area,
+    a good part of it in walls that contain the fibres, and lies in weaker material than the flat cut."""
+    from fields.strength import strength_field
+
+    lo, hi = np.zeros(3), np.array([0.5, 0.5, 1.0])
+    grid = Grid.from_bounds(lo - 1 / 48, hi + 1 / 48, (26, 26, 50))
+    layers = [{"kind": "fibres", "axis": "z", "bundle_size": 0.1, "interface_width": 0.015, "defect_length": 0.1,
+               "defect_contrast": 5.0}]
+    zeta = strength_field(grid.points(), (lo, hi), layers, seed=0).reshape(grid.shape)
+    BV, BF = box(lo, hi, (6, 6, 10))
+    V, F = sheet(lambda u, v: np.stack([u, v, np.full_like(u, 0.5)], 1), (0, 0.5), (0, 0.5), 7, 7)
+    mesh = FractureSurface.from_coarse(V, F, np.tile([0, 1], (len(F), 1)))
+    pyramid = StrengthPyramid(grid, zeta, levels=2, sigma=1.0)
+    res = graph_cut_search(mesh, pyramid, Exterior(BV, BF), band=10, tension=0.05, core=0.25,
+                           grain=Grain(10.0, "along", [0, 0, 1], [0, 0, 0]))
+    S = res.surface
+    assert S is not None and res.sampled[1] < 0.9 * res.sampled[0]
+    n = np.cross(S.V[S.F[:, 1]] - S.V[S.F[:, 0]], S.V[S.F[:, 2]] - S.V[S.F[:, 0]])
+    area = np.linalg.norm(n, axis=1)
+    assert area.sum() / 2 > 1.3 * 0.25  # the flat cut's area is 0.25
+    walls = np.abs(n[:, 2]) / area < 0.5  # normals more than 60 degrees off the fibres
+    assert area[walls].sum() > 0.2 * area.sum()
+    C = S.V[S.F].mean(axis=1)
+    assert np.average(pyramid.value(C), weights=area) < 0.85 * pyramid.value(V[F].mean(axis=1)).mean()

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from fields.grid import Grid
-from fields.strength import KINDS, UnitFrame, bricks, inclusions, load_volume, marble, radial, strength_field
+from fields.strength import KINDS, UnitFrame, bricks, fibres, inclusions, load_volume, marble, radial, strength_field
 from fracture.errors import InputError
 
 BOUNDS = (np.array([0.0, 0.0, 0.0]), np.array([2.0, 1.0, 0.5]))
@@ -21,7 +21,7 @@ def sample_points(n=20000, seed=0):
     return np.random.default_rng(seed).uniform(BOUNDS[0], BOUNDS[1], (n, 3))
 
 
-@pytest.mark.parametrize("kind", ["marble", "elongated", "radial", "bricks", "inclusions"])
+@pytest.mark.parametrize("kind", ["marble", "elongated", "fibres", "radial", "bricks", "inclusions"])
 def test_every_kind_is_normalised_finite_and_seeded(kind):
     X = sample_points()
     a = strength_field(X, BOUNDS, [layer(kind)], seed=3)
@@ -65,6 +65,36 @@ def test_elongated_noise_is_smoother_along_its_axis():
     along = np.abs(f(X + [0, d, 0]) - base).mean()
     across = np.abs(f(X + [d, 0, 0]) - base).mean()
     assert along < 0.4 * across
+
+
+def test_fibres_are_bundles_with_weak_interfaces_each_weak_at_its_own_heights():
+    """Along the axis a bundle's strength varies by its own noise (two bundles differ), across it the
+    weakest places are the interfaces between bundles, and a point on an interface has the interface's
+    strength whatever its height."""
+    p = params("fibres", axis="x", bundle_size=0.1, interface_width=0.005, defect_length=0.05, defect_contrast=0.5)
+    from scipy.spatial import cKDTree
+
+    rng_seeds = np.random.default_rng(7)
+    zeta = lambda P: fibres(P, FRAME, np.random.default_rng(7), **p)
+    # the seeds the kind draws, to find the bundles and their interfaces
+    extent = FRAME.extent[[1, 2]]
+    n = np.ceil(extent / p["bundle_size"]).astype(int) + 3
+    ii, jj = np.meshgrid(np.arange(n[0]) - 1.0, np.arange(n[1]) - 1.0, indexing="ij")
+    lattice = np.column_stack([ii.ravel(), jj.ravel()])
+    seeds = (lattice + rng_seeds.uniform(0.0, 1.0, lattice.shape)) * p["bundle_size"]
+    inner = seeds[(seeds[:, 0] > 0.02) & (seeds[:, 0] < extent[0] - 0.02) & (seeds[:, 1] > 0.02)
+                  & (seeds[:, 1] < extent[1] - 0.02)]
+    a, b = inner[0], inner[int(np.argmin(np.linalg.norm(inner[1:] - inner[0], axis=1))) + 1]
+    line = np.linspace(0.0, 1.9, 400)
+    along = lambda yz: zeta(np.column_stack([line, np.tile(yz, (len(line), 1))]))
+    za, zb = along(a), along(b)
+    assert np.ptp(za) > 0.3 and np.ptp(zb) > 0.3  # weak and strong places along a bundle
+    assert np.corrcoef(za, zb)[0, 1] < 0.5  # at other heights in the next bundle
+    mid = 0.5 * (a + b)
+    assert cKDTree(seeds).query(mid, k=2)[0][0] == pytest.approx(np.linalg.norm(mid - a))  # a, b nearest to mid
+    zm = along(mid)
+    np.testing.assert_allclose(zm, p["interface_strength"], atol=1e-6)  # the interface, all along
+    assert zm.max() < np.minimum(za, zb).min()
 
 
 def test_radial_is_soft_inside_and_hard_outside():
