@@ -1,7 +1,11 @@
 """Process set-up: explicit, and importing the package changes nothing."""
 
+import os
 import subprocess
 import sys
+from pathlib import Path
+
+import pytest
 
 
 def test_numba_caches_of_changed_sources_are_cleared(tmp_path):
@@ -79,3 +83,40 @@ def test_a_change_in_one_compiled_package_clears_the_caches_of_both(tmp_path):
     assert not clear_stale_numba_cache([refine, mesh]) and compiled.exists()
     (mesh / "k.py").write_text("import numba\nx = 2\n")
     assert clear_stale_numba_cache([refine, mesh]) and not compiled.exists()
+
+
+@pytest.mark.slow
+def test_a_changed_tolerance_reaches_the_compiled_kernels(tmp_path):
+    """The flips' kernel reads the Delaunay tolerance as a module constant, frozen into its cached machine
+    code; the tolerance lives in another file (fracture/tolerances.py). In a copy of the package: a quad
+    whose diagonal is not Delaunay is flipped; with the tolerance raised past any angle sum it is not, on
+    the next run, from the same cache directory."""
+    import shutil
+
+    root = Path(__file__).resolve().parents[1]
+    for package in ("fracture", "fields"):
+        shutil.copytree(root / package, tmp_path / package, ignore=shutil.ignore_patterns("__pycache__"))
+    script = (
+        "import numpy as np\n"
+        "from fracture.process import prepare_process\n"
+        "prepare_process(allocator=False)\n"
+        "from fracture.refine.flips import flip_edges\n"
+        "V = np.array([[0.0, 0, 0], [1, 0, 0], [0.5, 0.1, 0], [0.5, -0.1, 0]])\n"
+        "F = np.array([[0, 1, 2], [1, 0, 3]], np.int64)\n"
+        "print(flip_edges(V, F, np.array([[0, 1], [0, 1]], np.int64)))\n"
+    )
+    env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "NUMBA_DISABLE_JIT")}
+    env["PYTHONPATH"] = str(tmp_path)
+
+    def flips() -> int:
+        done = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, env=env, capture_output=True, text=True)
+        assert done.returncode == 0, done.stderr[-2000:]
+        return int(done.stdout.split()[-1])
+
+    assert flips() == 1 and flips() == 1  # compiled, then from the cache
+    assert list((tmp_path / "fracture" / "refine" / "__pycache__").glob("flips.*.nbc"))
+    tolerances = tmp_path / "fracture" / "tolerances.py"
+    text = tolerances.read_text()
+    assert "tol.delaunay = 1e-12" in text
+    tolerances.write_text(text.replace("tol.delaunay = 1e-12", "tol.delaunay = 1e9"))
+    assert flips() == 0

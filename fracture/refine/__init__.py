@@ -1,34 +1,85 @@
 """The refinement of the fracture surface (Sections 4.3, 4.4).
 
 numba caches each compiled function beside its source and checks only that
-file's time stamp, but the kernels here call each other across modules
-(and those of :mod:`fracture.mesh`: flips and collisions use its hash grid):
-a change in one module would leave stale machine code in the others' caches. :func:`clear_stale_numba_cache`
-clears the cache when the package's sources differ from those it was compiled
-from; programs call it once (:func:`fracture.process.prepare_process`), importing
-the package does not.
+file's time stamp, but the kernels call each other across modules and
+packages (flips and collisions use :mod:`fracture.mesh`'s hash grid), and
+freeze the module constants they read (the tolerances, copied from
+:mod:`fracture.tolerances` as ``_TINY = tol.tiny``) into their machine
+code: a change in another file would leave stale machine code behind.
+:func:`clear_stale_numba_cache` clears the cache of every package with
+compiled kernels (the fields', the mesh queries', the refinement's, the
+pieces') when the sources they were compiled from differ from the current
+ones: every module that uses numba and every module of the project it
+imports, directly or not (the tolerances among them). Programs call it once
+(:func:`fracture.process.prepare_process`); importing the package does not.
 """
 
 from __future__ import annotations
 
+import ast
 import hashlib
 import re
 from pathlib import Path
 
+_ROOT = Path(__file__).resolve().parents[2]  # holds the fracture and fields packages
+_TOP = ("fracture", "fields")
+
 
 def _compiled_packages() -> list[Path]:
-    """The packages whose numba kernels call each other: the refinement's and the mesh queries'."""
-    here = Path(__file__).parent
-    return [here, here.parent / "mesh"]
+    """The packages with compiled kernels: the fields', the mesh queries', the refinement's and the pieces'."""
+    return [_ROOT / "fields", _ROOT / "fracture" / "mesh", _ROOT / "fracture" / "refine", _ROOT / "fracture" / "pieces"]
+
+
+def _module_path(name: str, root: Path) -> Path | None:
+    """The file of project module ``name`` (dotted) under ``root``, or None if it is not one."""
+    base = root.joinpath(*name.split("."))
+    for candidate in (base.with_suffix(".py"), base / "__init__.py"):
+        if candidate.is_file():
+            return candidate
+    return None
+
+
+def _imports(path: Path, root: Path) -> set[Path]:
+    """The project modules that the module at ``path`` imports (absolute imports of the top packages)."""
+    found = set()
+    for node in ast.walk(ast.parse(path.read_bytes())):
+        names = []
+        if isinstance(node, ast.Import):
+            names = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            names = [node.module] + [f"{node.module}.{a.name}" for a in node.names]
+        for name in names:
+            if name.split(".")[0] in _TOP:
+                parts = name.split(".")
+                for k in range(1, len(parts) + 1):  # a package's __init__ runs too
+                    module = _module_path(".".join(parts[:k]), root)
+                    if module is not None:
+                        found.add(module)
+    return found
+
+
+def kernel_sources(packages: list[Path], root: Path = _ROOT) -> list[Path]:
+    """The modules the compiled kernels of ``packages`` are made from: those that use numba and every
+    project module (under ``root``) they import, directly or not (sorted)."""
+    todo = [p for package in packages for p in sorted(package.glob("*.py")) if b"import numba" in p.read_bytes()]
+    seen = set(todo)
+    while todo:
+        for module in _imports(todo.pop(), root) - seen:
+            seen.add(module)
+            todo.append(module)
+    return sorted(seen)
 
 
 def clear_stale_numba_cache(packages: Path | list[Path] | None = None) -> bool:
-    """Delete numba's cache files in every ``package/__pycache__`` (default: the refinement's and the
-    mesh queries', whose kernels call each other) unless they were made from the current sources of
-    all their ``*.py`` modules that use numba; returns whether anything was deleted."""
+    """Delete numba's cache files in every ``package/__pycache__`` (default: every package with compiled
+    kernels, whose kernels call each other) unless they were made from the current content of
+    :func:`kernel_sources`; returns whether anything was deleted."""
     packages = _compiled_packages() if packages is None else [packages] if isinstance(packages, Path) else packages
-    sources = (p.read_bytes() for package in packages for p in sorted(package.glob("*.py")))
-    digest = hashlib.sha1(b"".join(s for s in sources if b"import numba" in s)).hexdigest()
+    digest = hashlib.sha1()
+    for path in kernel_sources(packages):
+        name = path.relative_to(_ROOT).as_posix() if path.is_relative_to(_ROOT) else path.name
+        digest.update(name.encode() + b"\0" + path.read_bytes() + b"\0")
+    digest = digest.hexdigest()
     stamps = [package / "__pycache__" / "numba-sources.sha1" for package in packages]
     try:
         if all(stamp.read_text() == digest for stamp in stamps):
@@ -54,10 +105,10 @@ def clear_stale_numba_cache(packages: Path | list[Path] | None = None) -> bool:
 
 def kernels_cached(package: Path | None = None) -> bool:
     """Whether numba's cache holds the compiled (not inlined) functions of ``package`` (default: the
-    refinement's and the mesh queries', compiled together), i.e. whether a run starts at once rather
-    than after a one-off compilation. A run compiles only what it calls, so most of them (not every
+    refinement's and the mesh queries', which the refine stage calls), i.e. whether a run starts at once
+    rather than after a one-off compilation. A run compiles only what it calls, so most of them (not every
     one) is enough."""
-    packages = _compiled_packages() if package is None else [package]
+    packages = [_ROOT / "fracture" / "refine", _ROOT / "fracture" / "mesh"] if package is None else [package]
     want, have = set(), set()
     for package in packages:
         want |= _compiled_names(package)
