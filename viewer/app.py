@@ -45,6 +45,7 @@ from viewer.looks import (
     show_context, show_material, show_pieces, show_stage, slice_pose, slice_title,
 )
 from viewer.media import Video, check_size, frame_counts
+from viewer.lifetime import Lifetime
 from viewer.rerun import RerunWorker
 from viewer.state import PANELS, ViewState, from_section, write_view_file
 from viewer.tolerances import view_tol
@@ -686,6 +687,11 @@ class Viewer:
             redraw = True
         return redraw
 
+    def end(self) -> None:
+        """End what the window started: its re-run child (after the current re-run if it ends within a
+        second, else at once)."""
+        self._rerunner.stop()
+
     def _on_close(self) -> bool:
         if self._worker is not None and self._worker.is_alive():
             self.say("a re-run is still going; it ends with the window")
@@ -995,9 +1001,10 @@ def main(target: Path, out: Path | None = None, width: int = 1800, height: int =
     run = RunData(sweep[0].dir) if sweep else open_target(target, out)
     app = gui.Application.instance
     app.initialize()
-    Viewer(run, width, height, start, sweep)
-    app.run()
-    return 0
+    # the loop ends with the window, on SIGINT or SIGTERM, or with the display (viewer/lifetime.py)
+    with Lifetime() as lifetime:
+        viewer = Viewer(run, width, height, start, sweep)
+        return lifetime.run(app, viewer.window.close, viewer.end)
 
 
 __all__ = ["Viewer", "main", "open_target", "tunables"]

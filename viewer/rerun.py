@@ -19,6 +19,8 @@ import time
 
 # Seconds between the idle child's checks that the window's process is still there.
 _PARENT_CHECK = 0.5
+# Seconds a child cut short has to remove its staging directory before it is killed.
+_TERM_GRACE = 2.5
 
 
 class RerunWorker:
@@ -60,29 +62,51 @@ class RerunWorker:
             self._jobs.put(None)
             self._proc.join(timeout)
 
+    def stop(self, timeout: float = 1.0) -> None:
+        """End the child: after its current job if that ends within ``timeout`` seconds, else cut short
+        (SIGTERM: the run's staging directory is removed, :func:`~fracture.io.atomic.staged_directory`),
+        killed if it has not ended :data:`_TERM_GRACE` seconds later (a compiled loop keeps the signal
+        waiting; the next run into the same place removes what a killed one left)."""
+        self.close(timeout)
+        if self.alive:
+            self._proc.terminate()
+            self._proc.join(_TERM_GRACE)
+            if self.alive:
+                self._proc.kill()
+                self._proc.join(timeout)
+
 
 def _serve(jobs, events) -> None:
     """The child: import the pipeline once, then run the jobs until told to stop (``None``) or until the
     window's process is gone (however it ended: the child must not outlive it)."""
     import importlib
     import queue
+    import signal
 
     from fracture.process import prepare_process
+
+    def cut_short(signum, frame):  # SIGTERM from stop(): unwind, so the run's staging directory goes
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, cut_short)  # this process's own handler (a child of its own)
 
     importlib.import_module("fracture.pipeline.runner")  # the pipeline's imports now, while nobody waits
 
     prepare_process()
     parent = mp.parent_process()
-    while True:
-        try:
-            job = jobs.get(timeout=_PARENT_CHECK)
-        except queue.Empty:
-            if parent is not None and not parent.is_alive():
+    try:
+        while True:
+            try:
+                job = jobs.get(timeout=_PARENT_CHECK)
+            except queue.Empty:
+                if parent is not None and not parent.is_alive():
+                    return
+                continue
+            if job is None:
                 return
-            continue
-        if job is None:
-            return
-        run_job(*job, events)
+            run_job(*job, events)
+    except KeyboardInterrupt:  # cut short by stop(): a run's staging directory is gone already
+        return
 
 
 def run_job(cfg: dict, out: str, events) -> None:
@@ -104,6 +128,7 @@ def run_job(cfg: dict, out: str, events) -> None:
     try:
         runner.run(cfg, out, progress=False, listener=listener, cache=StageCache())
         events.put(("done", {}))
+
     except Exception as exc:  # noqa: BLE001 - sent to the window
         events.put(("error", f"{type(exc).__name__}: {exc}"))
 
