@@ -94,3 +94,45 @@ def test_a_hollow_exterior_keeps_its_cavity_inward():
     assert signed_volume(V, F2) == pytest.approx(1 - 0.4 ** 3)
     F3, turned, _ = orient_outward(V, F2)
     assert turned == 0 and np.array_equal(F3, F2)
+
+
+def test_flat_triangles_of_a_boolean_made_exterior_are_removed_and_its_shape_kept(tmp_path):
+    """CGAL's union of three boxes (a staircase) keeps corners at one place under two numbers and triangles
+    without area between them; the cracks could not be traced across those. They go, the solid stays."""
+    import cutgen
+    from fracture.mesh.clean import flat_triangles, remove_flat_triangles
+    from fracture.mesh.topology import unique_edges
+
+    BV, BF = cutgen.exterior("stairs", np.random.default_rng(0))
+    assert flat_triangles(BV, BF).sum() > 10
+    V, F, removed = remove_flat_triangles(BV, BF)
+    assert removed == flat_triangles(BV, BF).sum() and not flat_triangles(V, F).any()
+    assert (unique_edges(F)[1] == 2).all()
+    assert signed_volume(V, F) == pytest.approx(signed_volume(BV, BF), rel=1e-12)
+    assert remove_flat_triangles(V, F)[2] == 0  # nothing more to do
+    cf = coarse_from_meshes(_meshes(tmp_path, (BV, BF), _plane(0.5)))
+    assert cf.n_components == 2 and any("without area removed" in n for n in cf.notes)
+
+
+def test_an_incomplete_cut_in_a_staircase_is_extended_round_its_step(tmp_path):
+    """An incomplete plane whose extension leaves the staircase across a step: each new boundary point
+    goes where the sheet's plane meets the surface (B's closest point to a midpoint deep inside lay on
+    another face, and the cut split nothing)."""
+    import cutgen
+
+    ext_kind, cut_kind, exterior, cut = cutgen.case(cutgen.EXTERIORS.index("stairs") + 6 * cutgen.CUTS.index("incomplete"))
+    assert (ext_kind, cut_kind) == ("stairs", "incomplete")
+    cf = coarse_from_meshes(_meshes(tmp_path, exterior, cut))
+    assert cf.n_components == 2 and cf.virtual.any()
+    assert (cf.sides[:, 0] != cf.sides[:, 1]).all()
+
+
+def test_a_cut_that_splits_nothing_is_refused(tmp_path):
+    """A disk through one arm of a ring: the ring stays one piece."""
+    import cutgen
+
+    BV, BF = cutgen.exterior("torus", np.random.default_rng(0))
+    X, Z = np.meshgrid(np.linspace(0.55, 1.3, 9), np.linspace(-0.3, 1.3, 9), indexing="ij")
+    cut = np.c_[X.ravel(), np.full(X.size, 0.5), Z.ravel()], grid_faces(9, 9)  # across the arm at x > 1/2
+    with pytest.raises(InputError, match="the cut does not split the object anywhere"):
+        coarse_from_meshes(_meshes(tmp_path, (BV, BF), cut))

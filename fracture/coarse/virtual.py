@@ -52,7 +52,7 @@ def _crossing(B: Exterior, inside_pts: np.ndarray, outside_pts: np.ndarray, tole
 
 
 def extend_cuts(V: np.ndarray, F: np.ndarray, BV: np.ndarray, BF: np.ndarray, step: float | None = None,
-                max_steps: int = 500) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                max_steps: int = 500, virtual: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Extend every crack front of the fracture surface to the exterior B.
 
     Parameters
@@ -63,6 +63,8 @@ def extend_cuts(V: np.ndarray, F: np.ndarray, BV: np.ndarray, BF: np.ndarray, st
     step : float, optional
         Length of one strip (default: the mean length of the front edges).
     max_steps : int
+    virtual : (m,) bool, optional
+        Which of the given triangles are virtual already (default: none).
 
     Returns
     -------
@@ -71,7 +73,7 @@ def extend_cuts(V: np.ndarray, F: np.ndarray, BV: np.ndarray, BF: np.ndarray, st
     F2 : (m2, 3) int
         The old triangles followed by the virtual ones.
     virtual : (m2,) bool
-        True for the added triangles.
+        True for the added triangles (and those given as virtual).
 
     Raises
     ------
@@ -80,9 +82,10 @@ def extend_cuts(V: np.ndarray, F: np.ndarray, BV: np.ndarray, BF: np.ndarray, st
     """
     B = Exterior(BV, BF)  # many winding-number and distance queries: build the trees once
     reach = tol.on_surface * float(np.linalg.norm(np.ptp(B.V, axis=0)))
+    given = np.zeros(len(F), bool) if virtual is None else np.asarray(virtual, bool)
     front, off = _crack_front(V, F, B)
     if len(front) == 0:
-        return V, F, np.zeros(len(F), bool)
+        return V, F, given.copy()
     Vall = np.asarray(V, np.float64)
     try:
         verts, direction = boundary_conormals(Vall, F, front)
@@ -123,9 +126,9 @@ def extend_cuts(V: np.ndarray, F: np.ndarray, BV: np.ndarray, BF: np.ndarray, st
         raise InputError(f"virtual fracture: a crack front did not reach the exterior within {max_steps} steps "
                          f"of {h:.3g}; is the cut inside a closed exterior?")
     F2 = np.concatenate([F] + [f.astype(np.int64) for f in new_faces])
-    virtual = np.zeros(len(F2), bool)
-    virtual[len(F):] = True
-    return follow_b(Vall, F2, virtual, B)
+    flags = np.ones(len(F2), bool)
+    flags[:len(F)] = given
+    return follow_b(Vall, F2, flags, B)
 
 
 # A boundary edge of the extended cut whose midpoint is farther than this
@@ -140,13 +143,18 @@ def follow_b(V: np.ndarray, F: np.ndarray, virtual: np.ndarray, B: Exterior, max
     between two ends on different faces of B cuts a corner off B's convex
     edges (the edge runs inside) or leaves it (concave ones): the cut then
     leaves a channel round that corner that joins its two sides. Each split
-    puts the edge's midpoint at its closest point on B (one edge per triangle
-    a round; the triangle on it is halved and the halves keep its flag).
+    puts a new vertex where the sheet meets B in the triangle's plane: on the
+    ray from the triangle's third corner (inside the object) through the edge's
+    midpoint, where it first meets B (:meth:`Exterior.along`; an edge across a
+    re-entrant part of B, such as a step of a staircase, has its midpoint deep
+    inside, and B's closest point to it lies on another face, which splits the
+    edge into two chords as deep). One edge per triangle a round; the triangle
+    on it is halved and the halves keep its flag.
     """
     limit = CHORD * float(np.linalg.norm(np.ptp(B.V, axis=0)))
     for _ in range(max_rounds):
         E = boundary_edges(F)
-        d2, _, closest = B.closest(0.5 * (V[E[:, 0]] + V[E[:, 1]]))
+        d2, _, _ = B.closest(0.5 * (V[E[:, 0]] + V[E[:, 1]]))
         far = np.flatnonzero(d2 > limit ** 2)
         if not len(far):
             break
@@ -154,11 +162,12 @@ def follow_b(V: np.ndarray, F: np.ndarray, virtual: np.ndarray, B: Exterior, max
         far, first = far[np.unique(face, return_index=True)[1]], np.unique(face)
         a, b = E[far, 0], E[far, 1]
         m = len(V) + np.arange(len(far))
-        V = np.concatenate([V, closest[far]])
         tri = F[first]
         c = tri.sum(axis=1) - a - b  # the corner off the edge
+        V = np.concatenate([V, B.along(V[c], 0.5 * (V[a] + V[b]))])
         F = F.copy()
         F[first] = np.stack([a, m, c], 1)
         F = np.concatenate([F, np.stack([m, b, c], 1)])
         virtual = np.concatenate([virtual, virtual[first]])
     return V, F, virtual
+

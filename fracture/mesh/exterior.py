@@ -55,3 +55,22 @@ class Exterior:
 
     def distance(self, P: np.ndarray) -> np.ndarray:
         return np.sqrt(self.closest(P)[0])
+
+    def along(self, start: np.ndarray, through: np.ndarray) -> np.ndarray:
+        """Per row, where the ray from ``start`` (inside B) through ``through`` first meets B: a point of a
+        fracture sheet put on B in the sheet's own plane (from a corner inside, through the point), which
+        B's closest point is not near a crease (points on both sides of B's edge go to the edge, and two
+        boundary curves there can cross). Rows whose ray meets nothing, or whose ``start`` is not inside,
+        take B's closest point to ``through``."""
+        start = np.ascontiguousarray(start, np.float64).reshape(-1, 3)
+        through = np.ascontiguousarray(through, np.float64).reshape(-1, 3)
+        out = self.closest(through)[2]
+        ray = through - start
+        ok = self.inside(start) & (np.einsum("ij,ij->i", ray, ray) > 0.0)
+        if ok.any():
+            face, t, _ = self._tree.intersect_ray_first(self.V, self.F, start[ok], np.ascontiguousarray(ray[ok]))
+            hit = (face >= 0) & np.isfinite(t) & (t > 0.0)
+            rows = np.flatnonzero(ok)[hit]
+            if len(rows):  # the ray's hit is within rounding of B; its closest point is on it
+                out[rows] = self.closest(start[rows] + t[hit, None] * ray[rows])[2]
+        return out

@@ -52,7 +52,18 @@ def coarse_from_meshes(inp: ConfigInput | Mapping) -> CoarseFracture:
     if outside:
         notes.append(f"input.fracture: trimmed to the object ({100 * outside:.1f} % of its area was outside)")
     V, F, virtual = extend_cuts(V, F, BV, BF)
-    sides, ext, n = label_components(BV, BF, V, F, what=what)
+    sides, ext, n = label_components(BV, BF, V, F, what=what, strict=False)
+    same = sides[:, 0] == sides[:, 1]
+    if same.all():
+        raise InputError(f"{what}: the cut does not split the object anywhere, even extended to the object's "
+                         f"surface (every one of its {len(F)} triangles has the same piece on both sides); expected "
+                         "a cut that separates the object into pieces")
+    if same.any():  # parts that end inside a piece and that no extension completes: left out
+        F, virtual = F[~same], virtual[~same]
+        notes.append(f"input.fracture: {int(same.sum())} triangles of the cut have the same piece on both sides "
+                     "(a crack that ends inside a piece): left out")
+        V, F, virtual = extend_cuts(V, F, BV, BF, virtual=virtual)  # what was left out may leave a crack front
+        sides, ext, n = label_components(BV, BF, V, F, what=what)
     F, sides, ext, n, kept, joined = join_slivers(BV, BF, V, F, sides, ext, n)
     virtual = virtual[kept]
     if joined:
@@ -76,6 +87,7 @@ def coarse_from_meshes(inp: ConfigInput | Mapping) -> CoarseFracture:
 def read_exterior(path) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """The object's closed exterior, oriented outward (cavities inward), and notes on what was turned."""
     from fracture.errors import InputError
+    from fracture.mesh.clean import remove_flat_triangles
     from fracture.mesh.topology import orient_outward
 
     BV, BF = read_mesh(path, "input.exterior", closed=True)
@@ -83,7 +95,11 @@ def read_exterior(path) -> tuple[np.ndarray, np.ndarray, list[str]]:
     if conflict is not None:
         raise InputError(f"input.exterior ({path}): faces {conflict[0] + 1} and {conflict[1] + 1} (counted from 1) "
                          "lie on a one-sided surface; expected the closed surface of a solid")
-    return BV, BF, [f"input.exterior: {turned} faces turned to face outward"] if turned else []
+    BV, BF, flat = remove_flat_triangles(BV, BF)
+    notes = [f"input.exterior: {flat} triangles without area removed (corners merged or flipped away)"] if flat else []
+    if turned:
+        notes.append(f"input.exterior: {turned} faces turned to face outward")
+    return BV, BF, notes
 
 
 def coarse_stage(ctx: RunContext) -> None:
