@@ -358,7 +358,9 @@ class Refiner:
         collision stops them; returns the largest distance of a boundary vertex from B after that.
 
         A new vertex on a boundary edge starts on the edge's chord, off B, and a
-        collision may stop its first projection; at the end of a stage this
+        collision may stop its first projection, as may another boundary curve that the projection would
+        cross on B (near B's creases B's closest point takes points on both sides to the edge); at the
+        end of a stage this
         step, which tests only the elements on the few vertices it moves,
         replaces the iterations that would otherwise wait for them. ``table``
         is the current edge table, if the caller has it.
@@ -372,6 +374,7 @@ class Refiner:
             return float(np.sqrt(d2.max()))
         X1 = m.V.copy()
         X1[ids[off]] = P[off]
+        self.stop_crossings_on_b(X1, table or self.edges())  # no two boundary curves made to cross on B
         stopped, _ = self.stop_collisions(m.V, X1, m.F, self.params.thickness * self.h, table or self.edges(),
                                      moving=ids[off])
         self.state.hold[stopped] = self.params.hold
