@@ -3,8 +3,10 @@
 Objects: box, sphere, torus, L-shape, stairs, prism (closed, outward, about unit size). Cuts pass
 near the object's centre with a random orientation and overhang it (the import trims them):
 a plane, a curved sheet, a bent sheet (two half-planes meeting at a crease), a plane that stops
-inside the object (the import extends it), junctions of half-planes sharing a line (Y: three,
-T: a plane and a half-plane, X: four), and a curved sheet with a third of its faces turned over.
+inside the object (the import extends it), a sheet with a slight kink (10 to 30 degrees), junctions of
+half-planes sharing a line (Y: three, T: a plane and a half-plane, X: four; wing: a Y whose third
+half-plane ends inside the object, a dangling wing), and a curved sheet with a third of its faces
+turned over.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ from fracture.mesh.topology import weld
 from test_flow import icosphere
 
 EXTERIORS = ("box", "sphere", "torus", "lshape", "stairs", "prism")
-CUTS = ("plane", "curved", "bent", "incomplete", "overhang", "Y", "T", "X", "misoriented")
+CUTS = ("plane", "curved", "bent", "kinked", "incomplete", "overhang", "Y", "T", "X", "wing", "misoriented")
 
 
 def _torus(R: float, r: float, nu: int = 32, nv: int = 16) -> tuple[np.ndarray, np.ndarray]:
@@ -102,12 +104,13 @@ def cut(kind: str, center, rng: np.random.Generator) -> tuple[np.ndarray, np.nda
         return V, F
     if kind == "incomplete":  # stops a fifth of the object past its centre
         return _sheet(o, t, d, (-L, L), (-L, 0.2))
-    if kind == "bent":
-        angle = rng.uniform(0.3, 0.8) * np.pi
+    if kind in ("bent", "kinked"):  # two half-planes meeting at a crease, the second turned by angle from -d
+        angle = rng.uniform(0.3, 0.8) * np.pi if kind == "bent" else np.pi - np.radians(rng.uniform(10.0, 30.0))
         d2 = np.cos(angle) * d + np.sin(angle) * n
         return _merge([_sheet(o, t, d, (-L, L), (0, L)), _sheet(o, t, d2, (-L, L), (0, L))], L)
     # junctions: half-planes from the line o + s t
-    if kind == "Y":
+    reach = [L] * 4
+    if kind in ("Y", "wing"):
         angles = np.array([0.0, 2 * np.pi / 3, 4 * np.pi / 3]) + rng.uniform(-0.3, 0.3, 3)
     elif kind == "T":
         angles = np.array([0.0, np.pi, np.pi / 2 + rng.uniform(-0.3, 0.3)])
@@ -115,7 +118,9 @@ def cut(kind: str, center, rng: np.random.Generator) -> tuple[np.ndarray, np.nda
         angles = np.array([0.0, np.pi / 2, np.pi, 3 * np.pi / 2]) + rng.uniform(-0.2, 0.2, 4)
     else:
         raise ValueError(kind)
-    halves = [_sheet(o, t, np.cos(a) * d + np.sin(a) * n, (-L, L), (0, L)) for a in angles]
+    if kind == "wing":  # the third half-plane stops a fifth to a third of the object from the line
+        reach[2] = rng.uniform(0.2, 0.33)
+    halves = [_sheet(o, t, np.cos(a) * d + np.sin(a) * n, (-L, L), (0, r)) for a, r in zip(angles, reach)]
     # every half-plane faces the next one round the line, so the sides between them agree
     halves = [(P, G if k % 2 == 0 else G[:, ::-1]) for k, (P, G) in enumerate(halves)]
     return _merge(halves, L)
@@ -132,3 +137,33 @@ def case(seed: int) -> tuple[str, str, tuple, tuple]:
     if ext_kind == "torus":  # through the ring, not its hole
         center = center + [0.35, 0, 0]
     return ext_kind, cut_kind, (BV, BF), cut(cut_kind, center, rng)
+
+
+# Settings of a case's run: a coarse grid and a small budget (the property is that it runs, not how well).
+RUN_OVERRIDES = ["grid.resolution=16", "pyramid.levels=2", "refine.max_triangles=1500", "refine.iterations=6",
+                 "animate.check_samples=2000", "animate.usd=false", "refine.snapshots=false"]
+
+
+def run_case(seed: int, where) -> tuple[str, str, str, object]:
+    """Write case ``seed``'s object and cut as OBJ files under ``where`` and run them end to end (the
+    example's config with :data:`RUN_OVERRIDES`): ``(object kind, cut kind, outcome, run directory)`` with
+    outcome ``"ok"`` or the one-line refusal (the run directory then None)."""
+    from pathlib import Path
+
+    from fracture.errors import InputError, ResultError
+    from fracture.mesh.primitives import write_obj
+    from fracture.pipeline import runner
+    from fracture.pipeline.config import load_config
+
+    ext_kind, cut_kind, (BV, BF), (V, F) = case(seed)
+    d = Path(where) / f"case_{seed}"
+    write_obj(d / "exterior.obj", BV, BF)
+    write_obj(d / "cut.obj", V, F)
+    configs = Path(__file__).resolve().parents[1] / "configs"
+    cfg = load_config(configs / "example.yaml", [
+        "input.kind=meshes", f"input.exterior={d / 'exterior.obj'}", f"input.fracture={d / 'cut.obj'}",
+        *RUN_OVERRIDES])
+    try:
+        return ext_kind, cut_kind, "ok", runner.run(cfg, d / "run", progress=False)
+    except (InputError, ResultError) as exc:
+        return ext_kind, cut_kind, str(exc), None

@@ -4,8 +4,10 @@ Each run either succeeds, and then its pieces passed the run's own checks (close
 manifold, uncrossed, volumes by winding number) and hold the object's volume, or it refuses in one
 clear line; nothing crashes. At least 90 % of these cuts, all valid, must succeed.
 
-``make test`` runs half of the 54 combinations of object and cut kind; ``FRACREF_RANDOM_CUTS=N``
-runs all 54 and N more random cases.
+``make test`` runs every combination of object and cut kind (66: six objects, eleven cuts, among them
+a sheet with a slight kink, an incomplete cut in a staircase and a Y junction with a dangling wing);
+``FRACREF_RANDOM_CUTS=N`` adds N random cases. ``python benchmarks/random_cuts.py`` prints the table of
+outcomes that the README shows.
 """
 
 import json
@@ -15,17 +17,10 @@ import re
 import pytest
 
 import cutgen
-from conftest import CONFIGS
-from fracture.pipeline import runner
-from fracture.pipeline.config import load_config
-from fracture.errors import InputError, ResultError
-from fracture.mesh.primitives import write_obj
 from fracture.mesh.topology import signed_volume
 
 SYSTEMATIC = len(cutgen.EXTERIORS) * len(cutgen.CUTS)
-EXTRA = int(os.environ.get("FRACREF_RANDOM_CUTS", "0"))
-SEEDS = (list(range(SYSTEMATIC + EXTRA)) if EXTRA else
-         [s for s in range(SYSTEMATIC) if (s + s // len(cutgen.EXTERIORS)) % 2 == 0])
+SEEDS = list(range(SYSTEMATIC + int(os.environ.get("FRACREF_RANDOM_CUTS", "0"))))
 # words of the implementation that a refusal must not use
 INTERNAL = re.compile(r"\bon B\b|\bcomponent\b|Traceback|\bS\b")
 
@@ -34,26 +29,19 @@ INTERNAL = re.compile(r"\bon B\b|\bcomponent\b|Traceback|\bS\b")
 def test_random_cuts_succeed_or_refuse_clearly(tmp_path):
     outcomes = {}
     for seed in SEEDS:
-        ext_kind, cut_kind, (BV, BF), (V, F) = cutgen.case(seed)
-        d = tmp_path / f"case_{seed}"
-        write_obj(d / "exterior.obj", BV, BF)
-        write_obj(d / "cut.obj", V, F)
-        cfg = load_config(CONFIGS / "example.yaml", [
-            "input.kind=meshes", f"input.exterior={d / 'exterior.obj'}", f"input.fracture={d / 'cut.obj'}",
-            "grid.resolution=16", "pyramid.levels=2", "refine.max_triangles=1500", "refine.iterations=6",
-            "animate.check_samples=2000", "animate.usd=false", "refine.snapshots=false"])
+        ext_kind, cut_kind, outcome, out = cutgen.run_case(seed, tmp_path)
         label = f"seed {seed}: {cut_kind} cut through a {ext_kind}"
-        try:
-            out = runner.run(cfg, d / "run", progress=False)
-        except (InputError, ResultError) as exc:
-            message = str(exc)
-            assert "\n" not in message and not INTERNAL.search(message), f"{label}: unclear refusal: {message}"
-            outcomes[label] = message
+        if out is None:
+            assert "\n" not in outcome and not INTERNAL.search(outcome), f"{label}: unclear refusal: {outcome}"
+            outcomes[label] = outcome
             continue
-        stats = json.loads((out / "manifest.json").read_text())["stats"]["animate"]
-        assert stats["volume_B"] == pytest.approx(signed_volume(BV, BF), rel=1e-4), label  # the OBJ keeps 6 decimals
-        assert stats["volume_relative_error"] < 0.01, label
-        assert len(stats["pieces"]) >= 2, label
+        stats = json.loads((out / "manifest.json").read_text())["stats"]
+        BV, BF = cutgen.case(seed)[2]
+        assert stats["animate"]["volume_B"] == pytest.approx(signed_volume(BV, BF), rel=1e-4), label  # 6 decimals
+        assert stats["animate"]["volume_relative_error"] < 0.01, label
+        assert len(stats["animate"]["pieces"]) >= 2, label
+        assert stats["refine"]["self_intersecting_pairs"] == 0, label
         outcomes[label] = "ok"
+    assert len(outcomes) >= 60
     refused = {k: v for k, v in outcomes.items() if v != "ok"}
     assert len(refused) <= 0.1 * len(outcomes), "\n".join(f"{k}: {v}" for k, v in refused.items())
