@@ -26,8 +26,6 @@ ENDS_WITHIN = 5.0
 # Seconds a window may take to appear (software rendering under Xvfb on a loaded machine).
 OPENS_WITHIN = 180.0
 
-pytestmark = pytest.mark.skipif(shutil.which("Xvfb") is None or shutil.which("xdotool") is None,
-                                reason="needs Xvfb and xdotool (`make system-deps`)")
 
 
 @pytest.fixture(scope="module")
@@ -46,6 +44,9 @@ class Xvfb:
     """A private X server on a free display (``-displayfd``: the server picks the number and tells it)."""
 
     def __init__(self):
+        missing = [tool for tool in ("Xvfb", "xdotool") if shutil.which(tool) is None]
+        if missing:
+            pytest.fail(f"{' and '.join(missing)} missing: `make system-deps` installs them")
         read, write = os.pipe()
         self.proc = subprocess.Popen(["Xvfb", "-displayfd", str(write), "-screen", "0", "1280x1024x24",
                                       "-nolisten", "tcp"], pass_fds=(write,), stderr=subprocess.DEVNULL)
