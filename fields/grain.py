@@ -12,7 +12,8 @@ Per triangle with area vector ``a = A n`` the anisotropic area is
 degree one, so its gradient in ``a`` is ``m = M n / g(n)``: the flow's
 derivative of a triangle's area with respect to a corner, ``1/2 n x e``,
 becomes ``1/2 m x e`` (:mod:`fracture.refine.flow`), and the search charges
-an edge of the grid graph the weights that measure ``g`` (:mod:`fracture.refine.cut_weights`).
+an edge of the grid graph the weights that measure ``g`` (``fracture.refine.cut_weights``, which
+reads the directions and the ratio from here).
 
 Fibres run ``along`` an axis (a branch's wood) or ``around`` it (circles about
 the line through ``center`` along the axis).
@@ -21,8 +22,6 @@ the line through ``center`` along the axis).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
-
 import numpy as np
 
 from fields.tolerances import tol
@@ -84,36 +83,3 @@ class Grain:
         g = np.sqrt(1.0 + k * c * c)
         m = (normals + (k * c)[:, None] * d) / g[:, None]
         return g, m
-
-    @cached_property
-    def _table(self) -> tuple[np.ndarray, dict]:
-        from scipy.spatial import cKDTree
-
-        from fracture.refine.cut_weights import sphere_directions
-
-        D = sphere_directions(_TABLE_DIRECTIONS)
-        return D, {"tree": cKDTree(np.concatenate([D, -D])), "cache": {}}
-
-    def edge_weights(self, spacing, P: np.ndarray) -> np.ndarray:
-        """Per point, the 13 weights of the grid graph's offsets whose cuts measure the integral of ``g``
-        (:func:`~fracture.refine.cut_weights.grain_weight_table`: fitted for the axis when the fibres run
-        along it, else once per spacing on :data:`_TABLE_DIRECTIONS` fibre directions, each point taking
-        the nearest), ``(k, 13)``."""
-        from fracture.refine.cut_weights import grain_weight_table
-
-        D, state = self._table
-        key = tuple(float(s) for s in np.asarray(spacing).reshape(3))
-        if self.fibres == "along":  # one direction: fitted for it exactly
-            row = state["cache"].get(("along",) + key)
-            if row is None:
-                row = state["cache"][("along",) + key] = grain_weight_table(key, self.ratio, self.axis[None])[0]
-            return np.broadcast_to(row, (len(P), len(row)))
-        table = state["cache"].get(key)
-        if table is None:
-            table = state["cache"][key] = grain_weight_table(key, self.ratio, D)
-        _, j = state["tree"].query(self.directions(P), workers=-1)
-        return table[j % len(D)]
-
-
-# Fibre directions the search's weights are fitted for (each grid node takes the nearest).
-_TABLE_DIRECTIONS = 64

@@ -183,7 +183,7 @@ def _main(argv: list[str] | None) -> int:
         if args.command == "render":
             return _render(args)
         if args.command == "export":
-            from fracture.io.export import export_run
+            from fracture.pipeline.export import export_run
 
             print(f"wrote {export_run(args.run_dir, args.format, args.out)}")
             return 0

@@ -1,7 +1,24 @@
 """Errors that reach the user as one clear line (the CLI prints them without a traceback)."""
 
 from fields.errors import InputError  # raised by the fields too, which import nothing from here
-from fracture.pipeline.schema import ConfigError
+
+
+class ConfigError(ValueError):
+    """A config value is missing, unknown, of the wrong type or out of range.
+
+    Parameters
+    ----------
+    where : str
+        The file (or ``--set``) the offending value came from.
+    key : str
+        Dotted key path, e.g. ``strength.layers[0].frequency``.
+    problem : str
+        What is wrong, including what was given and what was expected.
+    """
+
+    def __init__(self, where: str, key: str, problem: str):
+        self.where, self.key, self.problem = where, key, problem
+        super().__init__(f"{where}: {key}: {problem}" if key else f"{where}: {problem}")
 
 
 class StageError(ValueError):

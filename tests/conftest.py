@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fracture.mesh.primitives import box, sheet, write_obj
+from fracture.io.obj import write_obj
+from fracture.mesh.primitives import box, sheet
 
 REPO = Path(__file__).resolve().parents[1]
 CONFIGS = REPO / "configs"

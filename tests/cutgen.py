@@ -151,7 +151,7 @@ def run_case(seed: int, where) -> tuple[str, str, str, object]:
     from pathlib import Path
 
     from fracture.errors import InputError, ResultError
-    from fracture.mesh.primitives import write_obj
+    from fracture.io.obj import write_obj
     from fracture.pipeline import runner
     from fracture.pipeline.config import load_config
 

@@ -10,7 +10,8 @@ import pytest
 from fracture.pipeline import runner
 from fracture.pipeline.cache import StageCache
 from fracture.pipeline.config import load_config
-from fracture.mesh.primitives import sheet, write_obj
+from fracture.io.obj import write_obj
+from fracture.mesh.primitives import sheet
 
 
 def run(cfg, out, cache):

@@ -64,6 +64,28 @@ def test_no_module_imports_itself_through_others():
     assert circles == []
 
 
+def _unit(module: str) -> str:
+    """The subpackage (or top-level module) of ``fracture`` a module belongs to, else its package."""
+    parts = module.split(".")
+    return ".".join(parts[:2]) if parts[0] == "fracture" and len(parts) > 1 else parts[0]
+
+
+def test_no_subpackage_imports_itself_through_others():
+    """The subpackages of ``fracture`` (and its top-level modules) form layers too: errors and
+    tolerances at the bottom, the IO below what uses it, the pipeline on top; no two import each other,
+    directly or through others (local imports count)."""
+    _, edges = _import_graph()
+    units = sorted({_unit(n) for edge in edges for n in edge})
+    index = {u: i for i, u in enumerate(units)}
+    pairs = {(index[_unit(a)], index[_unit(b)]) for a, b in edges if _unit(a) != _unit(b)}
+    rows, cols = zip(*pairs)
+    graph = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(len(units), len(units)))
+    _, label = connected_components(graph, directed=True, connection="strong")
+    circles = [[u for u, k in zip(units, label) if k == c] for c in np.unique(label) if (label == c).sum() > 1]
+    assert circles == [], [sorted((a, b) for a, b in edges if _unit(a) in circles[0] and _unit(b) in circles[0]
+                                  and _unit(a) != _unit(b))]
+
+
 def test_no_epsilon_is_typed_inline_in_an_expression():
     """Tolerances are named: in tol (fracture/tolerances.py, fields/tolerances.py), in view_tol
     (viewer/tolerances.py) or as a module constant with its reason; no expression of the code types a

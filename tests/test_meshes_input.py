@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from fracture.errors import InputError
-from fracture.mesh.primitives import box, grid_faces, write_obj
+from fracture.io.obj import write_obj
+from fracture.mesh.primitives import box, grid_faces
 from fracture.pipeline.stages.coarse import coarse_from_meshes
 from fracture.mesh.topology import orient_outward, signed_volume
 from fracture.coarse.trim import trim_to_object

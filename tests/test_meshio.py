@@ -3,7 +3,8 @@ import pytest
 
 from fracture.errors import InputError
 from fracture.io.meshes import check_triangle_mesh, read_mesh
-from fracture.mesh.primitives import box, cylinder, write_obj
+from fracture.io.obj import write_obj
+from fracture.mesh.primitives import box, cylinder
 from fracture.mesh.topology import signed_volume
 
 

@@ -137,7 +137,8 @@ def test_until_coarse_writes_the_coarse_stage_of_a_scene(tmp_path):
 
 
 def test_meshes_input_extends_an_incomplete_cut(tmp_path):
-    from fracture.mesh.primitives import box, sheet, write_obj
+    from fracture.io.obj import write_obj
+    from fracture.mesh.primitives import box, sheet
     from fracture.pipeline.stages.coarse import coarse_from_meshes
 
     V, F = box([0, 0, 0], [2, 1, 0.5], (8, 4, 2))

@@ -6,7 +6,7 @@ import json
 import pytest
 
 from fracref.cli import main
-from fracture.pipeline.schema import ConfigError
+from fracture.errors import ConfigError
 from fracture.pipeline.sweep import parse_grid, points, run_sweep
 
 GRID = {"psi.stress_weight": [0.2, 1.5], "seed": [7, 8]}

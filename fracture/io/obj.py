@@ -7,6 +7,13 @@ from pathlib import Path
 import numpy as np
 
 
+def write_obj(path, V: np.ndarray, F: np.ndarray) -> None:
+    """A plain OBJ file of one mesh (vertices with 6 decimals, 1-based triangles), written atomically."""
+    from fracture.io.atomic import atomic_write_text
+
+    atomic_write_text(path, vertex_block(V) + face_block(F, 0))
+
+
 def face_block(F: np.ndarray, offset: int) -> str:
     """The ``f`` lines of triangles ``F`` whose vertices start at 1-based index ``offset + 1``."""
     F = np.asarray(F, np.int64) + offset + 1

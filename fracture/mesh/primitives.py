@@ -87,12 +87,3 @@ def sheet(fn, u_range, v_range, nu: int, nv: int) -> tuple[np.ndarray, np.ndarra
     U, W = np.meshgrid(np.linspace(*u_range, nu), np.linspace(*v_range, nv), indexing="ij")
     P = np.asarray(fn(U.ravel(), W.ravel()), np.float64)
     return P, grid_faces(nu, nv)
-
-
-def write_obj(path, V: np.ndarray, F: np.ndarray) -> None:
-    """A plain OBJ file (vertices with 6 decimals, 1-based triangles)."""
-    from fracture.io.atomic import atomic_write_text
-
-    lines = [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in V]
-    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in F]
-    atomic_write_text(path, "\n".join(lines) + "\n")

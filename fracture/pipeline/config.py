@@ -7,7 +7,7 @@ Every key has a default in :data:`SCHEMA`, so an experiment lists only what it
 changes. Mappings merge key by key; lists and scalars replace.
 
 Loading validates everything before anything runs: an unknown key, a wrong type
-or an out-of-range value raises :class:`~fracture.pipeline.schema.ConfigError` naming
+or an out-of-range value raises :class:`~fracture.errors.ConfigError` naming
 the file that set the value, the key path, what was given and what was
 expected. YAML is read with ``yaml.safe_load`` (no object construction), and
 paths are relative to the file that sets them.
@@ -24,7 +24,8 @@ import yaml
 from fields.colormap import NAMES as COLORMAPS
 from fields.strength import KINDS, LAYER_COMMON
 from fracture.refine.params import described_fields
-from fracture.pipeline.schema import ConfigError, Layers, Param, schema_defaults, validate
+from fracture.errors import ConfigError
+from fracture.pipeline.schema import Layers, Param, schema_defaults, validate
 
 SET_SOURCE = "--set"
 

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping
 
 from fields.spec import Spec
+from fracture.errors import ConfigError
 
 _TYPE_WORDS = {
     "float": "a number",
@@ -27,24 +28,6 @@ _TYPE_WORDS = {
     "bounds": "a list of two points [[x0, y0, z0], [x1, y1, z1]] with x0 < x1, y0 < y1, z0 < z1",
     "grid": "a mapping of config keys (e.g. psi.stress_weight) to non-empty lists of values",
 }
-
-
-class ConfigError(ValueError):
-    """A config value is missing, unknown, of the wrong type or out of range.
-
-    Parameters
-    ----------
-    where : str
-        The file (or ``--set``) the offending value came from.
-    key : str
-        Dotted key path, e.g. ``strength.layers[0].frequency``.
-    problem : str
-        What is wrong, including what was given and what was expected.
-    """
-
-    def __init__(self, where: str, key: str, problem: str):
-        self.where, self.key, self.problem = where, key, problem
-        super().__init__(f"{where}: {key}: {problem}" if key else f"{where}: {problem}")
 
 
 def _describe(value: Any) -> str:

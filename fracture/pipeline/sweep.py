@@ -39,7 +39,7 @@ import yaml
 
 from fracture.io.atomic import atomic_write_text, staged_directory
 from fracture.pipeline.config import load_config
-from fracture.pipeline.schema import ConfigError
+from fracture.errors import ConfigError
 
 GRID_SOURCE = "--grid"
 BACKENDS = ("local", "ray")

@@ -105,3 +105,36 @@ def grain_weight_table(spacing, ratio: float, directions: np.ndarray) -> np.ndar
 def cut_cost(spacing, weights: np.ndarray, normals: np.ndarray) -> np.ndarray:
     """What the weights charge per unit area of planes with the given normals (1 for area weights)."""
     return cut_density(spacing, np.asarray(normals, np.float64).reshape(-1, 3)) @ weights
+
+
+# Fibre directions the search's weights are fitted for when the fibres turn (each grid node takes the
+# nearest).
+_TABLE_DIRECTIONS = 64
+
+
+class GrainWeights:
+    """The grid graph's edge weights that measure a grain's cost ``g`` (:class:`fields.grain.Grain`), per
+    point: fitted for the axis when the fibres run along it, else once per spacing for
+    :data:`_TABLE_DIRECTIONS` fibre directions, each point taking the nearest."""
+
+    def __init__(self, grain):
+        self.grain = grain
+        self._cache: dict = {}
+
+    def __call__(self, spacing, P: np.ndarray) -> np.ndarray:
+        """The 13 weights of the offsets at each point of ``P``, ``(k, 13)``."""
+        from scipy.spatial import cKDTree
+
+        g = self.grain
+        key = tuple(float(s) for s in np.asarray(spacing).reshape(3))
+        if g.fibres == "along":  # one direction: fitted for it exactly
+            if key not in self._cache:
+                self._cache[key] = grain_weight_table(key, g.ratio, g.axis[None])[0]
+            row = self._cache[key]
+            return np.broadcast_to(row, (len(P), len(row)))
+        if key not in self._cache:
+            D = sphere_directions(_TABLE_DIRECTIONS)
+            self._cache[key] = (grain_weight_table(key, g.ratio, D), cKDTree(np.concatenate([D, -D])))
+        table, tree = self._cache[key]
+        _, j = tree.query(g.directions(P), workers=-1)
+        return table[j % len(table)]

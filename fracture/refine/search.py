@@ -69,7 +69,7 @@ from fracture.mesh.multilabel import contour_labels
 from fracture.mesh.sampling import area_samples, uniform_barycentric
 from fracture.mesh.sheets import coarsen_sheets
 from fracture.mesh.topology import barycentric_weights, face_frames, unique_edges
-from fracture.refine.cut_weights import OFFSETS, area_weights
+from fracture.refine.cut_weights import OFFSETS, GrainWeights, area_weights
 from fracture.refine.expansion import PottsGraph, expand
 from fracture.refine.flow import energy, face_terms
 from fracture.tolerances import tol
@@ -132,7 +132,7 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
     names, for the notes;
     ``distance`` (optional) is the distance of every grid node to the coarse surface; ``grain``
     (optional, a :class:`fields.grain.Grain`) makes the cost of a surface element depend on its normal
-    (per node the edge weights of :meth:`~fields.grain.Grain.edge_weights`).
+    (per node the edge weights of :class:`~fracture.refine.cut_weights.GrainWeights`).
     """
     clock = time.perf_counter()
     seconds: dict[str, float] = {}
@@ -188,7 +188,7 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
 
     # 2. the cut
     graph = _graph(sub, near, keep, (psi[box] + offset).ravel(), None if grain is None else
-                   grain.edge_weights(sub.spacing, P[near]))
+                   GrainWeights(grain)(sub.spacing, P[near]))
     free = ~keep
     reach_of = _reach(P[near], V0, F0, S0, band * h + h)
     labels, log = expand(graph, coarse, free, reach_of, cycles=_CYCLES)
