@@ -113,3 +113,23 @@ def test_no_epsilon_is_typed_inline_in_an_expression():
                     continue
                 found.append(f"{path.relative_to(REPO)}:{number}: {line.strip()}")
     assert not found, "epsilons typed inline:\n" + "\n".join(found)
+
+
+def test_importing_the_packages_leaves_the_environment_alone():
+    """The project's modules set nothing in ``os.environ`` when imported (the libraries they use are
+    imported first: Open3D's own import sets OpenMP variables)."""
+    code = """
+import importlib, os, pkgutil
+import igl, numba, numpy, open3d, pymeshlab, scipy
+before = dict(os.environ)
+for name in ("fields", "fracture", "viewer"):
+    pkg = importlib.import_module(name)
+    for m in pkgutil.walk_packages(pkg.__path__, name + "."):
+        if not m.name.endswith("__main__"):
+            importlib.import_module(m.name)
+print(sorted(set(os.environ.items()) ^ set(before.items())))
+"""
+    env = {k: v for k, v in __import__("os").environ.items() if k not in ("DISPLAY", "EGL_PLATFORM")}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.strip() == "[]"

@@ -20,26 +20,20 @@ written with a transparent background (PNG; the videos are composited on white).
 from __future__ import annotations
 
 import os
+import shutil
+import tempfile
+from dataclasses import dataclass, replace
+from pathlib import Path
 
-# Open3D 0.19 needs EGL's surfaceless platform to render with no X display;
-# it must be in the environment before the first renderer is made.
-if not os.environ.get("DISPLAY"):
-    os.environ.setdefault("EGL_PLATFORM", "surfaceless")
+import numpy as np
 
-import shutil  # noqa: E402
-import tempfile  # noqa: E402
-from dataclasses import dataclass, replace  # noqa: E402
-from pathlib import Path  # noqa: E402
-
-import numpy as np  # noqa: E402
-
-from fracture.io.atomic import atomic_write_bytes, png_bytes  # noqa: E402
-from fracture.errors import InputError  # noqa: E402
-from viewer import annotate  # noqa: E402
-from viewer.annotate import Bar  # noqa: E402
-from viewer.data import RunData, Surface  # noqa: E402
-from viewer.media import Video, check_size, frame_counts  # noqa: E402
-from viewer.looks import (  # noqa: E402
+from fracture.io.atomic import atomic_write_bytes, png_bytes
+from fracture.errors import InputError
+from viewer import annotate
+from viewer.annotate import Bar
+from viewer.data import RunData, Surface
+from viewer.media import Video, check_size, frame_counts
+from viewer.looks import (
     FIELD_CMAPS, SURFACE_CMAPS, CameraPose, View, animation_pose, apply_camera, capture, dominant_normal, frame_points,
     iteration_caption, scene_box,
     iteration_pose, pieces_caption, set_cutaway, set_frame, set_slice, set_surface, show_context, show_material, show_pieces,
@@ -90,6 +84,10 @@ class Renderer:
             raise InputError(f"{width}x{height} supersampled {supersample} times is over 8192 pixels; "
                              "expected a smaller size or less supersampling")
         self.width, self.height, self.k, self.transparent = width, height, int(supersample), transparent
+        # Open3D 0.19 renders with no X display only on EGL's surfaceless platform, which must be in the
+        # environment before its first offscreen renderer is made (here: a renderer is what needs it)
+        if not os.environ.get("DISPLAY"):
+            os.environ.setdefault("EGL_PLATFORM", "surfaceless")
         self.r = rendering.OffscreenRenderer(width * self.k, height * self.k)
         self.r.scene.view.set_post_processing(True)
 
