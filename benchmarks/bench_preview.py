@@ -20,6 +20,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from fracture.io import layout  # noqa: E402
 from fracture.pipeline import runner  # noqa: E402
 from fracture.pipeline.cache import StageCache  # noqa: E402
 from fracture.pipeline.config import load_config  # noqa: E402
@@ -43,7 +44,7 @@ def main(argv=None) -> None:
             out = runner.run(load_config(args.config, common + [f"psi.stress_weight={weight}"]), Path(tmp) / f"r{k}",
                              until="refine", progress=False, cache=cache)
             wall = time.perf_counter() - start
-            m = json.loads((out / "manifest.json").read_text())
+            m = json.loads((out / layout.MANIFEST).read_text())
             s = {n: v["seconds"] for n, v in m["stages"].items()}
             print(f"| {k + 1} | {weight:.1f} | {s['coarse']:.2f} | {s['fields']:.2f} | {s['refine']:.2f} "
                   f"| {sum(s.values()):.2f} | {wall:.2f} | {m['counts']['refined_fracture_triangles']} "

@@ -22,6 +22,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from fracture.io import layout  # noqa: E402
 from fracture.pipeline import runner  # noqa: E402
 from fracture.pipeline.config import load_config  # noqa: E402
 from fracture.errors import InputError, ResultError, StageError  # noqa: E402
@@ -59,7 +60,7 @@ def main() -> int:
             except (InputError, ResultError, StageError) as exc:
                 print(f"| {case} | refused: {str(exc)[:120]} | | | {time.perf_counter() - start:.0f} |")
                 continue
-            manifest = json.loads((out / "manifest.json").read_text())
+            manifest = json.loads((out / layout.MANIFEST).read_text())
             bad = [i for i, p in enumerate(manifest["stats"]["animate"]["pieces"])
                    if not (p["closed_oriented"] and p["vertex_manifold"] and p["self_intersections"] == 0)]
             good += not bad

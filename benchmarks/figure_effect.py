@@ -30,6 +30,7 @@ sys.path.insert(0, str(ROOT))
 from fields.grid import Grid  # noqa: E402
 from fields.pyramid import StrengthPyramid  # noqa: E402
 from fracture.coarse.scenes.weak_sheets import weak_sheet_case  # noqa: E402
+from fracture.io import layout  # noqa: E402
 from fracture.pipeline import runner  # noqa: E402
 from fracture.pipeline.config import load_config  # noqa: E402
 from fracture.mesh.exterior import Exterior  # noqa: E402
@@ -91,11 +92,11 @@ def scene_panel(ax, name: str, title: str, axis: int = 2) -> None:
     cfg = load_config(ROOT / "configs" / f"{name}.yaml", ["refine.snapshots=false"])
     with tempfile.TemporaryDirectory() as tmp:
         out = runner.run(cfg, Path(tmp) / "run", until="refine", progress=False)
-        grid = Grid.from_dict(json.loads((out / "fields/grid.json").read_text()))
-        zeta = np.load(out / "fields/zeta.npy")
-        coarse = read_ply(out / "coarse/fracture_surface.ply")[:2]
-        refined = read_ply(out / "refined/fracture_surface.ply")[:2]
-        solid = Exterior(*read_ply(out / "coarse/exterior.ply")[:2])
+        grid = Grid.from_dict(json.loads((out / layout.GRID).read_text()))
+        zeta = np.load(out / layout.field("zeta"))
+        coarse = read_ply(out / layout.COARSE_SURFACE)[:2]
+        refined = read_ply(out / layout.REFINED_SURFACE)[:2]
+        solid = Exterior(*read_ply(out / layout.EXTERIOR)[:2])
     panel(ax, grid, zeta, axis, [coarse, refined], title, solid)
 
 

@@ -22,11 +22,12 @@ def _one(seed: int) -> tuple:
     import json
 
     import cutgen
+    from fracture.io import layout
 
     start = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
         ext_kind, cut_kind, outcome, out = cutgen.run_case(seed, tmp)
-        notes = json.loads((out / "manifest.json").read_text()).get("notes", []) if out is not None else []
+        notes = json.loads((out / layout.MANIFEST).read_text()).get("notes", []) if out is not None else []
     return seed, ext_kind, cut_kind, outcome, time.perf_counter() - start, notes
 
 

@@ -16,6 +16,7 @@ import sys
 from pathlib import Path
 
 from fracture.errors import ConfigError
+from fracture.io import layout
 
 
 # commands that refine or load refinement results (the others only read configs)
@@ -209,7 +210,7 @@ def _main(argv: list[str] | None) -> int:
         if not args.quiet:
             import json
 
-            print(runner.timing_table(json.loads((done / "manifest.json").read_text(encoding="utf-8"))))
+            print(runner.timing_table(json.loads((done / layout.MANIFEST).read_text(encoding="utf-8"))))
         print(f"run complete: {done}  (manifest: {done / 'manifest.json'})")
         return 0
     except (ConfigError, InputError, ResultError, StageError, RunDirectoryExists, OutputError) as exc:
@@ -233,7 +234,7 @@ def _start_view(run_dir: Path, camera: Path | None):
     if camera is not None:
         return read_view_file(camera)
     run = RunData(run_dir)
-    return from_section(run.config.get("view"), str(run.dir / "config.yaml"))
+    return from_section(run.config.get("view"), str(run.dir / layout.CONFIG))
 
 
 def _render(args) -> int:

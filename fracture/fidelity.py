@@ -27,6 +27,7 @@ import numpy as np
 from fields.grid import Grid
 from fields.interpolate import trilinear
 from fields.stress import distance_to_surface
+from fracture.io import layout
 from fracture.mesh.exterior import Exterior
 from fracture.io.ply import read_ply
 from fracture.mesh.sampling import area_samples as surface_samples
@@ -88,13 +89,13 @@ def run_figures(out: str | Path) -> dict:
     whether the search's surface was taken (``searched``) and its ``search_seconds``.
     """
     out = Path(out)
-    manifest = json.loads((out / "manifest.json").read_text())
-    grid = Grid.from_dict(json.loads((out / "fields/grid.json").read_text()))
-    zeta = np.load(out / "fields/zeta.npy").astype(np.float64)
-    psi = np.load(out / "fields/psi.npy").astype(np.float64)
-    BV, BF = read_ply(out / "coarse/exterior.ply")[:2]
-    CV, CF = read_ply(out / "coarse/fracture_surface.ply")[:2]
-    RV, RF = read_ply(out / "refined/fracture_surface.ply")[:2]
+    manifest = json.loads((out / layout.MANIFEST).read_text())
+    grid = Grid.from_dict(json.loads((out / layout.GRID).read_text()))
+    zeta = np.load(out / layout.field("zeta")).astype(np.float64)
+    psi = np.load(out / layout.field("psi")).astype(np.float64)
+    BV, BF = read_ply(out / layout.EXTERIOR)[:2]
+    CV, CF = read_ply(out / layout.COARSE_SURFACE)[:2]
+    RV, RF = read_ply(out / layout.REFINED_SURFACE)[:2]
     thresholds = inside_thresholds(grid, zeta, BV, BF)
     coarse = surface_figures(CV, CF, grid, zeta, thresholds, psi)
     refined = surface_figures(RV, RF, grid, zeta, thresholds, psi, reference=(CV, CF))

@@ -33,6 +33,7 @@ import open3d as o3d
 from open3d.visualization import gui, rendering
 
 from fields.colormap import colorbar
+from fracture.io import layout
 from fracture.io.atomic import atomic_write_bytes, atomic_write_text, png_bytes
 from fracture.errors import ConfigError, InputError, ResultError, StageError
 from fracture.pipeline.config import explain
@@ -137,7 +138,7 @@ class Viewer:
         self.sweep = list(sweep or [])
         self.point, self.previous_point = 0, 0
         # the view to start with: ``start`` (a view file), else the run's config ``view:`` section
-        start = start or from_section(run.config.get("view"), str(run.dir / "config.yaml"))
+        start = start or from_section(run.config.get("view"), str(run.dir / layout.CONFIG))
         self.view = start.view  # checked against the run by load()
         self.window = self.app.create_window(f"fracref: {run.name}", width, height)
         self.window.set_on_layout(self._layout)
@@ -986,7 +987,7 @@ def open_target(target: Path, out: Path | None) -> RunData:
         raise InputError(f"{target}: neither a run directory nor a config file")
     cfg = load_config(target)
     out = Path(out) if out is not None else Path("runs") / cfg["name"]
-    if not (out / "manifest.json").is_file():
+    if not (out / layout.MANIFEST).is_file():
         print(f"running {target} into {out} first ...")
         runner.run(cfg, out, progress=True, cache=StageCache())
     return RunData(out)

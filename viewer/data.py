@@ -17,6 +17,7 @@ import numpy as np
 
 from fields.grid import Grid
 from fracture.errors import InputError
+from fracture.io import layout
 from fracture.pipeline.sweep import Point
 
 FIELDS = ("psi", "zeta", "xi")
@@ -50,7 +51,7 @@ def read_sweep(sweep_dir: str | Path) -> list[SweepPoint]:
         raise InputError(f"{sweep_dir / 'sweep.json'}: not a sweep's record ({exc}); expected the file "
                          "`fracref sweep` writes") from None
     points = [SweepPoint(name, Point(tuple(p.get("values", {}).items())).label, sweep_dir / name)
-              for name, p in listed.items() if (sweep_dir / name / "manifest.json").is_file()]
+              for name, p in listed.items() if (sweep_dir / name / layout.MANIFEST).is_file()]
     if not points:
         raise InputError(f"{sweep_dir}: no point of this sweep has finished yet (expected run directories with "
                          "manifest.json)")
@@ -62,7 +63,7 @@ class RunData:
 
     def __init__(self, run_dir: str | Path):
         self.dir = Path(run_dir)
-        manifest = self.dir / "manifest.json"
+        manifest = self.dir / layout.MANIFEST
         if not self.dir.is_dir():
             raise InputError(f"{self.dir}: no such run directory (make one with `fracref run CONFIG --out DIR`)")
         if not manifest.is_file():
@@ -92,7 +93,7 @@ class RunData:
     def config(self) -> dict:
         import yaml
 
-        return yaml.safe_load(self._require("config.yaml", "the config").read_text(encoding="utf-8"))
+        return yaml.safe_load(self._require(layout.CONFIG, "the config").read_text(encoding="utf-8"))
 
     @property
     def up_axis(self) -> str:
@@ -107,15 +108,15 @@ class RunData:
 
     @cached_property
     def grid(self) -> Grid:
-        return Grid.from_dict(json.loads(self._require("fields/grid.json", "the fields").read_text()))
+        return Grid.from_dict(json.loads(self._require(layout.GRID, "the fields").read_text()))
 
     @cached_property
     def _pyramid(self) -> np.ndarray:
-        return np.load(self._require("fields/pyramid.npy", "the strength pyramid"), mmap_mode="r")
+        return np.load(self._require(layout.PYRAMID, "the strength pyramid"), mmap_mode="r")
 
     @property
     def pyramid_levels(self) -> int:
-        return int(self._pyramid.shape[0]) if self.has("fields/pyramid.npy") else 1
+        return int(self._pyramid.shape[0]) if self.has(layout.PYRAMID) else 1
 
     def field(self, name: str, level: int = 0) -> np.ndarray:
         """Field ``name`` (zeta, xi or psi) on the grid; psi at pyramid ``level`` (0 = finest).
@@ -131,7 +132,7 @@ class RunData:
                     raise InputError(f"pyramid level must be in 0..{self.pyramid_levels - 1}, got {level}")
                 values = np.asarray(self._pyramid[level])
             else:
-                values = np.load(self._require(f"fields/{name}.npy", f"the {name} field"))
+                values = np.load(self._require(layout.field(name), f"the {name} field"))
             self._memo[name, level] = values
         return self._memo[name, level]
 
@@ -158,7 +159,7 @@ class RunData:
     def exterior(self) -> Surface:
         from fracture.io.ply import read_ply
 
-        V, F, _, fd = read_ply(self._require("coarse/exterior.ply", "the exterior"))
+        V, F, _, fd = read_ply(self._require(layout.EXTERIOR, "the exterior"))
         return Surface(V, F, {"component": fd.get("component", np.zeros(len(F), np.int64))})
 
     @cached_property
@@ -172,25 +173,25 @@ class RunData:
     def coarse_fracture(self) -> Surface:
         from fracture.io.ply import read_ply
 
-        V, F, _, _ = read_ply(self._require("coarse/fracture_surface.ply", "the coarse fracture surface"))
+        V, F, _, _ = read_ply(self._require(layout.COARSE_SURFACE, "the coarse fracture surface"))
         return Surface(V, F)
 
     @cached_property
     def refined_fracture(self) -> Surface | None:
         from fracture.io.ply import read_ply
 
-        if not self.has("refined/fracture_surface.ply"):
+        if not self.has(layout.REFINED_SURFACE):
             return None
-        V, F, _, _ = read_ply(self._path("refined/fracture_surface.ply"))
+        V, F, _, _ = read_ply(self._path(layout.REFINED_SURFACE))
         return Surface(V, F)
 
     @cached_property
     def coarse_animation(self):
         from fracture.coarse.animation import CoarseAnimation
 
-        return CoarseAnimation(lo=np.load(self._require("coarse/animation_lo.npy", "the coarse animation")),
-                               hi=np.load(self._require("coarse/animation_hi.npy", "the coarse animation")),
-                               nodes=np.load(self._require("coarse/animation_nodes.npy", "the coarse animation")))
+        return CoarseAnimation(lo=np.load(self._require(layout.ANIMATION_LO, "the coarse animation")),
+                               hi=np.load(self._require(layout.ANIMATION_HI, "the coarse animation")),
+                               nodes=np.load(self._require(layout.ANIMATION_NODES, "the coarse animation")))
 
     @cached_property
     def coarse_parts(self) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -228,13 +229,13 @@ class RunData:
 
     @property
     def has_iterations(self) -> bool:
-        return self.has("refined/iterations.json")
+        return self.has(layout.ITERATIONS_INDEX)
 
     @cached_property
     def iterations(self) -> list[dict]:
         from fracture.pipeline.stages.refine import load_snapshots
 
-        self._require("refined/iterations.json", "the iteration view")
+        self._require(layout.ITERATIONS_INDEX, "the iteration view")
         return load_snapshots(self.dir)
 
     @property
@@ -265,13 +266,13 @@ class RunData:
 
     @property
     def has_animation(self) -> bool:
-        return self.has("animation/transfer.npz")
+        return self.has(layout.TRANSFER)
 
     @cached_property
     def transfer(self):
         from fracture.pieces.transfer import load_transfer
 
-        return load_transfer(self._require("animation/transfer.npz", "the animation view"))
+        return load_transfer(self._require(layout.TRANSFER, "the animation view"))
 
     @cached_property
     def _piece_files(self) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
@@ -280,7 +281,7 @@ class RunData:
 
         out = []
         for c in range(len(self.transfer.offsets) - 1):
-            V, F, _, fd = read_ply(self._require(f"pieces/piece_{c:03d}.ply", "the animation view"))
+            V, F, _, fd = read_ply(self._require(layout.piece(c), "the animation view"))
             ext = np.asarray(fd.get("exterior", np.ones(len(F))), bool)
             out.append((V, F.astype(np.int64), ext))
         return out

@@ -17,6 +17,8 @@ import tempfile
 from pathlib import Path
 from typing import Iterator
 
+from fracture.io import layout
+
 
 def _umask() -> int:
     mask = os.umask(0)
@@ -62,7 +64,7 @@ class OutputError(Exception):
     """A run directory could not be written (a path component is a file, the disk is full, no permission)."""
 
 
-RUN_MARKER = "manifest.json"
+RUN_MARKER = layout.MANIFEST
 
 
 def check_run_directory(out: Path, force: bool, marker: str = RUN_MARKER) -> None:

@@ -16,6 +16,7 @@ import numpy as np
 import yaml
 
 from fracture.errors import InputError
+from fracture.io import layout
 
 FORMATS = ("usd",)
 
@@ -42,25 +43,25 @@ def export_run(run: str | Path, fmt: str = "usd", out: str | Path | None = None)
         raise InputError(f"export: unknown format {fmt!r}; expected one of {', '.join(FORMATS)}")
     if not run.is_dir():
         raise InputError(f"{run}: not a run directory")
-    names = json.loads(_need(run, "coarse/components.json").read_text())["names"]
-    transfer = load_transfer(_need(run, "animation/transfer.npz"))
+    names = json.loads(_need(run, layout.COMPONENTS).read_text())["names"]
+    transfer = load_transfer(_need(run, layout.TRANSFER))
     n = len(transfer.offsets) - 1
     if n != len(names):
         raise InputError(f"{run}: coarse/components.json names {len(names)} pieces, animation/transfer.npz has {n}")
     faces, exterior = [], []
     for c in range(n):
-        rel = f"pieces/piece_{c:03d}.ply"
+        rel = layout.piece(c)
         V, F, _, face_data = read_ply(_need(run, rel))
         if len(V) != transfer.offsets[c + 1] - transfer.offsets[c] or "exterior" not in face_data:
             raise InputError(f"{run / rel}: does not match animation/transfer.npz ({len(V)} vertices, "
                              f"expected {transfer.offsets[c + 1] - transfer.offsets[c]}, with a face property exterior)")
         faces.append(F)
         exterior.append(np.asarray(face_data["exterior"]).astype(bool))
-    cfg = yaml.safe_load(_need(run, "config.yaml").read_text())
+    cfg = yaml.safe_load(_need(run, layout.CONFIG).read_text())
     fps = float(cfg.get("animate", {}).get("fps", 24.0))
-    manifest = json.loads(_need(run, "manifest.json").read_text())
+    manifest = json.loads(_need(run, layout.MANIFEST).read_text())
     up = manifest.get("stats", {}).get("coarse", {}).get("up_axis", "z")
-    out = Path(out) if out is not None else run / "animation" / "pieces.usdc"
+    out = Path(out) if out is not None else run / layout.USD
     if out.suffix not in (".usd", ".usdc", ".usda"):
         raise InputError(f"export: {out}: a USD file name ends in .usd, .usdc or .usda")
     if not out.parent.is_dir():

@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from fracture.errors import StageError
+from fracture.io import layout
 from fracture.io.atomic import staged_directory
 from fracture.pipeline.config import dump_config
 from fracture.pipeline.context import RunContext
@@ -174,7 +175,7 @@ def run(cfg: dict, out: str | Path, until: str | None = None, force: bool = Fals
     # failed run's directory is removed
     with staged_directory(out, force) as staging, ThreadPoolExecutor(1, "fracref-writer") as writer:
         ctx = RunContext(cfg=cfg, dir=staging, progress=progress, listener=listener, cache=cache, writer=writer)
-        ctx.path("config.yaml").write_text(dump_config(cfg), encoding="utf-8")
+        ctx.path(layout.CONFIG).write_text(dump_config(cfg), encoding="utf-8")
         for stage in chosen:
             t0 = time.perf_counter()
             ctx.tell("stage", name=stage.name)
@@ -195,5 +196,5 @@ def run(cfg: dict, out: str | Path, until: str | None = None, force: bool = Fals
         manifest["files"] = {rel: {"sha256": _sha256(staging / rel), "bytes": (staging / rel).stat().st_size}
                              for rel in sorted(ctx.files)}
         # Written last: a directory with a manifest is a complete run.
-        (staging / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n", encoding="utf-8")
+        (staging / layout.MANIFEST).write_text(json.dumps(manifest, indent=2) + "\n", encoding="utf-8")
     return Path(out)

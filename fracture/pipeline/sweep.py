@@ -37,6 +37,7 @@ from typing import Any, Iterable, Iterator
 
 import yaml
 
+from fracture.io import layout
 from fracture.io.atomic import atomic_write_text, staged_directory
 from fracture.pipeline.config import load_config
 from fracture.errors import ConfigError
@@ -252,7 +253,7 @@ def run_sweep(config: str | Path, grid: dict[str, list], out: str | Path, overri
     state = {"config": str(config), "overrides": base, "grid": grid, "backend": backend, "points": {}}
     todo = []
     for p in pts:
-        if (out / p.name / "manifest.json").is_file():
+        if (out / p.name / layout.MANIFEST).is_file():
             state["points"][p.name] = {"values": dict(p.values), "status": "done before"}
         else:
             state["points"][p.name] = {"values": dict(p.values), "status": "pending"}
@@ -278,7 +279,7 @@ def run_sweep(config: str | Path, grid: dict[str, list], out: str | Path, overri
 def point_figures(run_dir: Path) -> dict:
     """A finished point's figures: seconds, refined triangles, iterations, the last plain energy and
     functional, and (with a refine stage) the fidelity figures of :func:`fracture.fidelity.run_figures`."""
-    manifest = json.loads((run_dir / "manifest.json").read_text())
+    manifest = json.loads((run_dir / layout.MANIFEST).read_text())
     out: dict[str, Any] = {"seconds": round(sum(s["seconds"] for s in manifest["stages"].values()), 3),
                            "reused_stages": sum(s.get("cache") == "reused" for s in manifest["stages"].values())}
     refine = manifest.get("stats", {}).get("refine")

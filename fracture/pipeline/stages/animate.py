@@ -31,6 +31,7 @@ import copy
 import igl
 import numpy as np
 
+from fracture.io import layout
 from fracture.pieces.imprint import imprint_boundary
 from fracture.io.obj import ObjFrames
 from fracture.pieces.assembly import build_pieces
@@ -65,7 +66,7 @@ def animate_stage(ctx: RunContext) -> None:
         local = pieces.parts
         for c, (ids, V, F) in enumerate(local):
             rows = slice(transfer.offsets[c], transfer.offsets[c + 1])
-            write_ply(ctx.path(f"pieces/piece_{c:03d}.ply"), V, F,
+            write_ply(ctx.path(layout.piece(c)), V, F,
                       vertex_data={"fracture_time": transfer.time[rows].astype(np.float32)},
                       face_data={"exterior": pieces.exterior[c].astype(np.uint8)})
         _save_transfer(ctx, transfer)
@@ -86,11 +87,11 @@ def animate_stage(ctx: RunContext) -> None:
                 writer.write(ctx.path(f"frames/frame_{t + 1:04d}.obj"),
                              [transfer.piece(X, c) for c in range(pieces.n_pieces)], header=f"frame {t + 1}")
             if opts.ply_frames:
-                write_ply(ctx.path(f"frames/frame_{t + 1:04d}.ply"), X, all_F, face_data={"piece": piece_of})
+                write_ply(ctx.path(layout.frame(t)), X, all_F, face_data={"piece": piece_of})
             bar.update()
         checks["early_gap_max"] = gap.worst
         if opts.usd:
-            write_pieces_usd(ctx.path("animation/pieces.usdc"), cf.names,
+            write_pieces_usd(ctx.path(layout.USD), cf.names,
                              [F for _, _, F in local], pieces.exterior, frame_points(transfer), fps=opts.fps,
                              up_axis="Y" if cf.up_axis == "y" else "Z")
 
@@ -102,7 +103,7 @@ def animate_stage(ctx: RunContext) -> None:
 
 
 def _save_transfer(ctx: RunContext, tr: Transfer) -> None:
-    ctx.save_npz("animation/transfer.npz", {
+    ctx.save_npz(layout.TRANSFER, {
         "own_data": tr.own.data, "own_indices": tr.own.indices.astype(np.int64),
         "own_indptr": tr.own.indptr.astype(np.int64), "own_shape": np.array(tr.own.shape, np.int64),
         "shared_data": tr.shared.data, "shared_indices": tr.shared.indices.astype(np.int64),

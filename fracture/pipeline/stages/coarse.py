@@ -9,6 +9,7 @@ import numpy as np
 
 from fracture.coarse.surface import CoarseFracture, make_coarse
 from fracture.coarse.mesh_sequence import load_coarse_sequence
+from fracture.io import layout
 from fracture.io.meshes import read_mesh
 from fracture.io.ply import write_ply
 from fracture.pipeline.context import RunContext
@@ -149,16 +150,16 @@ def coarse_stage(ctx: RunContext) -> None:
 def save_coarse(ctx: RunContext, cf: CoarseFracture) -> None:
     """Write the coarse stage's outputs (PLY meshes with labels, animation arrays)."""
     sp = cf.special()
-    write_ply(ctx.path("coarse/exterior.ply"), cf.exterior_V, cf.exterior_F,
+    write_ply(ctx.path(layout.EXTERIOR), cf.exterior_V, cf.exterior_F,
               face_data={"component": cf.exterior_component})
-    write_ply(ctx.path("coarse/fracture_surface.ply"), cf.V, cf.F,
+    write_ply(ctx.path(layout.COARSE_SURFACE), cf.V, cf.F,
               vertex_data={"fracture_time": cf.vertex_fracture_time,
                            "boundary": sp.boundary_vertices.astype(np.uint8),
                            "nonmanifold": sp.nonmanifold_vertices.astype(np.uint8)},
               face_data={"side0": cf.sides[:, 0], "side1": cf.sides[:, 1], "fracture_time": cf.face_fracture_time,
                          "virtual": cf.virtual.astype(np.uint8)})
-    ctx.save_array("coarse/animation_lo.npy", cf.animation.lo)
-    ctx.save_array("coarse/animation_hi.npy", cf.animation.hi)
-    ctx.save_array("coarse/animation_nodes.npy", cf.animation.nodes)
-    ctx.save_array("coarse/fit_residual.npy", cf.fit_residual)
-    ctx.save_json("coarse/components.json", {"names": cf.names, "frames": cf.n_frames, "notes": cf.notes})
+    ctx.save_array(layout.ANIMATION_LO, cf.animation.lo)
+    ctx.save_array(layout.ANIMATION_HI, cf.animation.hi)
+    ctx.save_array(layout.ANIMATION_NODES, cf.animation.nodes)
+    ctx.save_array(layout.FIT_RESIDUAL, cf.fit_residual)
+    ctx.save_json(layout.COMPONENTS, {"names": cf.names, "frames": cf.n_frames, "notes": cf.notes})

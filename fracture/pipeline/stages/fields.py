@@ -8,6 +8,7 @@ from fields.build import build_fields, fields_memory, grid_for
 from fields.pyramid import StrengthPyramid
 from fields.slices import axis_slice, slice_image
 from fracture.errors import ConfigError
+from fracture.io import layout
 from fracture.pipeline.context import RunContext
 from fracture.pipeline.typed import Config, typed_config
 
@@ -67,11 +68,11 @@ def fields_stage(ctx: RunContext) -> None:
             ctx.cache.keep(name, known_key(ctx, name), fs.field(name))
     ctx.products.fields = fs
 
-    ctx.save_json("fields/grid.json", fs.grid.to_dict())
+    ctx.save_json(layout.GRID, fs.grid.to_dict())
     for name in PREVIEW_FIELDS:
-        ctx.save_array(f"fields/{name}.npy", fs.field(name).astype(np.float32))
-    ctx.save_array("fields/pyramid.npy", fs.pyramid.levels.astype(np.float32))
-    ctx.save_png("fields/preview.png", preview_image(fs, ctx.config.preview))
+        ctx.save_array(layout.field(name), fs.field(name).astype(np.float32))
+    ctx.save_array(layout.PYRAMID, fs.pyramid.levels.astype(np.float32))
+    ctx.save_png(layout.PREVIEW, preview_image(fs, ctx.config.preview))
 
     ctx.counts.update(
         grid_nodes=fs.grid.size,

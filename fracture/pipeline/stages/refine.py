@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from fracture.io import layout
 from fracture.io.ply import write_ply
 from fracture.refine import kernels_cached
 from fracture.refine.engine import Refiner, default_search
@@ -67,7 +68,7 @@ def refine_stage(ctx: RunContext) -> None:
     mesh.V, crossed = require_uncrossed(mesh.V, mesh.F, refiner.B)
     ctx.products.refined = mesh
 
-    write_ply(ctx.path("refined/fracture_surface.ply"), mesh.V, mesh.F,
+    write_ply(ctx.path(layout.REFINED_SURFACE), mesh.V, mesh.F,
               face_data={"side0": mesh.sides[:, 0].astype(np.int32), "side1": mesh.sides[:, 1].astype(np.int32)})
     W = mesh.tree_matrix()
     empty = np.zeros((0, 3))
@@ -79,9 +80,9 @@ def refine_stage(ctx: RunContext) -> None:
         map_data=W.data, map_indices=W.indices.astype(np.int64), map_indptr=W.indptr.astype(np.int64),
         map_shape=np.array(W.shape, np.int64),
     )
-    ctx.save_npz("refined/tree.npz", tree)
+    ctx.save_npz(layout.TREE, tree)
     if snaps is not None:
-        snaps.save(ctx, "refined/iterations")
+        snaps.save(ctx, layout.ITERATIONS)
 
     ctx.counts.update(refined_fracture_triangles=int(len(mesh.F)), refined_fracture_vertices=int(len(mesh.V)),
                       iterations=log.iterations)
@@ -154,7 +155,7 @@ class Snapshots:
                                        "snapshots": len(self.V)})
 
 
-def load_snapshots(run_dir, stem: str = "refined/iterations") -> list[dict]:
+def load_snapshots(run_dir, stem: str = layout.ITERATIONS) -> list[dict]:
     """The snapshots of a run: per iteration a dict of positions, faces, psi, speed."""
     base = Path(run_dir) / stem
     meta = json.loads(base.with_suffix(".json").read_text())

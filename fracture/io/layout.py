@@ -1,0 +1,82 @@
+"""The run directory's layout: every file a run writes, named once.
+
+The stages write these files (``ctx.path(layout.TREE)``), and the viewer,
+``fracref export``, the fidelity figures, sweeps and the benchmarks read
+them, through the names here and the loaders below. Paths are relative to
+the run directory, with ``/`` as the separator.
+
+``manifest.json`` is written last: a directory with one is a complete run
+(:mod:`fracture.pipeline.runner`).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+MANIFEST = "manifest.json"
+CONFIG = "config.yaml"
+
+# fields stage
+GRID = "fields/grid.json"
+PYRAMID = "fields/pyramid.npy"
+PREVIEW = "fields/preview.png"
+
+# coarse stage
+EXTERIOR = "coarse/exterior.ply"
+COARSE_SURFACE = "coarse/fracture_surface.ply"
+COMPONENTS = "coarse/components.json"
+ANIMATION_LO = "coarse/animation_lo.npy"
+ANIMATION_HI = "coarse/animation_hi.npy"
+ANIMATION_NODES = "coarse/animation_nodes.npy"
+FIT_RESIDUAL = "coarse/fit_residual.npy"
+
+# refine stage
+REFINED_SURFACE = "refined/fracture_surface.ply"
+TREE = "refined/tree.npz"
+ITERATIONS = "refined/iterations"  # the stem of the snapshot arrays and of their index
+ITERATIONS_INDEX = ITERATIONS + ".json"
+
+# animate stage
+TRANSFER = "animation/transfer.npz"
+USD = "animation/pieces.usdc"
+
+
+def field(name: str) -> str:
+    """A field on the grid (``zeta``, ``xi``, ``psi``, ``distance``)."""
+    return f"fields/{name}.npy"
+
+
+def piece(c: int) -> str:
+    """Piece ``c`` in material space."""
+    return f"pieces/piece_{c:03d}.ply"
+
+
+def frame(t: int) -> str:
+    """All pieces at frame ``t`` (counted from 0; the file from 1)."""
+    return f"frames/frame_{t + 1:04d}.ply"
+
+
+def read_manifest(run: str | Path) -> dict:
+    return json.loads((Path(run) / MANIFEST).read_text(encoding="utf-8"))
+
+
+def read_grid(run: str | Path):
+    """The field grid (:class:`fields.grid.Grid`)."""
+    from fields.grid import Grid
+
+    return Grid.from_dict(json.loads((Path(run) / GRID).read_text(encoding="utf-8")))
+
+
+def read_field(run: str | Path, name: str) -> np.ndarray:
+    return np.load(Path(run) / field(name))
+
+
+def read_surface(run: str | Path, rel: str) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices and triangles of a surface of the run (``EXTERIOR``, ``COARSE_SURFACE``, ``REFINED_SURFACE``,
+    ``piece(c)``)."""
+    from fracture.io.ply import read_ply
+
+    return read_ply(Path(run) / rel)[:2]
