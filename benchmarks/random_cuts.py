@@ -1,5 +1,5 @@
 """The random-cut property test's cases (``tests/cutgen.py``) run end to end, as a table: case, object, cut,
-outcome (ok, or the refusal's reason), seconds.
+outcome (ok, or the refusal's reason), seconds (docs/import.md shows it).
 
     python benchmarks/random_cuts.py [--cases N] [--jobs 2]
 """

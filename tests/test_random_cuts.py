@@ -7,7 +7,7 @@ clear line; nothing crashes. At least 90 % of these cuts, all valid, must succee
 ``make test`` runs every combination of object and cut kind (66: six objects, eleven cuts, among them
 a sheet with a slight kink, an incomplete cut in a staircase and a Y junction with a dangling wing);
 ``FRACREF_RANDOM_CUTS=N`` adds N random cases. ``python benchmarks/random_cuts.py`` prints the table of
-outcomes that the README shows.
+outcomes that docs/import.md shows.
 """
 
 import json

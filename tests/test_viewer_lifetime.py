@@ -4,16 +4,14 @@ is killed under it, and its re-run child with it; every file of the run stays as
 from __future__ import annotations
 
 import hashlib
-import os
-import shutil
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pytest
 from conftest import CONFIGS
+from xserver import Xvfb, open_viewer
 
 from fracture.pipeline import runner
 from fracture.pipeline.config import load_config
@@ -23,9 +21,6 @@ RUN_OVERRIDES = ["input.frames=4", "refine.max_triangles=2000", "refine.iteratio
                  "animate.check_samples=1000"]
 # Seconds the viewer may take to end after a signal or after its display went away.
 ENDS_WITHIN = 5.0
-# Seconds a window may take to appear (software rendering under Xvfb on a loaded machine).
-OPENS_WITHIN = 180.0
-
 
 
 @pytest.fixture(scope="module")
@@ -40,50 +35,11 @@ def fingerprint(root: Path) -> dict[str, str]:
             for p in sorted(root.rglob("*")) if p.is_file()}
 
 
-class Xvfb:
-    """A private X server on a free display (``-displayfd``: the server picks the number and tells it)."""
-
-    def __init__(self):
-        missing = [tool for tool in ("Xvfb", "xdotool") if shutil.which(tool) is None]
-        if missing:
-            pytest.fail(f"{' and '.join(missing)} missing: `make system-deps` installs them")
-        read, write = os.pipe()
-        self.proc = subprocess.Popen(["Xvfb", "-displayfd", str(write), "-screen", "0", "1280x1024x24",
-                                      "-nolisten", "tcp"], pass_fds=(write,), stderr=subprocess.DEVNULL)
-        os.close(write)
-        with os.fdopen(read) as f:
-            self.display = f":{f.readline().strip()}"
-
-    def kill(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.kill()
-        self.proc.wait(10)
-
-
 @pytest.fixture
 def xserver():
     server = Xvfb()
     yield server
     server.kill()
-
-
-def open_viewer(run_dir: Path, display: str) -> subprocess.Popen:
-    """``fracref view`` on ``display``, once its window is there."""
-    env = {**os.environ, "DISPLAY": display}
-    proc = subprocess.Popen([sys.executable, "-m", "fracref", "view", str(run_dir), "--width", "1024",
-                             "--height", "640"], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    deadline = time.monotonic() + OPENS_WITHIN
-    while time.monotonic() < deadline:
-        found = subprocess.run(["xdotool", "search", "--name", "^fracref: "], env=env, capture_output=True,
-                               text=True)
-        if found.stdout.strip():
-            time.sleep(1.0)  # its first frames
-            return proc
-        if proc.poll() is not None:
-            pytest.fail(f"the viewer ended before its window opened: {proc.communicate()[1][-2000:]}")
-        time.sleep(0.5)
-    proc.kill()
-    pytest.fail(f"no viewer window within {OPENS_WITHIN:g} s")
 
 
 def ended(proc: subprocess.Popen, within: float) -> tuple[int, str]:

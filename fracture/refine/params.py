@@ -42,7 +42,8 @@ class RefineParams:
     search: str = _choice("none", ("graphcut", "none"),
                           "graphcut: before the flow, the band around the coarse surface is searched for the surface "
                           "of least integral of psi by a minimum cut (fracture/refine/search.py), and the flow polishes "
-                          "it on the finest level alone (experimental: see the README); none: the flow alone, coarse to fine")
+                          "it on the finest level alone (its effect per scene: benchmarks/README.md); none: the flow "
+                          "alone, coarse to fine")
     band: float = _p(10.0, 1.0, 200.0, "the search moves the surface at most this far from the coarse one (grid cells)")
     core: float = _p(0.25, 0.0, 1.0, "the search leaves each piece the grid nodes farther from the coarse surface than "
                      "this fraction of the piece's depth (a minimum cut favours small pieces: without a core a small "
