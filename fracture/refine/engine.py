@@ -87,12 +87,12 @@ from fracture.refine.collide import stop_collisions
 from fracture.refine.crossings_on_b import candidate_pairs, close_pairs
 from fracture.refine.fans import closed_vertices
 from fracture.refine.flips import flip_edges
-from fracture.refine.flow import energy, energy_gradient, face_terms
+from fracture.refine.flow import PsiFlow, energy, energy_gradient, face_terms
 from fracture.mesh.edges import edge_table, EdgeTable, row_edges
 from fracture.refine.order import spatial_order
 from fracture.mesh.fracture_surface import FractureSurface
 from fracture.refine.params import RefineParams
-from fracture.refine.remesh import plan_chord_splits, plan_splits
+from fracture.refine.remesh import PsiSplits, plan_chord_splits
 from fracture.refine.search import SearchResult, graph_cut_search
 from fracture.refine.state import VertexState
 from fracture.refine.step import (BOUNDARY_MOVE, ImplicitStep, StepSize, cotangent_weights, limit_by_shortest_edge,
@@ -161,12 +161,19 @@ class Refiner:
     ``grain`` (a :class:`fields.grain.Grain`) makes the functional the integral
     of psi g(n): the flow, the splits and the step's acceptance use it (the
     implicit area term takes each triangle's g(n) as a factor of its weight).
+    ``flow`` is the flow (default :class:`~fracture.refine.flow.PsiFlow`, Eq. 3; its integrand and
+    field term), ``splits`` the split rule (default :class:`~fracture.refine.remesh.PsiSplits`, the
+    paper's): seams for another flow (``AreaFlow``: mean curvature flow) or split rule
+    (``LongEdgeSplits``).
     """
 
     def __init__(self, mesh: FractureSurface, pyramid, BV: np.ndarray, BF: np.ndarray, params: RefineParams,
-                 rng: np.random.Generator, *, collisions=stop_collisions, search="default", grain=None):
+                 rng: np.random.Generator, *, collisions=stop_collisions, search="default", grain=None, flow=None,
+                 splits=None):
         self.mesh, self.pyramid, self.params, self.rng = mesh, pyramid, params, rng
         self.grain = grain
+        self.flow = PsiFlow() if flow is None else flow
+        self.splits = PsiSplits() if splits is None else splits
         self.stop_collisions = collisions
         self.search = default_search(params, grain=grain) if search == "default" else search
         self.searched = False  # the search's surface replaced the coarse one
@@ -218,7 +225,7 @@ class Refiner:
     def field(self, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The stage's shifted psibar and its gradient at points (what the flow follows)."""
         _, psibar, grad = self.pyramid.coarse_field(self.first, P, self.count)
-        return psibar + self.offset, grad
+        return self.flow.integrand(psibar, self.offset), self.flow.gradient(grad)
 
     def vertex_field(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """psi, psibar (both unshifted) and grad psibar at the vertices, evaluated only where a vertex
@@ -244,7 +251,7 @@ class Refiner:
 
     def functional(self) -> float:
         """E_s of the current surface: what the flow minimises (module notes)."""
-        return energy(self.mesh.V, self.mesh.F, self.vertex_field()[1] + self.offset, self.grain)
+        return energy(self.mesh.V, self.mesh.F, self.flow.integrand(self.vertex_field()[1], self.offset), self.grain)
 
     def plain_energy(self) -> float:
         """E(S) = integral of psi (level 0, unshifted; times g(n) with a grain) over the surface."""
@@ -417,8 +424,8 @@ class Refiner:
         """
         m = self.mesh
         _, psibar, grad = self.vertex_field()
-        w = psibar + self.offset
-        dE, area = energy_gradient(m.V, m.F, w, grad, self.grain)
+        w = self.flow.integrand(psibar, self.offset)
+        dE, area = energy_gradient(m.V, m.F, w, self.flow.gradient(grad), self.grain)
         v = -dE / np.maximum(area, tol.tiny)[:, None]
         rows = table.boundary_rows
         if not len(rows):
@@ -445,9 +452,7 @@ class Refiner:
         table = self.edges()
         v, w, area, boundary, frames = self._velocity(table)
         clock = log.tick("flow", clock)
-        plan = plan_splits(m.V, m.F, table, v, w, self.step.start, self.field, self.rng, near=self.near,
-                           far=p.split_distance * self.h, off_b=self.off_b, grain=self.grain,
-                           budget=p.max_triangles - p.max_triangles // _CHORD_RESERVE - len(m.F))
+        plan = self.splits.plan(self, table, v, w, budget=p.max_triangles - p.max_triangles // _CHORD_RESERVE - len(m.F))
         self.full |= plan.full
         made = plan.apply(m)
         if made:
@@ -498,7 +503,7 @@ class Refiner:
             fresh = self.pyramid.coarse_field(self.first, trial[went], self.count)
             psibar1 = s.psibar.copy()
             psibar1[went] = fresh[1]
-            value = energy(trial, m.F, psibar1 + self.offset, self.grain)
+            value = energy(trial, m.F, self.flow.integrand(psibar1, self.offset), self.grain)
             clock = log.tick("step", clock)
             if value <= before + tol.functional_rise * abs(before):
                 hit, _, grid = self.stop_collisions(m.V, trial, m.F, p.thickness * self.h, table, return_grid=True,
@@ -508,7 +513,7 @@ class Refiner:
                     moved = (trial[went] != m.V[went]).any(axis=1)
                     went, fresh = went[moved], tuple(f[moved] for f in fresh)
                     psibar1[hit] = s.psibar[hit]
-                    value = energy(trial, m.F, psibar1 + self.offset, self.grain)
+                    value = energy(trial, m.F, self.flow.integrand(psibar1, self.offset), self.grain)
                     clock = log.tick("step", clock)
             if value <= before + tol.functional_rise * abs(before):
                 X1, after, stopped = trial, value, hit

@@ -190,3 +190,32 @@ def _f64(a):
 
 def _prepare(V, F):
     return _f64(V), np.ascontiguousarray(F, np.int64)
+
+
+class PsiFlow:
+    """Eq. 3: the gradient flow of the integral of the stage's psibar, shifted positive (``offset``), times
+    g(n) with a grain. What the refiner asks of a flow: the integrand per vertex and the field-gradient
+    term of the velocity (the area term, the implicit step and the acceptance of a step follow from the
+    integrand)."""
+
+    name = "psi"
+
+    def integrand(self, psibar: np.ndarray, offset: float) -> np.ndarray:
+        return psibar + offset
+
+    def gradient(self, grad: np.ndarray) -> np.ndarray:
+        return grad
+
+
+class AreaFlow:
+    """Mean curvature flow: the integrand is 1 and there is no field term, so the surface only shortens (a
+    second flow for the refiner, and a check that it composes any flow through :class:`PsiFlow`'s
+    interface)."""
+
+    name = "area"
+
+    def integrand(self, psibar: np.ndarray, offset: float) -> np.ndarray:
+        return np.ones_like(psibar)
+
+    def gradient(self, grad: np.ndarray) -> np.ndarray:
+        return np.zeros_like(grad)

@@ -273,3 +273,43 @@ def split_wanted(T, P, bary, d, v, F, dt, k_edge, has_edge, near2, far, min_qual
             want[f] = (abs(dx * N[f, 0] + dy * N[f, 1] + dz * N[f, 2]) > far
                        and q * 0.5 * t / max(sq, _TINY) > min_quality)
     return want, N
+
+
+class PsiSplits:
+    """The paper's split rule (module notes): a triangle is split where a sample point of it, moved by the
+    flow, would leave it. What the refiner asks of a split rule: ``plan(refiner, table, v, w, budget)``,
+    the :class:`SplitPlan` of one round from the surface (``refiner.mesh``), its edge table, the velocity
+    and integrand at the vertices and the triangles that may still be made."""
+
+    name = "psi"
+
+    def plan(self, refiner, table: EdgeTable, v: np.ndarray, w: np.ndarray, budget: int) -> SplitPlan:
+        m = refiner.mesh
+        return plan_splits(m.V, m.F, table, v, w, refiner.step.start, refiner.field, refiner.rng, near=refiner.near,
+                           far=refiner.params.split_distance * refiner.h, off_b=refiner.off_b, grain=refiner.grain,
+                           budget=budget)
+
+
+class LongEdgeSplits:
+    """A second split rule: every edge longer than ``length`` is halved, whatever the field (uniform
+    refinement), at most one edge per triangle a round (the longest first), within the budget."""
+
+    name = "long_edges"
+
+    def __init__(self, length: float):
+        self.length = float(length)
+
+    def plan(self, refiner, table: EdgeTable, v: np.ndarray, w: np.ndarray, budget: int) -> SplitPlan:
+        V, F = refiner.mesh.V, refiner.mesh.F
+        rows = table.first[table.first >= 0]  # one directed triangle edge per edge
+        E = np.stack([F[rows // 3, rows % 3], F[rows // 3, (rows % 3 + 1) % 3]], 1)
+        length = np.linalg.norm(V[E[:, 1]] - V[E[:, 0]], axis=1)
+        order = np.argsort(-length, kind="stable")
+        order = order[length[order] > self.length]
+        order = order[table.independent(table.eid[rows[order]])]  # no triangle carries two
+        adds = table.count[table.eid[rows[order]]]  # a split edge adds a triangle per triangle on it
+        keep = np.cumsum(adds) <= budget
+        chosen = order[keep]
+        on, which = table.rows_of(table.eid[rows[chosen]])
+        return SplitPlan(E[chosen], np.full(len(chosen), 0.5), on, which, np.zeros(0, np.int64), np.zeros((0, 3)),
+                         not keep.all())
