@@ -7,7 +7,8 @@ import numpy as np
 from fields.grid import Grid
 from fields.pyramid import StrengthPyramid
 from fracture.mesh.primitives import box, sheet
-from fracture.refine.engine import RefineParams, Refiner, clearance
+from fracture.refine.boundary import clearance
+from fracture.refine.engine import RefineParams, Refiner
 from fracture.refine.remesh import plan_splits, split_folds
 from fracture.mesh.fracture_surface import FractureSurface
 from fracture.tolerances import tol
@@ -41,7 +42,7 @@ def test_flat_cut_moves_onto_the_nearer_weak_sheet_and_the_functional_decreases(
     assert log.energy[-1] < log.energy[0]
     assert log.stage == sorted(log.stage, reverse=True) and log.stage[-1] == 0  # coarse to fine, ends on every level
     # the boundary stays on the box
-    on_b = r.boundary_vertices()
+    on_b = r.onb.vertices()
     P = mesh.V[on_b]
     assert (np.abs(np.minimum(np.abs(P), np.abs(P - 1)).min(axis=1)) < 1e-9).all()
 
@@ -66,12 +67,12 @@ def test_settle_boundary_moves_only_the_vertices_off_b_onto_it():
     BV, BF = box([0, 0, 0], [1, 1, 1], (8, 8, 8))
     mesh = flat_cut()
     r = Refiner(mesh, pyramid, BV, BF, RefineParams(), np.random.default_rng(0))
-    r.boundary = r.boundary_vertices()
+    r.onb.boundary = r.onb.vertices()
     before = mesh.V.copy()
-    off = r.boundary[np.argmin(mesh.V[r.boundary, 1])]  # a vertex on the face y = 0
+    off = r.onb.boundary[np.argmin(mesh.V[r.onb.boundary, 1])]  # a vertex on the face y = 0
     mesh.V[off, 1] = -0.03
-    assert r.boundary_error() > 0.029
-    assert r.settle_boundary() < 1e-12
+    assert r.onb.error() > 0.029
+    assert r.onb.settle() < 1e-12
     assert np.allclose(mesh.V, before, atol=1e-15)  # back on y = 0; nothing else moved
 
 
@@ -112,12 +113,12 @@ def test_settle_boundary_stops_a_vertex_whose_way_onto_b_is_blocked():
                                   np.vstack([sides, [[1, 2]]]))
     assert self_intersections(mesh.V, mesh.F) == 0
     r = Refiner(mesh, pyramid, BV, BF, RefineParams(), np.random.default_rng(0))
-    r.boundary = np.array([v])
+    r.onb.boundary = np.array([v])
     before = mesh.V.copy()
-    assert abs(r.settle_boundary() - 0.03) < 1e-12  # still off B ...
+    assert abs(r.onb.settle() - 0.03) < 1e-12  # still off B ...
     assert np.array_equal(mesh.V, before) and r.state.hold[v] == r.params.hold  # ... held where it was
     mesh.V[-3:, 0] += 2.0  # the obstacle elsewhere: it goes
-    assert r.settle_boundary() < 1e-12 and mesh.V[v, 1] == 0.0
+    assert r.onb.settle() < 1e-12 and mesh.V[v, 1] == 0.0
 
 
 def test_no_splits_beside_a_boundary_vertex_that_is_off_b():
@@ -133,11 +134,11 @@ def test_no_splits_beside_a_boundary_vertex_that_is_off_b():
     mesh.V[v, 1] = 0.03
     table = r.edges()
     vel, w, *_ = r._velocity(table)
-    assert r.off_b.tolist() == [v]
+    assert r.onb.off_b.tolist() == [v]
     fan = mesh.F[(mesh.F == v).any(axis=1)].copy()
     m = len(mesh.F)
     plan = plan_splits(mesh.V, mesh.F, table, vel, w, 10.0 * r.step.start, r.field, r.rng, near=0.0, far=0.0,
-                       budget=10_000, off_b=r.off_b)
+                       budget=10_000, off_b=r.onb.off_b)
     assert plan.apply(mesh) > 0
     assert len(mesh.F) > m + len(fan)  # the rest did split ...
     assert np.array_equal(mesh.F[(mesh.F == v).any(axis=1)], fan)  # ... around v nothing did
@@ -151,17 +152,17 @@ def test_closest_points_on_b_are_asked_again_only_for_vertices_that_moved():
     asked = []
     closest = r.B.closest
     r.B.closest = lambda P: asked.append(len(P)) or closest(P)
-    ids = r.boundary_vertices()
+    ids = r.onb.vertices()
     for moved in (0, 3):
         mesh.V[ids[:moved]] += 0.01
-        got = r.closest_on_b(ids)
+        got = r.onb.closest(ids)
         for a, b in zip(got, closest(mesh.V[ids])):
             assert np.array_equal(a, b)
     assert asked == [len(ids), 3]
     r._renumber(np.arange(len(mesh.V))[::-1])  # the answers follow a renumbering
     mesh.split_triangles(np.array([0]), np.array([[0.2, 0.3, 0.5]]))  # and grow with the mesh
-    ids = r.boundary_vertices()
-    for a, b in zip(r.closest_on_b(np.r_[ids, len(mesh.V) - 1]), closest(mesh.V[np.r_[ids, len(mesh.V) - 1]])):
+    ids = r.onb.vertices()
+    for a, b in zip(r.onb.closest(np.r_[ids, len(mesh.V) - 1]), closest(mesh.V[np.r_[ids, len(mesh.V) - 1]])):
         assert np.array_equal(a, b)
     assert asked == [len(ids), 3, 1]
 
@@ -229,7 +230,7 @@ def test_chord_splits_take_every_boundary_edge_far_from_b_and_only_those():
 
 
 def test_inner_vertices_that_would_leave_b_are_found_and_only_near_ones_are_asked_about():
-    """leaving_b: an inner vertex moved out of the box (or onto it) is reported, one moved inside is not,
+    """BoundaryOnB.leaving: an inner vertex moved out of the box (or onto it) is reported, one moved inside is not,
     B is asked only about vertices that its last answers do not prove inside, and an answer outside B
     proves nothing."""
     pyramid = two_weak_sheets()
@@ -237,7 +238,7 @@ def test_inner_vertices_that_would_leave_b_are_found_and_only_near_ones_are_aske
     mesh = flat_cut()  # the plane x = 0.52; inner vertices from 1/6 to 5/6 in y and z
     r = Refiner(mesh, pyramid, BV, BF, RefineParams(), np.random.default_rng(0))
     inner = np.flatnonzero((np.abs(mesh.V[:, 1:] - 0.5) < 0.4).all(axis=1))
-    r.closest_on_b(inner)  # their distances to B are known now
+    r.onb.closest(inner)  # their distances to B are known now
     X1 = mesh.V.copy()
     edge, middle = inner[np.argmin(mesh.V[inner, 1])], inner[np.argmin(np.abs(mesh.V[inner, 1:] - 0.5).sum(axis=1))]
     X1[edge, 1] = -0.01  # out through the face y = 0
@@ -245,23 +246,23 @@ def test_inner_vertices_that_would_leave_b_are_found_and_only_near_ones_are_aske
     asked = []
     closest = r.B.closest
     r.B.closest = lambda P: (asked.append(len(P)), closest(P))[1]
-    out = r.leaving_b(X1, np.array([edge, middle]))
+    out = r.onb.leaving(X1, np.array([edge, middle]))
     assert out.tolist() == [edge] and asked == [1]  # the middle vertex is farther than its move from B
     X1[edge, 1] = -0.3  # far out: 0.3 from B
-    assert r.leaving_b(X1, np.array([edge])).tolist() == [edge]
+    assert r.onb.leaving(X1, np.array([edge])).tolist() == [edge]
     X1[edge, 1] = -0.25  # still out, though within 0.3 of where B was last asked about it
-    assert r.leaving_b(X1, np.array([edge])).tolist() == [edge]
+    assert r.onb.leaving(X1, np.array([edge])).tolist() == [edge]
     X1[edge, 1] = 0.0  # onto B: closer than the thickness
-    assert r.leaving_b(X1, np.array([edge])).tolist() == [edge]
+    assert r.onb.leaving(X1, np.array([edge])).tolist() == [edge]
     X1[edge, 1] = 0.02  # back inside
-    assert r.leaving_b(X1, np.array([edge])).size == 0
+    assert r.onb.leaving(X1, np.array([edge])).size == 0
     asked.clear()
     X1[edge, 1] = 0.015  # inside, nearer than its distance at the last answer: not asked
-    assert r.leaving_b(X1, np.array([edge])).size == 0 and asked == []
+    assert r.onb.leaving(X1, np.array([edge])).size == 0 and asked == []
 
 
 def test_a_split_vertex_inside_its_parents_clear_balls_is_not_asked_about():
-    """leaving_b: a vertex made by a split has never been asked about, but it lies within the balls
+    """BoundaryOnB.leaving: a vertex made by a split has never been asked about, but it lies within the balls
     free of B around its parents' last answers: B is not asked about it, unless its move takes it out
     of them (then it is asked, and reported if it leaves)."""
     pyramid = two_weak_sheets()
@@ -269,7 +270,7 @@ def test_a_split_vertex_inside_its_parents_clear_balls_is_not_asked_about():
     mesh = flat_cut()
     r = Refiner(mesh, pyramid, BV, BF, RefineParams(), np.random.default_rng(0))
     inner = np.flatnonzero((np.abs(mesh.V[:, 1:] - 0.5) < 0.3).all(axis=1))
-    r.closest_on_b(inner)
+    r.onb.closest(inner)
     table = r.edges()
     a, b = inner[0], inner[np.argmin(np.linalg.norm(mesh.V[inner[1:]] - mesh.V[inner[0]], axis=1)) + 1]
     assert table.find(np.array([[a, b]]))[0] >= 0  # neighbours
@@ -280,7 +281,7 @@ def test_a_split_vertex_inside_its_parents_clear_balls_is_not_asked_about():
     r.B.closest = lambda P: (asked.append(len(P)), closest(P))[1]
     X1 = mesh.V.copy()
     X1[new, 0] += 0.02
-    assert r.leaving_b(X1, np.array([new])).size == 0 and asked == []
+    assert r.onb.leaving(X1, np.array([new])).size == 0 and asked == []
     assert clearance(mesh.F, X1, r.state.near_at, r.state.near_d2, np.array([new]))[0] > 0.1
     X1[new, 0] = 1.1  # out through the face x = 1, beyond every neighbour's ball
-    assert r.leaving_b(X1, np.array([new])).tolist() == [new] and asked == [1]
+    assert r.onb.leaving(X1, np.array([new])).tolist() == [new] and asked == [1]

@@ -89,7 +89,7 @@ def test_the_tree_reproduces_every_vertex_when_nothing_moves(name):
         table = r.edges()
         v, w, *_ = r._velocity(table)
         plan_splits(mesh.V, mesh.F, table, v, w, r.step.start, r.field, r.rng, near=r.near, far=0.0,
-                    budget=8000 - len(mesh.F), off_b=r.off_b).apply(mesh)
+                    budget=8000 - len(mesh.F), off_b=r.onb.off_b).apply(mesh)
         r.state.grow(len(mesh.V))
     assert len(mesh.F) > 4 * len(cf.F)
     W = mesh.tree_matrix()

@@ -59,7 +59,7 @@ One iteration:
 3. the step: backward Euler on the area term
    (:func:`~fracture.refine.step.implicit_step`), the boundary constraint again,
    collision holds, the move limits, projection of the boundary onto B,
-   inner vertices that would leave B stopped (:meth:`Refiner.leaving_b`),
+   inner vertices that would leave B stopped (:meth:`~fracture.refine.boundary.BoundaryOnB.leaving`),
    continuous collision detection (stopped vertices stay where they were);
    the step is taken only if it does not raise the minimised functional
    ``E_s = integral of (psibar_s + offset)``, with the same quadrature as the
@@ -78,13 +78,11 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
-import numba
 import numpy as np
 
-from fracture.mesh import vec
 from fracture.mesh.exterior import Exterior
+from fracture.refine.boundary import BoundaryOnB
 from fracture.refine.collide import stop_collisions
-from fracture.refine.crossings_on_b import candidate_pairs, close_pairs
 from fracture.refine.fans import closed_vertices
 from fracture.refine.flips import flip_edges
 from fracture.refine.flow import PsiFlow, energy, energy_gradient, face_terms
@@ -92,7 +90,7 @@ from fracture.mesh.edges import edge_table, EdgeTable, row_edges
 from fracture.refine.order import spatial_order
 from fracture.mesh.fracture_surface import FractureSurface
 from fracture.refine.params import RefineParams
-from fracture.refine.remesh import PsiSplits, plan_chord_splits
+from fracture.refine.remesh import PsiSplits
 from fracture.refine.search import SearchResult, graph_cut_search
 from fracture.refine.state import VertexState
 from fracture.refine.step import (BOUNDARY_MOVE, ImplicitStep, StepSize, cotangent_weights, limit_by_shortest_edge,
@@ -100,14 +98,10 @@ from fracture.refine.step import (BOUNDARY_MOVE, ImplicitStep, StepSize, cotange
 from fracture.tolerances import tol
 from fracture.mesh.topology import boundary_conormals
 
-# Boundary curves keep this far apart on B (grid cells): imprinting them moves their vertices a little.
-_CURVE_GAP = 0.05
 # Attempts of a step that would raise the functional, each with half the tau of the last.
 _ATTEMPTS = 4
 # The field's splits leave the last 1/this of the triangle budget to chord splits (the boundary following B).
 _CHORD_RESERVE = 50
-# Rounds of chord splits per iteration (fit_chords).
-_CHORD_ROUNDS = 3
 # The stage of the search's entry in the log.
 SEARCH_STAGE = -1
 # A stage has settled when its moves are small and an iteration splits at most this share of the triangles.
@@ -178,15 +172,14 @@ class Refiner:
         self.search = default_search(params, grain=grain) if search == "default" else search
         self.searched = False  # the search's surface replaced the coarse one
         self.h = float(np.min(pyramid.grid.spacing))
-        self.on_b = tol.on_b * self.h  # a boundary vertex this close to B is on it
         self.log = IterationLog()
         self.B = Exterior(BV, BF)  # its AABB tree, built on the first query, serves every iteration
         self.step = StepSize(params.step, self.h)
         self.solve = ImplicitStep()  # keeps its factorisation for a retried step
         self.state = VertexState.empty(len(mesh.V))
         self.begin_stage(*self.stages()[0])  # sets first, count, near, offset and the step size
-        self.boundary = np.zeros(0, np.int64)  # boundary vertices of the last iteration
-        self.off_b = np.zeros(0, np.int64)  # boundary vertices off B at the last velocity
+        # the boundary constraint on B: owns B's answers about the vertices, the boundary and what is off B
+        self.onb = BoundaryOnB(mesh, self.state, self.B, self.h, params, collisions)
         self.full = False  # the triangle budget has stopped a wanted split
         self._ordered = 0  # vertex count when the mesh was last put in spatial order
 
@@ -263,7 +256,7 @@ class Refiner:
         new = self.mesh.reorder(vorder, forder)
         self.state.grow(len(vorder))
         self.state.permute(vorder)
-        self.boundary, self.off_b = new[self.boundary], new[self.off_b]
+        self.onb.renumber(new)
 
     def put_in_spatial_order(self) -> None:
         """Number vertices along a Morton curve and triangles by their first vertex
@@ -277,142 +270,6 @@ class Refiner:
     def edges(self) -> EdgeTable:
         """The edge table of the current triangles (O(m), compiled)."""
         return edge_table(self.mesh.F, len(self.mesh.V))
-
-    def boundary_vertices(self) -> np.ndarray:
-        return np.unique(row_edges(self.mesh.F, self.edges().boundary_rows))
-
-    # -- constraints -----------------------------------------------------------------------
-    def closest_on_b(self, ids: np.ndarray, V: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """:meth:`Exterior.closest` of vertices ``ids`` where they are (or at positions ``V``): squared
-        distances, triangles of B and closest points. B is asked only about vertices that are new or
-        moved since they were last asked about (the answers are kept in the vertex state)."""
-        V, s = (self.mesh.V if V is None else V), self.state
-        s.grow(len(V))
-        ask = ids[(V[ids] != s.near_at[ids]).any(axis=1)]
-        if len(ask):
-            s.near_d2[ask], s.near_tri[ask], s.near_point[ask] = self.B.closest(V[ask])
-            s.near_at[ask] = V[ask]
-        return s.near_d2[ids], s.near_tri[ids], s.near_point[ids]
-
-    def stop_crossings_on_b(self, X1: np.ndarray, table: EdgeTable, rounds: int = 4) -> int:
-        """Keep in place (in ``X1``) the boundary vertices of edges that the step to ``X1`` would make cross
-        (or come closer than ``_CURVE_GAP`` to) another boundary edge on B (:mod:`fracture.refine.crossings_on_b`); returns how many were kept.
-
-        Pairs that cross already where the surface is stay as they are (they are not made worse by
-        this step's own crossings only)."""
-        E = row_edges(self.mesh.F, table.boundary_rows)
-        if not len(E):
-            return 0
-        gap = _CURVE_GAP * self.h
-        # every round's positions lie between the surface's and X1: one candidate search serves them all
-        ends = E.ravel()  # a vertex on two edges counts twice: the same largest move
-        move = float(np.sqrt(((X1[ends] - self.mesh.V[ends]) ** 2).sum(axis=1).max()))
-        candidates = candidate_pairs(self.mesh.V, E, gap, move)
-        pairs, crossing = close_pairs(self.mesh.V, E, self.B.normal_at, gap, candidates)
-        close = {tuple(x) for x in pairs.tolist()}
-        cross = {tuple(x) for x in pairs[crossing].tolist()}
-        kept = 0
-        for _ in range(rounds):
-            # new pairs closer than the gap, and new crossings (of pairs already close, too)
-            now, crossing = close_pairs(X1, E, self.B.normal_at, gap, candidates)
-            pairs = [x for x, c in zip(now.tolist(), crossing.tolist())
-                     if tuple(x) not in close or (c and tuple(x) not in cross)]
-            if not pairs:
-                break
-            ids = np.unique(E[np.asarray(pairs).ravel()])
-            ids = ids[(X1[ids] != self.mesh.V[ids]).any(axis=1)]
-            if not len(ids):
-                break
-            X1[ids] = self.mesh.V[ids]
-            kept += len(ids)
-        return kept
-
-    def leaving_b(self, X1: np.ndarray, ids: np.ndarray) -> np.ndarray:
-        """Of the inner vertices ``ids``, moved to ``X1``, those that would leave the object: outside B
-        there, or closer to it than the collision thickness.
-
-        The paper stops colliding vertices (Sec. 4.4); B is one more obstacle:
-        a piece is the region of B on one side of the sheets, and an inner
-        vertex outside B makes the piece cross itself. B is asked only about
-        vertices that may be: a point closer to an inside point ``r`` than
-        ``r``'s distance to B is inside, and farther from B than that distance
-        less how far apart they are. So a vertex whose last known distance
-        (at an inside position, kept by :meth:`closest_on_b`), less its move
-        since, exceeds the thickness is inside and clear of B; only the rest
-        are asked about. The same holds for a neighbour's last answer: a
-        vertex made by a split (never asked) lies within its parents' clear
-        balls, and inside the object they are mostly far wider than its
-        edges (:func:`clearance`). An answer at a position outside B is
-        forgotten: it bounds nothing.
-        """
-        s = self.state
-        thin = self.params.thickness * self.h
-        near = ids[~(clearance(self.mesh.F, X1, s.near_at, s.near_d2, ids) > thin)]
-        if not len(near):
-            return near
-        d2 = self.closest_on_b(near, X1)[0]
-        out = near[(d2 < thin * thin) | ~self.B.inside(X1[near])]
-        s.near_at[out] = np.nan
-        return out
-
-    def project_to_exterior(self, ids: np.ndarray, V: np.ndarray) -> None:
-        """Put vertices ``ids`` of positions ``V`` on B (in place)."""
-        if len(ids):
-            V[ids] = self.B.closest(V[ids])[2]
-
-    def settle_boundary(self, table: EdgeTable | None = None) -> float:
-        """Move the boundary vertices that are off B onto it, the rest of the surface at rest, unless a
-        collision stops them; returns the largest distance of a boundary vertex from B after that.
-
-        A new vertex on a boundary edge starts on the edge's chord, off B, and a
-        collision may stop its first projection, as may another boundary curve that the projection would
-        cross on B (near B's creases B's closest point takes points on both sides to the edge); at the
-        end of a stage this
-        step, which tests only the elements on the few vertices it moves,
-        replaces the iterations that would otherwise wait for them. ``table``
-        is the current edge table, if the caller has it.
-        """
-        m, ids = self.mesh, self.boundary
-        if not len(ids):
-            return 0.0
-        d2, _, P = self.closest_on_b(ids)
-        off = d2 > self.on_b ** 2
-        if not off.any():
-            return float(np.sqrt(d2.max()))
-        X1 = m.V.copy()
-        X1[ids[off]] = P[off]
-        self.stop_crossings_on_b(X1, table or self.edges())  # no two boundary curves made to cross on B
-        stopped, _ = self.stop_collisions(m.V, X1, m.F, self.params.thickness * self.h, table or self.edges(),
-                                     moving=ids[off])
-        self.state.hold[stopped] = self.params.hold
-        m.V = X1
-        return self.boundary_error(ids)
-
-    def fit_chords(self, table: EdgeTable, rounds: int = _CHORD_ROUNDS) -> tuple[int, EdgeTable]:
-        """Split boundary edges whose chords pass farther than ``split_distance`` from B and put the new
-        vertices on B (:func:`~fracture.refine.remesh.plan_chord_splits`), for a few rounds; returns the
-        number of splits and the current edge table."""
-        p, made = self.params, 0
-        for _ in range(rounds):
-            ids = np.unique(row_edges(self.mesh.F, table.boundary_rows))
-            off_b = ids[self.closest_on_b(ids)[0] > self.on_b ** 2]
-            plan = plan_chord_splits(self.mesh.V, self.mesh.F, table, far=p.split_distance * self.h,
-                                     near_b=p.min_edge * self.h, budget=p.max_triangles - len(self.mesh.F),
-                                     project=lambda P: self.B.closest(P)[2], off_b=off_b,
-                                     normal_at=self.B.normal_at)
-            if not plan.count:
-                break
-            made += plan.apply(self.mesh)
-            self.state.grow(len(self.mesh.V))
-            table = self.edges()
-            self.boundary = np.unique(row_edges(self.mesh.F, table.boundary_rows))
-            self.settle_boundary(table)
-        return made, table
-
-    def boundary_error(self, ids: np.ndarray | None = None) -> float:
-        """Largest distance of the boundary vertices (or of ``ids``) from B."""
-        ids = self.boundary_vertices() if ids is None else ids
-        return float(np.sqrt(self.closest_on_b(ids)[0].max())) if len(ids) else 0.0
 
     def _velocity(self, table: EdgeTable):
         """Eq. 3 at every vertex with the boundary constraint.
@@ -429,15 +286,15 @@ class Refiner:
         v = -dE / np.maximum(area, tol.tiny)[:, None]
         rows = table.boundary_rows
         if not len(rows):
-            self.off_b = np.zeros(0, np.int64)
+            self.onb.off_b = np.zeros(0, np.int64)
             return v, w, area, np.zeros(0, np.int64), (np.zeros((0, 3)), np.zeros((0, 3)))
         # boundary vertices slide on B: drop the part of their velocity that
         # points out of the sheet across its boundary (the area term of an
         # open sheet pulls its boundary inward; at a crease of B this pull is
         # not normal to B) and the part normal to B (projection undoes it)
         verts, c = boundary_conormals(m.V, m.F, row_edges(m.F, rows), strict=False, face=rows // 3, by_length=True)
-        d2, tri, _ = self.closest_on_b(verts)
-        self.off_b = verts[d2 > self.on_b ** 2]
+        d2, tri, _ = self.onb.closest(verts)
+        self.onb.off_b = verts[d2 > self.onb.on_b ** 2]
         nb = self.B.normals[tri]
         _drop(v, verts, c, nb)
         return v, w, area, verts, (c, nb)
@@ -459,15 +316,15 @@ class Refiner:
             s.grow(len(m.V))
             table = self.edges()
             clock = log.tick("remesh", clock)
-        fitted, table = self.fit_chords(table)
+        fitted, table = self.onb.fit_chords(table)
         made += fitted
         clock = log.tick("boundary", clock)
         # the boundary constraint first: new vertices on boundary edges start on
         # the chord, off B; the step is measured from the surface on B
-        self.boundary = np.unique(row_edges(m.F, table.boundary_rows))
-        settle = self.boundary_error(self.boundary) > self.on_b
+        self.onb.boundary = np.unique(row_edges(m.F, table.boundary_rows))
+        settle = self.onb.error(self.onb.boundary) > self.onb.on_b
         if settle:
-            self.settle_boundary(table)
+            self.onb.settle(table)
             clock = log.tick("boundary", clock)
         if made or settle:
             v, w, area, boundary, frames = self._velocity(table)
@@ -491,12 +348,12 @@ class Refiner:
             limit_moves(m.V, m.F, d, p.fold, p.max_move * self.h)
             limit_by_shortest_edge(m.V, m.F, d, boundary, BOUNDARY_MOVE)
             trial = m.V + d
-            self.project_to_exterior(boundary, trial)
+            self.onb.project(boundary, trial)
             inner = np.flatnonzero((d != 0.0).any(axis=1))
             inner = inner[~np.isin(inner, boundary)]
-            out = self.leaving_b(trial, inner)
+            out = self.onb.leaving(trial, inner)
             trial[out] = m.V[out]  # stopped, as a collision stops a vertex
-            self.stop_crossings_on_b(trial, table)
+            self.onb.stop_crossings(trial, table)
             # the functional before the collisions are looked for: a step that raises it is
             # rejected without them (stopping colliding vertices where they are seldom lowers it)
             went = np.flatnonzero((trial != m.V).any(axis=1))  # the field is known where nothing moved
@@ -529,7 +386,7 @@ class Refiner:
         s.hold[stopped] = p.hold
         moved = np.linalg.norm(X1 - m.V, axis=1)
         m.V = X1
-        self.boundary = boundary  # flips keep the boundary: valid until the next splits
+        self.onb.boundary = boundary  # flips keep the boundary: valid until the next splits
         flip_edges(m.V, m.F, m.sides, max_passes=3, safe=True, grid=grid, table=table, closed=closed)
         clock = log.tick("flips", clock)
         log.functional_before.append(before)
@@ -553,16 +410,16 @@ class Refiner:
             return result
         self.mesh.replace(result.surface)
         self.searched = True
-        self.state = VertexState.empty(len(self.mesh.V))
+        self.state = self.onb.state = VertexState.empty(len(self.mesh.V))
         self._ordered = 0
-        self.off_b = np.zeros(0, np.int64)
+        self.onb.off_b = np.zeros(0, np.int64)
         self.begin_stage(*self.stages()[0])
-        self.boundary = self.boundary_vertices()
+        self.onb.boundary = self.onb.vertices()
         # both on the polish's field (level 0): the coarse surface's functional there, and the new one's;
         # how far the surface went: the new vertices' distances to the coarse surface
         travel = result.travel
         self._record_step(result.functional[0], self.functional(), float(travel.max()) if len(travel) else 0.0)
-        self._record(float(travel.mean()) if len(travel) else 0.0, self.boundary_error(self.boundary),
+        self._record(float(travel.mean()) if len(travel) else 0.0, self.onb.error(self.onb.boundary),
                      stage=SEARCH_STAGE)
         log.tick("search", clock)
         if callback is not None:
@@ -597,19 +454,19 @@ class Refiner:
         may be numbered in spatial order then); the reason for stopping is
         ``log.stop``. Boundary vertices still off B at the end of a stage (a
         collision stopped their projection) are moved onto B alone
-        (:meth:`settle_boundary`). The mesh ends numbered in creation order.
+        (:meth:`~fracture.refine.boundary.BoundaryOnB.settle`). The mesh ends numbered in creation order.
         """
         p, log = self.params, self.log
         # iteration 0: the coarse surface
         E = self.functional()
         self._record_step(E, E, 0.0)
-        self.boundary = self.boundary_vertices()
-        self._record(0.0, self.boundary_error(self.boundary))
+        self.onb.boundary = self.onb.vertices()
+        self._record(0.0, self.onb.error(self.onb.boundary))
         if self.search is not None:
             self.run_search(callback)
-        if log.boundary_error[-1] > self.on_b:  # the surface onto B before the flow starts
-            self.settle_boundary()
-        self.fit_chords(self.edges())
+        if log.boundary_error[-1] > self.onb.on_b:  # the surface onto B before the flow starts
+            self.onb.settle()
+        self.onb.fit_chords(self.edges())
         done, unsettled = 0, []
         for first, count in self.stages():
             if (first, count) != (self.first, self.count):
@@ -625,9 +482,9 @@ class Refiner:
                 little = (_FULL_GAIN if self.full else _LITTLE_GAIN) * abs(log.functional[-1])
                 settled = (move < p.tolerance or gain < little) and (made <= _FEW_SPLITS * len(self.mesh.F)
                                                                       or self.full)
-                off_b = self.boundary_error(self.boundary)
-                if settled and off_b > self.on_b:
-                    off_b = self.settle_boundary()
+                off_b = self.onb.error(self.onb.boundary)
+                if settled and off_b > self.onb.on_b:
+                    off_b = self.onb.settle()
                     log.functional[-1] = self.functional()
                 self._record(move, off_b)
                 log.tick("bookkeeping", clock)
@@ -639,8 +496,8 @@ class Refiner:
                 unsettled.append(first)
             if done >= p.iterations:
                 break
-        off_b = self.settle_boundary() if self.boundary_error(self.boundary) > self.on_b else 0.0
-        if off_b > self.on_b:
+        off_b = self.onb.settle() if self.onb.error(self.onb.boundary) > self.onb.on_b else 0.0
+        if off_b > self.onb.on_b:
             log.boundary_error[-1] = off_b
         if done >= p.iterations and (self.first, self.count) != self.stages()[-1]:
             log.stop = f"iterations: {done} done before the last stage"
@@ -648,8 +505,8 @@ class Refiner:
             log.stop = f"stage iterations spent on the stages of levels {unsettled}"
         else:
             log.stop = "settled"
-        if off_b > self.on_b:
-            off = int((self.closest_on_b(self.boundary)[0] > self.on_b ** 2).sum())
+        if off_b > self.onb.on_b:
+            off = int((self.onb.closest(self.onb.boundary)[0] > self.onb.on_b ** 2).sum())
             which = "1 boundary vertex stays" if off == 1 else f"{off} boundary vertices stay"
             log.stop += f"; {which} off B (up to {off_b / self.h:.3g} grid cells): collisions block the way"
         self._renumber(self.mesh.creation_order())  # the tree's order, coarse vertices first
@@ -669,40 +526,6 @@ def default_search(params: RefineParams, distance: np.ndarray | None = None, nam
                                 names=names, grain=grain)
 
     return search
-
-
-def clearance(F: np.ndarray, X: np.ndarray, at: np.ndarray, d2: np.ndarray, ids: np.ndarray) -> np.ndarray:
-    """For vertices ``ids`` at ``X[ids]``: the largest ``sqrt(d2[j]) - |X[i] - at[j]|`` over the vertex
-    itself and its neighbours ``j`` in triangles ``F``, where ``d2[j]`` is the squared distance to B of
-    the inside point ``at[j]`` (NaN: unknown). Positive, it is a lower bound of ``X[i]``'s distance to
-    B, and ``X[i]`` lies inside (the distance is 1-Lipschitz); ``-inf`` where nothing is known."""
-    mark = np.zeros(len(X), np.bool_)
-    mark[ids] = True
-    bound = np.full(len(X), -np.inf)
-    _clearance(F, X, at, d2, mark, bound)
-    return bound[ids]
-
-
-@numba.njit(cache=True, inline="always")
-def _ball(X, at, d2, i, j, bound):
-    """Raise ``bound[i]`` to what ``j``'s answer (if any) proves of ``X[i]``."""
-    if np.isfinite(d2[j]) and at[j, 0] == at[j, 0]:
-        bound[i] = max(bound[i], np.sqrt(d2[j]) - vec.norm(vec.sub(vec.point(X, i), vec.point(at, j))))
-
-
-@numba.njit(cache=True)
-def _clearance(F, X, at, d2, mark, bound):
-    # one pass over the vertices and one over the triangles (a running maximum, which NumPy's
-    # maximum.at makes ten times slower on the wall's 200K triangles)
-    for i in range(X.shape[0]):
-        if mark[i]:
-            _ball(X, at, d2, i, i, bound)
-    for f in range(F.shape[0]):
-        for k in range(3):
-            i = F[f, k]
-            if mark[i]:
-                _ball(X, at, d2, i, F[f, (k + 1) % 3], bound)
-                _ball(X, at, d2, i, F[f, (k + 2) % 3], bound)
 
 
 def _drop(d: np.ndarray, ids: np.ndarray, c: np.ndarray, nb: np.ndarray) -> None:

@@ -286,7 +286,7 @@ class PsiSplits:
     def plan(self, refiner, table: EdgeTable, v: np.ndarray, w: np.ndarray, budget: int) -> SplitPlan:
         m = refiner.mesh
         return plan_splits(m.V, m.F, table, v, w, refiner.step.start, refiner.field, refiner.rng, near=refiner.near,
-                           far=refiner.params.split_distance * refiner.h, off_b=refiner.off_b, grain=refiner.grain,
+                           far=refiner.params.split_distance * refiner.h, off_b=refiner.onb.off_b, grain=refiner.grain,
                            budget=budget)
 
 
