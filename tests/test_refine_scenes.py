@@ -23,7 +23,7 @@ from fracture.tolerances import tol
 from fracture.refine.remesh import plan_splits
 from fracture.coarse.scenes import build_scene
 from fracture.pipeline.stages.fields import fields_from_config
-from fracture.pipeline.stages.refine import load_snapshots
+from fracture.io.snapshots import load_snapshots
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", SCENE_CASES)

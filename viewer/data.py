@@ -233,7 +233,7 @@ class RunData:
 
     @cached_property
     def iterations(self) -> list[dict]:
-        from fracture.pipeline.stages.refine import load_snapshots
+        from fracture.io.snapshots import load_snapshots
 
         self._require(layout.ITERATIONS_INDEX, "the iteration view")
         return load_snapshots(self.dir)

@@ -161,6 +161,22 @@ class FractureSurface:
             W = (W @ self.base).tocsr()
         return W
 
+    def tree_arrays(self) -> dict[str, np.ndarray]:
+        """The barycentric tree as a run stores it (``refined/tree.npz``): ``n_coarse``; per new vertex in
+        creation order its three ``parents`` (vertex ids), their ``weights`` and the position it was
+        ``created`` at; and the composed map of :meth:`tree_matrix` as CSR (``map_data``,
+        ``map_indices``, ``map_indptr``, ``map_shape``)."""
+        W = self.tree_matrix()
+        empty = np.zeros((0, 3))
+        return dict(
+            n_coarse=np.int64(self.n_coarse),
+            parents=np.concatenate(self.parents) if self.parents else empty.astype(np.int64),
+            weights=np.concatenate(self.weights) if self.weights else empty,
+            created=np.concatenate(self.created) if self.created else empty,
+            map_data=W.data, map_indices=W.indices.astype(np.int64), map_indptr=W.indptr.astype(np.int64),
+            map_shape=np.array(W.shape, np.int64),
+        )
+
     def replace(self, other: "FractureSurface") -> None:
         """Take ``other``'s vertices, triangles, sides and tree, in place (a new surface found from this
         one, which callers hold)."""

@@ -15,14 +15,13 @@ Outputs (material space):
 
 from __future__ import annotations
 
-import json
 import logging
-from pathlib import Path
 
 import numpy as np
 
 from fracture.io import layout
 from fracture.io.ply import write_ply
+from fracture.io.snapshots import Snapshots
 from fracture.refine import kernels_cached
 from fracture.refine.engine import Refiner, default_search
 from fracture.refine.untangle import require_uncrossed
@@ -45,13 +44,13 @@ def refine_stage(ctx: RunContext) -> None:
                       search=default_search(params, distance=fs.field("distance"), names=cf.names, grain=grain))
     snaps = Snapshots() if config.refine.snapshots else None
     if snaps is not None:
-        snaps.add(refiner)
+        snaps.add(mesh.V, mesh.F, refiner.psi, np.linalg.norm(refiner.velocity, axis=1))
     if not kernels_cached():
         ctx.say("refine: compiling the refinement kernels (once per install, about a minute) ...")
     with ctx.bar(params.iterations, "refine") as bar:  # an upper bound: stages end when they settle
         def progress(it, r):
             if snaps is not None:
-                snaps.add(r)
+                snaps.add(r.mesh.V, r.mesh.F, r.psi, np.linalg.norm(r.velocity, axis=1))
             bar.set_postfix_str(f"{len(r.mesh.F)} triangles")
             bar.update()
             _log.debug("iteration %d: %d triangles, functional %.6g, mean move %.3g cells", it + 1, len(r.mesh.F),
@@ -70,19 +69,9 @@ def refine_stage(ctx: RunContext) -> None:
 
     write_ply(ctx.path(layout.REFINED_SURFACE), mesh.V, mesh.F,
               face_data={"side0": mesh.sides[:, 0].astype(np.int32), "side1": mesh.sides[:, 1].astype(np.int32)})
-    W = mesh.tree_matrix()
-    empty = np.zeros((0, 3))
-    tree = dict(
-        n_coarse=np.int64(mesh.n_coarse),
-        parents=np.concatenate(mesh.parents) if mesh.parents else empty.astype(np.int64),
-        weights=np.concatenate(mesh.weights) if mesh.weights else empty,
-        created=np.concatenate(mesh.created) if mesh.created else empty,
-        map_data=W.data, map_indices=W.indices.astype(np.int64), map_indptr=W.indptr.astype(np.int64),
-        map_shape=np.array(W.shape, np.int64),
-    )
-    ctx.save_npz(layout.TREE, tree)
+    ctx.save_npz(layout.TREE, mesh.tree_arrays())
     if snaps is not None:
-        snaps.save(ctx, layout.ITERATIONS)
+        snaps.save(ctx)
 
     ctx.counts.update(refined_fracture_triangles=int(len(mesh.F)), refined_fracture_vertices=int(len(mesh.V)),
                       iterations=log.iterations)
@@ -129,38 +118,3 @@ def _search_stats(result) -> dict | None:
         "seconds": {k: round(v, 4) for k, v in result.seconds.items()},
         "notes": list(result.notes),
     }
-
-
-class Snapshots:
-    """Per-iteration positions, triangles, psi and speed, kept compact (float32, int32)."""
-
-    def __init__(self):
-        self.V, self.F, self.psi, self.speed = [], [], [], []
-
-    def add(self, r: Refiner) -> None:
-        m = r.mesh
-        self.V.append(m.V.astype(np.float32))
-        self.F.append(m.F.astype(np.int32))
-        self.psi.append(r.psi.astype(np.float32))
-        self.speed.append(np.linalg.norm(r.velocity, axis=1).astype(np.float32))
-
-    def save(self, ctx: RunContext, stem: str) -> None:
-        nv = np.cumsum([0] + [len(v) for v in self.V])
-        nf = np.cumsum([0] + [len(f) for f in self.F])
-        ctx.save_array(f"{stem}_positions.npy", np.concatenate(self.V))
-        ctx.save_array(f"{stem}_faces.npy", np.concatenate(self.F))
-        ctx.save_array(f"{stem}_psi.npy", np.concatenate(self.psi))
-        ctx.save_array(f"{stem}_speed.npy", np.concatenate(self.speed))
-        ctx.save_json(f"{stem}.json", {"vertex_offsets": nv.tolist(), "face_offsets": nf.tolist(),
-                                       "snapshots": len(self.V)})
-
-
-def load_snapshots(run_dir, stem: str = layout.ITERATIONS) -> list[dict]:
-    """The snapshots of a run: per iteration a dict of positions, faces, psi, speed."""
-    base = Path(run_dir) / stem
-    meta = json.loads(base.with_suffix(".json").read_text())
-    arrays = {k: np.load(f"{base}_{k}.npy") for k in ("positions", "faces", "psi", "speed")}
-    nv, nf = meta["vertex_offsets"], meta["face_offsets"]
-    return [{"positions": arrays["positions"][nv[i]:nv[i + 1]], "faces": arrays["faces"][nf[i]:nf[i + 1]],
-             "psi": arrays["psi"][nv[i]:nv[i + 1]], "speed": arrays["speed"][nv[i]:nv[i + 1]]}
-            for i in range(meta["snapshots"])]
