@@ -133,7 +133,8 @@ def test_no_splits_beside_a_boundary_vertex_that_is_off_b():
     v = on_y0[np.argmin(np.abs(mesh.V[on_y0, 2] - 0.5))]
     mesh.V[v, 1] = 0.03
     table = r.edges()
-    vel, w, *_ = r._velocity(table)
+    flow = r._velocity(table)
+    vel, w = flow.v, flow.w
     assert r.onb.off_b.tolist() == [v]
     fan = mesh.F[(mesh.F == v).any(axis=1)].copy()
     m = len(mesh.F)

@@ -87,7 +87,8 @@ def test_the_tree_reproduces_every_vertex_when_nothing_moves(name):
     r.begin_stage(*r.stages()[-1])  # the last stage: level 0
     for _ in range(4):  # splits only: the flow's moves are left out
         table = r.edges()
-        v, w, *_ = r._velocity(table)
+        flow = r._velocity(table)
+        v, w = flow.v, flow.w
         plan_splits(mesh.V, mesh.F, table, v, w, r.step.start, r.field, r.rng, near=r.near, far=0.0,
                     budget=8000 - len(mesh.F), off_b=r.onb.off_b).apply(mesh)
         r.state.grow(len(mesh.V))

@@ -85,7 +85,7 @@ from fracture.refine.boundary import BoundaryOnB
 from fracture.refine.collide import stop_collisions
 from fracture.refine.fans import closed_vertices
 from fracture.refine.flips import flip_edges
-from fracture.refine.flow import PsiFlow, energy, energy_gradient, face_terms
+from fracture.refine.flow import PsiFlow, energy, energy_gradient
 from fracture.mesh.edges import edge_table, EdgeTable, row_edges
 from fracture.refine.order import spatial_order
 from fracture.mesh.fracture_surface import FractureSurface
@@ -142,6 +142,34 @@ class IterationLog:
     @property
     def iterations(self) -> int:
         return max(len(self.functional) - 1, 0)
+
+
+@dataclass
+class Velocity:
+    """The flow's velocity of an iteration and what the step needs with it.
+
+    Attributes
+    ----------
+    v : (n, 3) float
+        The velocity per vertex, with the boundary constraint applied.
+    w : (n,) float
+        The flow's integrand per vertex (Eq. 3: the shifted psibar).
+    area : (n,) float
+        Barycentric vertex areas.
+    boundary : (k,) int
+        The boundary vertices, and per boundary vertex the two directions its moves lose:
+    conormal : (k, 3) float
+        the sheet's outward conormal (its area term pulls the boundary inward), and
+    normal : (k, 3) float
+        B's normal (the projection onto B undoes it).
+    """
+
+    v: np.ndarray
+    w: np.ndarray
+    area: np.ndarray
+    boundary: np.ndarray
+    conormal: np.ndarray
+    normal: np.ndarray
 
 
 class Refiner:
@@ -271,14 +299,9 @@ class Refiner:
         """The edge table of the current triangles (O(m), compiled)."""
         return edge_table(self.mesh.F, len(self.mesh.V))
 
-    def _velocity(self, table: EdgeTable):
-        """Eq. 3 at every vertex with the boundary constraint.
-
-        Returns the velocity, the shifted psibar at the vertices (the flow's
-        integrand), the barycentric vertex areas, the boundary vertices and
-        the two directions their moves lose (the sheet's outward conormal and
-        B's normal); records the boundary vertices off B in ``off_b``.
-        """
+    def _velocity(self, table: EdgeTable) -> "Velocity":
+        """The flow's velocity at every vertex with the boundary constraint (:class:`Velocity`); records
+        the boundary vertices off B in ``onb.off_b``."""
         m = self.mesh
         _, psibar, grad = self.vertex_field()
         w = self.flow.integrand(psibar, self.offset)
@@ -287,7 +310,7 @@ class Refiner:
         rows = table.boundary_rows
         if not len(rows):
             self.onb.off_b = np.zeros(0, np.int64)
-            return v, w, area, np.zeros(0, np.int64), (np.zeros((0, 3)), np.zeros((0, 3)))
+            return Velocity(v, w, area, np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3)))
         # boundary vertices slide on B: drop the part of their velocity that
         # points out of the sheet across its boundary (the area term of an
         # open sheet pulls its boundary inward; at a crease of B this pull is
@@ -297,7 +320,7 @@ class Refiner:
         self.onb.off_b = verts[d2 > self.onb.on_b ** 2]
         nb = self.B.normals[tri]
         _drop(v, verts, c, nb)
-        return v, w, area, verts, (c, nb)
+        return Velocity(v, w, area, verts, c, nb)
 
     # -- one iteration --------------------------------------------------------------------
     def iterate(self) -> tuple[float, int]:
@@ -307,9 +330,9 @@ class Refiner:
         self.put_in_spatial_order()
         clock = log.tick("order", clock)
         table = self.edges()
-        v, w, area, boundary, frames = self._velocity(table)
+        vel = self._velocity(table)
         clock = log.tick("flow", clock)
-        plan = self.splits.plan(self, table, v, w, budget=p.max_triangles - p.max_triangles // _CHORD_RESERVE - len(m.F))
+        plan = self.splits.plan(self, table, vel.v, vel.w, budget=p.max_triangles - p.max_triangles // _CHORD_RESERVE - len(m.F))
         self.full |= plan.full
         made = plan.apply(m)
         if made:
@@ -327,14 +350,12 @@ class Refiner:
             self.onb.settle(table)
             clock = log.tick("boundary", clock)
         if made or settle:
-            v, w, area, boundary, frames = self._velocity(table)
+            vel = self._velocity(table)
             clock = log.tick("flow", clock)
+        v, w, area, boundary = vel.v, vel.w, vel.area, vel.boundary
         s.velocity = v
         before = energy(m.V, m.F, w, self.grain)
-        wf = w[m.F].mean(axis=1)
-        if self.grain is not None:  # the implicit area term: each triangle's weight times its g(n)
-            A, G, _ = face_terms(m.V, m.F, self.grain)
-            wf = wf * G / np.maximum(A, tol.tiny)
+        wf = self.flow.triangle_weights(m.V, m.F, w, self.grain)  # the implicit area term's weights
         held = s.hold > 0
         s.hold = np.maximum(s.hold - 1, 0)
         closed = closed_vertices(m.F, len(m.V), table)  # for the collision step and the flips
@@ -343,7 +364,7 @@ class Refiner:
         for attempt in range(_ATTEMPTS):
             tau = self.step.tau
             d = self.solve(L, area, v, tau)
-            _drop(d, boundary, *frames)
+            _drop(d, boundary, vel.conormal, vel.normal)
             d[held] = 0.0
             limit_moves(m.V, m.F, d, p.fold, p.max_move * self.h)
             limit_by_shortest_edge(m.V, m.F, d, boundary, BOUNDARY_MOVE)

@@ -206,6 +206,19 @@ class PsiFlow:
     def gradient(self, grad: np.ndarray) -> np.ndarray:
         return grad
 
+    def triangle_weights(self, V: np.ndarray, F: np.ndarray, w: np.ndarray, grain=None) -> np.ndarray:
+        """The implicit area term's weight per triangle (:func:`~fracture.refine.step.cotangent_weights`):
+        the mean integrand of its corners, times g(n) with a grain."""
+        return _triangle_weights(V, F, w, grain)
+
+
+def _triangle_weights(V, F, w, grain):
+    wf = w[F].mean(axis=1)
+    if grain is not None:  # each triangle's weight times its g(n)
+        A, G, _ = face_terms(V, F, grain)
+        wf = wf * G / np.maximum(A, tol.tiny)
+    return wf
+
 
 class AreaFlow:
     """Mean curvature flow: the integrand is 1 and there is no field term, so the surface only shortens (a
@@ -219,3 +232,6 @@ class AreaFlow:
 
     def gradient(self, grad: np.ndarray) -> np.ndarray:
         return np.zeros_like(grad)
+
+    def triangle_weights(self, V: np.ndarray, F: np.ndarray, w: np.ndarray, grain=None) -> np.ndarray:
+        return _triangle_weights(V, F, w, grain)
