@@ -96,9 +96,9 @@ def navigate(app, v, out) -> dict:
     res["linked_forward"] = [(-m[:3, 2]).tolist() for m in M]
     before = _cameras(v)
     v.export_w.int_value, v.export_h.int_value, v.export_fps.int_value = 640, 360, 5
-    res["screenshot"] = str(v.screenshot("all panels", out / "shot.png"))
-    v.screenshot("iterations", out / "shot_it.png")
-    v.export_video("iterations", out / "it.mp4")
+    res["screenshot"] = str(v.exports.screenshot("all panels", out / "shot.png"))
+    v.exports.screenshot("iterations", out / "shot_it.png")
+    v.exports.export_video("iterations", out / "it.mp4")
     while v._job is not None:
         app.run_one_tick()
     res["cameras_before_export"], res["cameras_after_export"] = before, _cameras(v)
@@ -156,10 +156,10 @@ def views(app, v, out) -> dict:
     res["views"] = [first, asdict(v.view)]
     res["saved_config"] = str(saved_config)
     v.export_w.int_value, v.export_h.int_value = 640, 360
-    res["compare"] = str(v.screenshot("coarse vs refined", out / "compare.png"))
+    res["compare"] = str(v.exports.screenshot("coarse vs refined", out / "compare.png"))
     v.transparent_box.checked = True
     v.export_scale.int_value = 2
-    res["transparent"] = str(v.screenshot("animation", out / "transparent.png"))
+    res["transparent"] = str(v.exports.screenshot("animation", out / "transparent.png"))
     v.transparent_box.checked = False
     v.export_scale.int_value = 1
     res["errors"] = list(v.errors)
@@ -233,7 +233,7 @@ def main() -> None:
     result: dict = {"errors": v.errors}
 
     def shot(i, name):
-        img = v.panel_image(i, 480, 360)
+        img = v.exports.panel_image(i, 480, 360)
         iio.imwrite(out / f"{name}.png", img)
         return str(out / f"{name}.png")
 
@@ -254,8 +254,8 @@ def main() -> None:
         result["zeta"] = shot(0, "zeta")
         v.export_w.int_value, v.export_h.int_value, v.export_fps.int_value = 640, 360, 5
         v.export_seconds.double_value, v.export_hold.double_value = 0.4, 0.6  # 2 video frames each, 3 more at the end
-        result["screenshot"] = str(v.screenshot("all panels", out / "window_all.png"))
-        v.export_video("animation", out / "window_animation.mp4")
+        result["screenshot"] = str(v.exports.screenshot("all panels", out / "window_all.png"))
+        v.exports.export_video("animation", out / "window_animation.mp4")
         while v._job is not None:
             app.run_one_tick()
         result["video"] = str(out / "window_animation.mp4")

@@ -285,7 +285,7 @@ json.dump({{"pixels": int(inside.sum()), "p95": float(np.percentile(nearest, 95)
 
 
 def test_exports_are_numbered_and_never_overwrite(tmp_path):
-    from viewer.app import numbered
+    from viewer.exports import numbered
 
     first = numbered(tmp_path / "renders", "screenshot_all_panels", ".png")
     assert first.name == "screenshot_all_panels_001.png"

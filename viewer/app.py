@@ -34,18 +34,16 @@ from open3d.visualization import gui, rendering
 
 from fields.colormap import colorbar
 from fracture.io import layout
-from fracture.io.atomic import atomic_write_bytes, atomic_write_text, png_bytes
+from fracture.io.atomic import atomic_write_text
 from fracture.errors import ConfigError, InputError, ResultError, StageError
 from fracture.pipeline.config import explain
-from viewer import annotate
-from viewer.annotate import Bar
 from viewer.data import FIELDS, RunData, Surface, SweepPoint, read_sweep
+from viewer.exports import Exports, numbered
 from viewer.looks import (
-    COLOR_BY, FIELD_CMAPS, SURFACE_CMAPS, CameraPose, animation_box, capture, animation_pose, frame_box, iteration_box,
-    iteration_caption, iteration_pose, pieces_caption, scene_box, set_cutaway, set_frame, set_frustum, set_slice, set_surface,
-    show_context, show_material, show_pieces, show_stage, slice_pose, slice_title,
+    COLOR_BY, FIELD_CMAPS, SURFACE_CMAPS, CameraPose, animation_box, animation_pose, frame_box, iteration_box,
+    iteration_caption, iteration_pose, scene_box, set_cutaway, set_frame, set_slice, set_surface, show_context,
+    show_material, show_stage, slice_pose,
 )
-from viewer.media import Video, check_size, frame_counts
 from viewer.lifetime import Lifetime
 from viewer.rerun import RerunWorker
 from viewer.state import PANELS, ViewState, from_section, write_view_file
@@ -86,15 +84,6 @@ def set_key(cfg: dict, path: str, value) -> None:
     for p in parts[:-1]:
         node = node[int(p)] if isinstance(node, list) else node[p]
     node[parts[-1]] = value
-
-
-def numbered(folder: Path, stem: str, suffix: str) -> Path:
-    """``folder/stem_NNN.suffix`` with the first number not taken: exports never overwrite."""
-    taken = {p.name for p in folder.glob(f"{stem}_*{suffix}")} if folder.is_dir() else set()
-    k = 1
-    while f"{stem}_{k:03d}{suffix}" in taken:
-        k += 1
-    return folder / f"{stem}_{k:03d}{suffix}"
 
 
 def _combobox(items, on_change=None) -> gui.Combobox:
@@ -164,6 +153,7 @@ class Viewer:
         self._last_step = 0.0
         self._sync_from: int | None = None
         self._job = None  # a generator stepped on ticks (video export)
+        self.exports = Exports(self)  # screenshots and videos of the panels (viewer/exports.py)
         self._worker: threading.Thread | None = None
         # re-runs go to one child process (viewer/rerun.py), started when a parameter is first
         # edited, so that it has imported the pipeline by the re-run; a window only looked at starts none
@@ -350,13 +340,13 @@ class Viewer:
         self.shot_box = _combobox(("all panels",) + PANELS + ("coarse vs refined",))
         row.add_child(self.shot_box)
         b = gui.Button("Screenshot")
-        b.set_on_clicked(lambda: self.screenshot(self.shot_box.selected_text))
+        b.set_on_clicked(lambda: self.exports.screenshot(self.shot_box.selected_text))
         row.add_child(b)
         side.add_child(row)
         row = gui.Horiz(0.5 * em)
         for what in ("iterations", "animation"):
             b = gui.Button(f"Video: {what}")
-            b.set_on_clicked(lambda w=what: self.export_video(w))
+            b.set_on_clicked(lambda w=what: self.exports.export_video(w))
             row.add_child(b)
         side.add_child(row)
         return side
@@ -636,7 +626,7 @@ class Viewer:
             elif event.key == gui.KeyName.R:
                 self.reset_view(None if self.link_box.checked else i)
             elif event.key == gui.KeyName.S:
-                self.screenshot(self.shot_box.selected_text)
+                self.exports.screenshot(self.shot_box.selected_text)
             elif event.key == gui.KeyName.F and self.sweep:
                 self.flip_points()
             else:
@@ -794,155 +784,6 @@ class Viewer:
         self.errors.append(text)
         self.say(text.splitlines()[0])
         self.window.show_message_box("fracref", text)
-
-    # -- export ------------------------------------------------------------------------------------
-
-    def _export_size(self) -> tuple[int, int]:
-        w, h = int(self.export_w.int_value), int(self.export_h.int_value)
-        check_size(w, h, "export")
-        k = int(self.export_scale.int_value)
-        if max(w, h) * k > 8192:
-            raise InputError(f"export: {w}x{h} supersampled {k} times is over 8192 pixels; expected a smaller "
-                             "size or less supersampling")
-        return w, h
-
-    def _labels(self, i: int) -> tuple[Bar | None, str | None]:
-        """Panel ``i``'s colour bar and caption in a figure."""
-        v = self.view
-        if i == 0:
-            return Bar(FIELD_CMAPS[v.field], *self.run.field_range(v.field, v.level), v.field), slice_title(v)
-        if i == 1 and self._iter_range is not None:
-            return Bar(SURFACE_CMAPS[v.color_by], *self._iter_range, v.color_by), self.iter_label.text
-        return None, self.frame_label.text
-
-    def _picture(self, i: int, width: int, height: int, picture: tuple[int, int],
-                 transparent: bool | None = None) -> np.ndarray:
-        """Panel ``i`` from its current camera, at ``width x height`` with the panel's view over the
-        upper-left ``picture`` part (supersampled and matted as the export settings say). The panel's
-        camera is put back exactly as it was (the window is unchanged)."""
-        k = int(self.export_scale.int_value)
-        transparent = self.transparent_box.checked if transparent is None else transparent
-        sw = self.scenes[i]
-        cam = sw.scene.camera
-        current = self.current_pose(i)
-        near, far = cam.get_near(), cam.get_far()
-        # keep all that the panel shows: a narrower picture gets a taller field of view
-        f = sw.frame
-        panel_aspect, aspect = f.width / max(f.height, 1), picture[0] / picture[1]
-        half = np.arctan(np.tan(np.radians(current.fov) / 2) * panel_aspect / aspect)
-        fov = max(current.fov, float(np.degrees(2 * half)))
-        set_frustum(cam, fov, width * k, height * k, (picture[0] * k, picture[1] * k), near, far)
-
-        def shot():
-            return np.asarray(self.app.render_to_image(sw.scene, width * k, height * k))[..., :3]
-        try:
-            return capture(sw.scene, shot, k, transparent)
-        finally:
-            cam.set_projection(current.fov, panel_aspect, near, far, rendering.Camera.FovType.Vertical)
-            sw.force_redraw()
-
-    def panel_image(self, i: int, width: int, height: int, caption: str | None = None,
-                    transparent: bool | None = None) -> np.ndarray:
-        """Panel ``i`` as a ``width x height`` figure: its picture, its colour bar and its caption."""
-        bar, text = self._labels(i)
-        lay = annotate.layout(width, height, bar is not None, True)
-        img = self._picture(i, width, height, lay.picture, transparent)
-        return annotate.compose(img[:lay.picture[1], :lay.picture[0]], lay, bar, caption or text)
-
-    def compare_image(self, width: int, height: int) -> np.ndarray:
-        """The coarse pieces and the refined pieces at the shown frame, side by side, from the animation
-        panel's camera."""
-        if not self.run.has_animation:
-            raise InputError("this run has no animation: the coarse and refined pieces are compared in it")
-        scene, t = self.scenes[2].scene, self.view.frame
-        coarse, refined = self.run.coarse_pieces(t), self.run.pieces_at(t)
-        figures = []
-        try:
-            for name, pieces, half in (("coarse", coarse, width // 2), ("refined", refined, width - width // 2)):
-                for c in range(max(len(coarse), len(refined))):
-                    for n in (f"piece_{c}", f"piece_{c}_fracture"):
-                        if scene.has_geometry(n):
-                            scene.remove_geometry(n)
-                show_pieces(scene, pieces)
-                figures.append(self.panel_image(2, half, height, pieces_caption(name, pieces, t)))
-        finally:
-            self.draw_frame()
-        return annotate.side_by_side(figures)
-
-    def screenshot(self, which: str = "all panels", path: str | Path | None = None) -> Path | None:
-        """A PNG of one panel (``material``, ``iterations``, ``animation``), of all three side by side,
-        or of the coarse and refined pieces side by side (``coarse vs refined``)."""
-        try:
-            w, h = self._export_size()
-            if which == "all panels":
-                widths = [w // 3 // 2 * 2] * 2
-                widths.append(w - sum(widths))
-                img = np.concatenate([self.panel_image(i, pw, h) for i, pw in enumerate(widths)], axis=1)
-            elif which == "coarse vs refined":
-                img = self.compare_image(w, h)
-            else:
-                img = self.panel_image(PANELS.index(which), w, h)
-            stem = f"screenshot_{which.replace(' ', '_')}"
-            path = Path(path) if path else numbered(self.run.dir / "renders", stem, ".png")
-            path.parent.mkdir(parents=True, exist_ok=True)
-            atomic_write_bytes(path, png_bytes(img))
-        except (InputError, OSError, ValueError) as exc:
-            self.report_error("screenshot failed", exc)
-            return None
-        self.say(f"saved {path}")
-        return path
-
-    def export_video(self, what: str, path: str | Path | None = None) -> None:
-        """An MP4 of the iterations or the animation, one image per window tick (the window stays live);
-        each image is shown for the export's seconds per image, the last held for its hold seconds."""
-        if self._job is not None:
-            self.say("a video export is already going; wait for it to finish")
-            return
-        try:
-            w, h = self._export_size()
-            fps = int(self.export_fps.int_value)
-            if what == "iterations" and not self.run.has_iterations or what == "animation" and not self.run.has_animation:
-                raise InputError(f"this run has no {what} to export")
-            n = len(self.run.iterations) if what == "iterations" else self.run.n_frames
-            # the animation at its own frame rate; iterations at the chosen seconds per image
-            seconds = (float(self.export_seconds.double_value) if what == "iterations"
-                       else 1.0 / float(self.run.config.get("animate", {}).get("fps", 24.0)))
-            counts = frame_counts(n, seconds, fps)
-            counts[-1] += round(float(self.export_hold.double_value) * fps)
-            path = Path(path) if path else numbered(self.run.dir / "renders", f"window_{what}", ".mp4")
-            path.parent.mkdir(parents=True, exist_ok=True)
-            video = Video(path, w, h, fps)
-        except (InputError, OSError) as exc:
-            self.report_error("video export failed", exc)
-            return
-        i = 1 if what == "iterations" else 2
-        keep = self.view
-
-        def job():
-            try:
-                for k in range(n):
-                    if what == "iterations":
-                        self.set_iteration(k)
-                    else:
-                        self.set_frame(k)
-                    img = self.panel_image(i, w, h, transparent=False)
-                    for _ in range(counts[k]):
-                        video.add(img)
-                    self.say(f"video: {k + 1} / {n}")
-                    yield
-            except BaseException:
-                video.abort()
-                raise
-            else:
-                video.close()
-                self.say(f"saved {path}")
-            finally:  # the panel and its slider back where they were
-                if what == "iterations":
-                    self.set_iteration(keep.iteration)
-                else:
-                    self.set_frame(keep.frame)
-
-        self._job = job()
 
     # -- views ---------------------------------------------------------------------------------------
 
