@@ -54,6 +54,7 @@ $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e '.[test]'
+	$(BIN)/fracref compile  # the kernels' one-off compilation now, not at the first run
 	@touch $(STAMP)
 
 $(BLENDER_STAMP):

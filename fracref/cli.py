@@ -20,7 +20,7 @@ from fracture.io import layout
 
 
 # commands that refine or load refinement results (the others only read configs)
-_COMPUTING = ("run", "sweep", "view", "render", "export")
+_COMPUTING = ("run", "sweep", "view", "render", "export", "compile")
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -56,6 +56,9 @@ def _parser() -> argparse.ArgumentParser:
     w.add_argument("--no-sheet", action="store_true", help="no contact sheet of the refined surfaces")
     w.add_argument("--quiet", action="store_true", help="no progress bar")
     _cache_flags(w)
+
+    sub.add_parser("compile", help="compile the kernels now (once per install; make install does it), so that "
+                   "the first run does not wait for it")
 
     c = sub.add_parser("config", help="print the resolved config, or what config keys mean")
     c.add_argument("config", type=Path, nargs="?", help="experiment YAML file (not needed with --explain)")
@@ -180,6 +183,11 @@ def _main(argv: list[str] | None) -> int:
     try:
         if args.command == "stages":
             print("\n".join(runner.available_stages()))
+            return 0
+        if args.command == "compile":
+            from fracture.pipeline.warmup import compile_kernels
+
+            print(f"kernels compiled and cached in {compile_kernels():.1f} s")
             return 0
         if args.command == "render":
             return _render(args)
