@@ -11,7 +11,6 @@ the coarse stage, the strength field and the distances are reused, and refines a
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import tempfile
 import time
@@ -44,7 +43,7 @@ def main(argv=None) -> None:
             out = runner.run(load_config(args.config, common + [f"psi.stress_weight={weight}"]), Path(tmp) / f"r{k}",
                              until="refine", progress=False, cache=cache)
             wall = time.perf_counter() - start
-            m = json.loads((out / layout.MANIFEST).read_text())
+            m = layout.read_manifest(out)
             s = {n: v["seconds"] for n, v in m["stages"].items()}
             print(f"| {k + 1} | {weight:.1f} | {s['coarse']:.2f} | {s['fields']:.2f} | {s['refine']:.2f} "
                   f"| {sum(s.values()):.2f} | {wall:.2f} | {m['counts']['refined_fracture_triangles']} "

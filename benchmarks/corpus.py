@@ -12,7 +12,6 @@ came out closed, vertex-manifold and free of self-intersections, with the triang
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import tarfile
 import tempfile
@@ -60,7 +59,7 @@ def main() -> int:
             except (InputError, ResultError, StageError) as exc:
                 print(f"| {case} | refused: {str(exc)[:120]} | | | {time.perf_counter() - start:.0f} |")
                 continue
-            manifest = json.loads((out / layout.MANIFEST).read_text())
+            manifest = layout.read_manifest(out)
             bad = [i for i, p in enumerate(manifest["stats"]["animate"]["pieces"])
                    if not (p["closed_oriented"] and p["vertex_manifold"] and p["self_intersections"] == 0)]
             good += not bad

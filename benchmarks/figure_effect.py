@@ -13,7 +13,6 @@ and where the refined one does (red).
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import tempfile
 from pathlib import Path
@@ -34,7 +33,6 @@ from fracture.io import layout  # noqa: E402
 from fracture.pipeline import runner  # noqa: E402
 from fracture.pipeline.config import load_config  # noqa: E402
 from fracture.mesh.exterior import Exterior  # noqa: E402
-from fracture.io.ply import read_ply  # noqa: E402
 from fracture.refine.engine import Refiner, RefineParams  # noqa: E402
 from fracture.mesh.fracture_surface import FractureSurface  # noqa: E402
 
@@ -92,11 +90,11 @@ def scene_panel(ax, name: str, title: str, axis: int = 2) -> None:
     cfg = load_config(ROOT / "configs" / f"{name}.yaml", ["refine.snapshots=false"])
     with tempfile.TemporaryDirectory() as tmp:
         out = runner.run(cfg, Path(tmp) / "run", until="refine", progress=False)
-        grid = Grid.from_dict(json.loads((out / layout.GRID).read_text()))
-        zeta = np.load(out / layout.field("zeta"))
-        coarse = read_ply(out / layout.COARSE_SURFACE)[:2]
-        refined = read_ply(out / layout.REFINED_SURFACE)[:2]
-        solid = Exterior(*read_ply(out / layout.EXTERIOR)[:2])
+        grid = layout.read_grid(out)
+        zeta = layout.read_field(out, "zeta")
+        coarse = layout.read_surface(out, layout.COARSE_SURFACE)
+        refined = layout.read_surface(out, layout.REFINED_SURFACE)
+        solid = Exterior(*layout.read_surface(out, layout.EXTERIOR))
     panel(ax, grid, zeta, axis, [coarse, refined], title, solid)
 
 

@@ -27,7 +27,7 @@ def _one(seed: int) -> tuple:
     start = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
         ext_kind, cut_kind, outcome, out = cutgen.run_case(seed, tmp)
-        notes = json.loads((out / layout.MANIFEST).read_text()).get("notes", []) if out is not None else []
+        notes = layout.read_manifest(out).get("notes", []) if out is not None else []
     return seed, ext_kind, cut_kind, outcome, time.perf_counter() - start, notes
 
 

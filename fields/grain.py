@@ -22,6 +22,7 @@ the line through ``center`` along the axis).
 from __future__ import annotations
 
 from dataclasses import dataclass
+
 import numpy as np
 
 from fields.tolerances import tol

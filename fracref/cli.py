@@ -216,10 +216,8 @@ def _main(argv: list[str] | None) -> int:
         done = runner.run(cfg, out, until=args.until, force=args.force, progress=not args.quiet,
                           cache=cache_from_args(args))
         if not args.quiet:
-            import json
-
-            print(runner.timing_table(json.loads((done / layout.MANIFEST).read_text(encoding="utf-8"))))
-        print(f"run complete: {done}  (manifest: {done / 'manifest.json'})")
+            print(runner.timing_table(layout.read_manifest(done)))
+        print(f"run complete: {done}  (manifest: {done / layout.MANIFEST})")
         return 0
     except (ConfigError, InputError, ResultError, StageError, RunDirectoryExists, OutputError) as exc:
         print(f"fracref: error: {exc}", file=sys.stderr)

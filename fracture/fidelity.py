@@ -19,7 +19,6 @@ Samples are drawn with a fixed seed, so a surface always gets the same figures.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -29,7 +28,6 @@ from fields.interpolate import trilinear
 from fields.stress import distance_to_surface
 from fracture.io import layout
 from fracture.mesh.exterior import Exterior
-from fracture.io.ply import read_ply
 from fracture.mesh.sampling import area_samples as surface_samples
 
 PERCENTILES = (10, 20, 30, 90)
@@ -89,13 +87,13 @@ def run_figures(out: str | Path) -> dict:
     whether the search's surface was taken (``searched``) and its ``search_seconds``.
     """
     out = Path(out)
-    manifest = json.loads((out / layout.MANIFEST).read_text())
-    grid = Grid.from_dict(json.loads((out / layout.GRID).read_text()))
-    zeta = np.load(out / layout.field("zeta")).astype(np.float64)
-    psi = np.load(out / layout.field("psi")).astype(np.float64)
-    BV, BF = read_ply(out / layout.EXTERIOR)[:2]
-    CV, CF = read_ply(out / layout.COARSE_SURFACE)[:2]
-    RV, RF = read_ply(out / layout.REFINED_SURFACE)[:2]
+    manifest = layout.read_manifest(out)
+    grid = layout.read_grid(out)
+    zeta = layout.read_field(out, "zeta").astype(np.float64)
+    psi = layout.read_field(out, "psi").astype(np.float64)
+    BV, BF = layout.read_surface(out, layout.EXTERIOR)
+    CV, CF = layout.read_surface(out, layout.COARSE_SURFACE)
+    RV, RF = layout.read_surface(out, layout.REFINED_SURFACE)
     thresholds = inside_thresholds(grid, zeta, BV, BF)
     coarse = surface_figures(CV, CF, grid, zeta, thresholds, psi)
     refined = surface_figures(RV, RF, grid, zeta, thresholds, psi, reference=(CV, CF))

@@ -41,6 +41,6 @@ def test_a_surface_that_cannot_be_parted_is_refused_naming_where():
     with pytest.raises(ResultError, match=r"refine: \d+ pairs of refined fracture triangles cross each other "
                                           r"\(the first near \["):
         require_uncrossed(V, F, B, rounds=0)
-    X, before = require_uncrossed(V, F, B)
+    X, before, _ = require_uncrossed(V, F, B)
     assert before > 0 and self_intersections(X, F) == 0
 

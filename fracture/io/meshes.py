@@ -8,8 +8,8 @@ import igl
 import numpy as np
 
 from fracture.errors import InputError
-from fracture.tolerances import tol
-from fracture.mesh.topology import diagonal, face_frames, fan, unique_edges
+from fracture.mesh.clean import flat_triangles
+from fracture.mesh.topology import fan, unique_edges
 
 MESH_SUFFIXES = (".obj", ".ply", ".off", ".stl")
 
@@ -64,7 +64,7 @@ def check_triangle_mesh(V, F, what: str, closed: bool = False) -> tuple[np.ndarr
         f = int(twice[0])
         raise InputError(f"{what}: faces {int(first[inverse.ravel()[f]]) + 1} and {f + 1} (counted from 1) are the same "
                          f"triangle{f' ({len(twice)} such repeats)' if len(twice) > 1 else ''}; expected each triangle once")
-    flat = np.flatnonzero(2 * face_frames(V, F)[0] <= tol.degenerate * diagonal(V) ** 2)
+    flat = np.flatnonzero(flat_triangles(V, F))
     # only an open surface (a fracture surface) is refused for them: a closed exterior made by CAD
     # booleans often keeps flat triangles where coplanar faces merged, and they bound nothing
     if len(flat) and not closed:

@@ -64,13 +64,12 @@ class Exterior:
         take B's closest point to ``through``."""
         start = np.ascontiguousarray(start, np.float64).reshape(-1, 3)
         through = np.ascontiguousarray(through, np.float64).reshape(-1, 3)
-        out = self.closest(through)[2]
         ray = through - start
+        target = through.copy()  # where B's closest point is taken: the ray's hit, or the point itself
         ok = self.inside(start) & (np.einsum("ij,ij->i", ray, ray) > 0.0)
         if ok.any():
             face, t, _ = self._tree.intersect_ray_first(self.V, self.F, start[ok], np.ascontiguousarray(ray[ok]))
             hit = (face >= 0) & np.isfinite(t) & (t > 0.0)
             rows = np.flatnonzero(ok)[hit]
-            if len(rows):  # the ray's hit is within rounding of B; its closest point is on it
-                out[rows] = self.closest(start[rows] + t[hit, None] * ray[rows])[2]
-        return out
+            target[rows] = start[rows] + t[hit, None] * ray[rows]  # within rounding of B
+        return self.closest(target)[2]

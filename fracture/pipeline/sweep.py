@@ -279,7 +279,7 @@ def run_sweep(config: str | Path, grid: dict[str, list], out: str | Path, overri
 def point_figures(run_dir: Path) -> dict:
     """A finished point's figures: seconds, refined triangles, iterations, the last plain energy and
     functional, and (with a refine stage) the fidelity figures of :func:`fracture.fidelity.run_figures`."""
-    manifest = json.loads((run_dir / layout.MANIFEST).read_text())
+    manifest = layout.read_manifest(run_dir)
     out: dict[str, Any] = {"seconds": round(sum(s["seconds"] for s in manifest["stages"].values()), 3),
                            "reused_stages": sum(s.get("cache") == "reused" for s in manifest["stages"].values())}
     refine = manifest.get("stats", {}).get("refine")

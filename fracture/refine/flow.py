@@ -198,7 +198,6 @@ class PsiFlow:
     term of the velocity (the area term, the implicit step and the acceptance of a step follow from the
     integrand)."""
 
-    name = "psi"
 
     def integrand(self, psibar: np.ndarray, offset: float) -> np.ndarray:
         return psibar + offset
@@ -225,7 +224,6 @@ class AreaFlow:
     second flow for the refiner, and a check that it composes any flow through :class:`PsiFlow`'s
     interface)."""
 
-    name = "area"
 
     def integrand(self, psibar: np.ndarray, offset: float) -> np.ndarray:
         return np.ones_like(psibar)

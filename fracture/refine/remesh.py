@@ -281,7 +281,6 @@ class PsiSplits:
     the :class:`SplitPlan` of one round from the surface (``refiner.mesh``), its edge table, the velocity
     and integrand at the vertices and the triangles that may still be made."""
 
-    name = "psi"
 
     def plan(self, refiner, table: EdgeTable, v: np.ndarray, w: np.ndarray, budget: int) -> SplitPlan:
         m = refiner.mesh
@@ -294,7 +293,6 @@ class LongEdgeSplits:
     """A second split rule: every edge longer than ``length`` is halved, whatever the field (uniform
     refinement), at most one edge per triangle a round (the longest first), within the budget."""
 
-    name = "long_edges"
 
     def __init__(self, length: float):
         self.length = float(length)

@@ -58,9 +58,9 @@ def untangle(V: np.ndarray, F: np.ndarray, B: Exterior, rounds: int = ROUNDS) ->
 
 
 def require_uncrossed(V: np.ndarray, F: np.ndarray, B: Exterior, where: str = "refine",
-                      rounds: int = ROUNDS) -> tuple[np.ndarray, int]:
+                      rounds: int = ROUNDS) -> tuple[np.ndarray, int, int]:
     """:func:`untangle`, refusing a surface that still crosses itself (a :class:`~fracture.errors.ResultError`
-    naming where); returns the positions and how many pairs crossed before."""
+    naming where); returns the positions, how many pairs crossed before and how many after (counted: 0)."""
     X, before, left = untangle(V, F, B, rounds)
     if left:
         _, pairs = self_intersections(X, F, report=1)
@@ -68,5 +68,5 @@ def require_uncrossed(V: np.ndarray, F: np.ndarray, B: Exterior, where: str = "r
         raise ResultError(f"{where}: {left} pairs of refined fracture triangles cross each other (the first near "
                          f"{at}) and relaxing them did not part them; a different seed or refine.max_triangles gives "
                          "another refined surface")
-    return X, before
+    return X, before, left
 

@@ -64,7 +64,7 @@ def refine_stage(ctx: RunContext) -> None:
         bar.refresh()
     _log.info("refine: %d triangles after %d iterations; %s", len(mesh.F), log.iterations, log.stop)
     # no crossing pair leaves the refinement: relaxed apart, or the run is refused (fracture/refine/untangle.py)
-    mesh.V, crossed = require_uncrossed(mesh.V, mesh.F, refiner.B)
+    mesh.V, crossed, crossing = require_uncrossed(mesh.V, mesh.F, refiner.B)
     ctx.products.refined = mesh
 
     write_ply(ctx.path(layout.REFINED_SURFACE), mesh.V, mesh.F,
@@ -92,7 +92,7 @@ def refine_stage(ctx: RunContext) -> None:
         "stopped_by_collisions": [int(s) for s in log.stopped],
         # the last iteration's (flips keep the boundary); measured afresh when no iteration ran
         "max_boundary_distance": float(log.boundary_error[-1] if log.boundary_error else refiner.boundary_error()),
-        "self_intersecting_pairs": 0,  # require_uncrossed: none, or no run
+        "self_intersecting_pairs": int(crossing),  # counted by require_uncrossed (any left: no run)
         "crossing_pairs_relaxed": int(crossed),
         "phase_seconds": {k: round(v, 4) for k, v in log.seconds.items()},
         "search": _search_stats(log.search),
