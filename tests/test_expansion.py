@@ -50,6 +50,18 @@ def test_two_labels_reach_the_global_minimum_and_three_within_twice_it(seed):
             assert g.energy(out) <= 2 * best + 1e-12
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_the_edges_incident_to_nodes_are_found_each_once(seed):
+    rng = np.random.default_rng(20 + seed)
+    g = _graph(rng, n=30, density=0.3)
+    nodes = np.flatnonzero(rng.random(g.n) < 0.4)
+    member = np.zeros(g.n, bool)
+    member[nodes] = True
+    found = g.incident(nodes, member)
+    assert len(found) == len(np.unique(found))
+    assert set(found.tolist()) == set(np.flatnonzero(member[g.p] | member[g.q]).tolist())
+
+
 @pytest.mark.parametrize("spacing", [(1, 1, 1), (0.5, 0.5, 0.5), (1, 1, 0.7)])
 def test_the_weights_measure_the_area_of_planes_at_every_orientation(spacing):
     w = area_weights(spacing)

@@ -122,3 +122,47 @@ def test_moved_vertices_that_meet_another_go_back():
     out = _apart(V, X, h=0.1)
     np.testing.assert_array_equal(out[0], V[0])
     np.testing.assert_array_equal(out[3], X[3])
+
+
+def test_band_nodes_take_the_piece_on_their_side_of_a_junction():
+    """A T of two planes (x = 0 between piece 0 and the rest; y = 0 between pieces 1 and 2 where x > 0):
+    every node off the planes gets the piece it lies in, also those whose closest point is on the
+    junction line or a rim."""
+    from fracture.refine.search import _SideOf, _sides
+
+    def piece(X):
+        return np.where(X[:, 0] < 0, 0, np.where(X[:, 1] < 0, 1, 2))
+
+    def quad(corners):
+        return np.array(corners, float), np.array([[0, 1, 2], [0, 2, 3]])
+
+    parts = [quad([[0, -1, -1], [0, 0, -1], [0, 0, 1], [0, -1, 1]]),  # x = 0, y < 0: pieces 0 and 1
+             quad([[0, 0, -1], [0, 1, -1], [0, 1, 1], [0, 0, 1]]),  # x = 0, y > 0: pieces 0 and 2
+             quad([[0, 0, -1], [0, 0, 1], [1, 0, 1], [1, 0, -1]])]  # y = 0, x > 0: pieces 1 and 2
+    V = np.concatenate([v for v, _ in parts])
+    F = np.concatenate([f + 4 * k for k, (_, f) in enumerate(parts)])
+    T = V[F]
+    n = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    c = T.mean(axis=1)
+    S = np.stack([piece(c - 1e-3 * n), piece(c + 1e-3 * n)], 1)
+    P = np.random.default_rng(0).uniform([-1, -1, -1.2], [1.3, 1, 1.2], (4000, 3))
+    P = P[(np.abs(P[:, 0]) > 0.03) & ((P[:, 0] < 0) | (np.abs(P[:, 1]) > 0.03))]
+    got = _sides(P, V, F, S, _SideOf(V, F, S, 0.05))
+    np.testing.assert_array_equal(got, piece(P))
+
+
+def test_the_coarse_to_fine_cut_costs_within_a_percent_of_the_full_grids(monkeypatch):
+    import fracture.refine.search as search
+
+    case = weak_sheet_case(TURNED, 4.0, angle=45.0)
+    pyramid = StrengthPyramid(case.grid, case.zeta, levels=5, sigma=1.0)
+    B = Exterior(case.BV, case.BF)
+    banded = graph_cut_search(_coarse(case), pyramid, B, band=24, tension=0.05, core=0.5)
+    assert banded.free_nodes > search._COARSE_MIN
+    monkeypatch.setattr(search, "_COARSE_MIN", 10 ** 9)  # the whole band at full resolution at once
+    full = graph_cut_search(_coarse(case), pyramid, B, band=24, tension=0.05, core=0.5)
+    assert banded.free_nodes == full.free_nodes
+    assert banded.cut_energy[0] == pytest.approx(full.cut_energy[0])
+    assert full.cut_energy[1] <= banded.cut_energy[1] + 1e-9 <= 1.01 * full.cut_energy[1] + 1e-9
+    assert banded.cut_energy[1] < 0.3 * banded.cut_energy[0]

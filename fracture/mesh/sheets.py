@@ -18,54 +18,65 @@ from fracture.mesh.topology import unique_edges
 _CELLS_PER_TRIANGLE = 2.0
 
 
-def _simplify_sheets(X: np.ndarray, FF: np.ndarray, sides: np.ndarray, cell: float | None):
-    """Coarsen every sheet (module notes); returns the new points (``X`` followed by the sheets' new inner
-    vertices) and triangles."""
+def _simplify_sheet(X: np.ndarray, FF: np.ndarray, cell: float | None) -> tuple[np.ndarray, np.ndarray] | None:
+    """One sheet (triangles ``FF`` of points ``X``) coarsened (module notes): its new inner points and its
+    triangles, whose entries are ids of ``X`` for the kept vertices and ``-1 - j`` for new point ``j``; None
+    when the sheet is already as coarse as asked."""
     import pymeshlab
 
+    used, inv = np.unique(FF, return_inverse=True)
+    local = inv.reshape(-1, 3)
+    e, c = unique_edges(local)
+    rim = np.unique(e[c == 1])
+    target = max(2 * len(rim), 4)
+    if cell is not None:  # triangles of about two cells' area
+        T = X[used][local]
+        area = 0.5 * np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1).sum()
+        target = max(target, int(area / (_CELLS_PER_TRIANGLE * cell * cell)))
+    if target >= len(local):
+        return None
+    ms = pymeshlab.MeshSet()
+    ms.add_mesh(pymeshlab.Mesh(X[used], local))
+    ms.meshing_decimation_quadric_edge_collapse(
+        targetfacenum=target, preserveboundary=True, boundaryweight=1000.0, preservenormal=True,
+        preservetopology=True, planarquadric=cell is None, qualitythr=0.3, autoclean=False)
+    m = ms.current_mesh()
+    VD, FD = m.vertex_matrix(), m.face_matrix().astype(np.int64)
+    # kept vertices sit exactly where they were: back to their ids, the others are new
+    lookup = {tuple(p): g for p, g in zip(X[used].tolist(), used.tolist())}
+    ids = np.empty(len(VD), np.int64)
+    fresh = []
+    for i, p in enumerate(VD.tolist()):
+        g = lookup.get(tuple(p))
+        if g is None:
+            g = -1 - len(fresh)
+            fresh.append(p)
+        ids[i] = g
+    if not np.isin(used[rim], ids).all():
+        raise AssertionError("sheet simplification moved a boundary vertex")
+    return np.asarray(fresh, np.float64).reshape(-1, 3), ids[FD]
+
+
+def _simplify_sheets(X: np.ndarray, FF: np.ndarray, sides: np.ndarray, cell: float | None, done: dict):
+    """Coarsen every sheet (module notes); returns the new points (``X`` followed by the sheets' new inner
+    vertices) and triangles. ``done`` keeps each sheet's result by its pair of pieces, for the next call."""
     n = len(X)
     out_X, out_F, out_S = [X], [np.zeros((0, 3), np.int64)], [np.zeros((0, 2), np.int64)]
     pair = sides[:, 0] * (sides.max(initial=0) + 1) + sides[:, 1]
     for k in np.unique(pair):
         sel = np.flatnonzero(pair == k)
-        used, inv = np.unique(FF[sel], return_inverse=True)
-        local = inv.reshape(-1, 3)
-        e, c = unique_edges(local)
-        rim = np.unique(e[c == 1])
-        ms = pymeshlab.MeshSet()
-        ms.add_mesh(pymeshlab.Mesh(X[used], local))
-        target = max(2 * len(rim), 4)
-        if cell is not None:  # triangles of about two cells' area
-            T = X[used][local]
-            area = 0.5 * np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1).sum()
-            target = max(target, int(area / (_CELLS_PER_TRIANGLE * cell * cell)))
-        if target >= len(local):
-            out_X.append(np.zeros((0, 3)))
+        key = tuple(sides[sel[0]].tolist())
+        if key not in done:
+            done[key] = _simplify_sheet(X, FF[sel], cell)
+        if done[key] is None:
             out_F.append(FF[sel])
             out_S.append(sides[sel])
             continue
-        ms.meshing_decimation_quadric_edge_collapse(
-            targetfacenum=target, preserveboundary=True, boundaryweight=1000.0, preservenormal=True,
-            preservetopology=True, planarquadric=cell is None, qualitythr=0.3, autoclean=False)
-        m = ms.current_mesh()
-        VD, FD = m.vertex_matrix(), m.face_matrix().astype(np.int64)
-        # kept vertices sit exactly where they were: back to their global ids, the others are new
-        lookup = {tuple(p): g for p, g in zip(X[used].tolist(), used.tolist())}
-        ids = np.empty(len(VD), np.int64)
-        fresh = []
-        for i, p in enumerate(VD.tolist()):
-            g = lookup.get(tuple(p))
-            if g is None:
-                g = n
-                n += 1
-                fresh.append(p)
-            ids[i] = g
-        kept_rim = np.isin(used[rim], ids)
-        if not kept_rim.all():
-            raise AssertionError("sheet simplification moved a boundary vertex")
-        out_X.append(np.asarray(fresh, np.float64).reshape(-1, 3))
-        out_F.append(ids[FD])
-        out_S.append(np.repeat(sides[sel[:1]], len(FD), axis=0))
+        fresh, F = done[key]
+        out_X.append(fresh)
+        out_F.append(np.where(F < 0, n - 1 - F, F))
+        out_S.append(np.repeat(sides[sel[:1]], len(F), axis=0))
+        n += len(fresh)
     return np.concatenate(out_X), np.concatenate(out_F), np.concatenate(out_S)
 
 
@@ -79,8 +90,9 @@ def coarsen_sheets(X: np.ndarray, FF: np.ndarray, sides: np.ndarray, cell: float
     keep = np.zeros(len(FF), bool)
     base = sides.max(initial=0) + 1
     pair = sides[:, 0] * base + sides[:, 1]
+    done: dict = {}  # a sheet coarsened once is the same the next round
     for _ in range(4):
-        XS, FS, SS = _simplify_sheets(X, FF[~keep], sides[~keep], cell)
+        XS, FS, SS = _simplify_sheets(X, FF[~keep], sides[~keep], cell, done)
         XS_all = XS
         F_all = np.concatenate([FS, FF[keep]])
         S_all = np.concatenate([SS, sides[keep]])
