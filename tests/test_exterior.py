@@ -30,3 +30,12 @@ def test_each_tree_is_built_by_its_first_query_only():
     assert "_tree" in vars(B) and "_wn" not in vars(B)  # closest points need no winding numbers
     B.inside(np.zeros((1, 3)))
     assert "_wn" in vars(B)
+
+
+def test_a_segment_meets_the_box_where_it_leaves_it():
+    B = Exterior(*box([0, 0, 0], [1, 1, 1]))
+    inner = np.array([[0.5, 0.5, 0.5], [0.2, 0.3, 0.4], [0.5, 0.5, 0.5]])
+    outer = np.array([[1.5, 0.5, 0.5], [0.2, 0.3, -0.6], [0.6, 0.5, 0.5]])  # the last stays inside
+    t = B.crossing(inner, outer)
+    np.testing.assert_allclose(t[:2], [0.5, 0.4], atol=1e-12)
+    assert np.isnan(t[2])

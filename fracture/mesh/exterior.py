@@ -73,3 +73,16 @@ class Exterior:
             rows = np.flatnonzero(ok)[hit]
             target[rows] = start[rows] + t[hit, None] * ray[rows]  # within rounding of B
         return self.closest(target)[2]
+
+    def crossing(self, inner: np.ndarray, outer: np.ndarray) -> np.ndarray:
+        """Per row, the fraction of the segment from ``inner`` to ``outer`` at which it first meets B (a ray
+        cast through libigl's AABB tree); NaN where it meets B nowhere on the segment."""
+        inner = np.ascontiguousarray(inner, np.float64).reshape(-1, 3)
+        ray = np.ascontiguousarray(np.asarray(outer, np.float64).reshape(-1, 3) - inner)
+        t = np.full(len(inner), np.nan)
+        if not len(inner):
+            return t
+        face, hit, _ = self._tree.intersect_ray_first(self.V, self.F, inner, ray)
+        ok = (face >= 0) & np.isfinite(hit) & (hit >= 0.0) & (hit <= 1.0)
+        t[ok] = hit[ok]
+        return t

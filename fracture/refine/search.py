@@ -517,16 +517,20 @@ def _contour(sub: _BoxGrid, near, labels, B: Exterior, psi_at):
         out = (la == 0) | (lb == 0)
         t = np.full(len(P0), 0.5)
         t[~out] = _least_along(P0[~out], P1[~out], psi_at)
-        if out.any():  # where the edge leaves B, by bisection of B's winding number
+        if out.any():  # where the edge leaves B: a ray cast from its end inside, or by bisection of B's
+            # winding number where the ray meets B nowhere on the edge (a node on B counts as outside)
             A, C = P0[out], P1[out]
             a_in = la[out] > 0
+            s = B.crossing(np.where(a_in[:, None], A, C), np.where(a_in[:, None], C, A))
+            cast = np.where(a_in, s, 1.0 - s)
             lo, hi = np.zeros(len(A)), np.ones(len(A))
-            for _ in range(10):
-                mid = 0.5 * (lo + hi)
-                ins = B.inside(A + mid[:, None] * (C - A))
-                toward = ins == a_in  # still on the first end's side
-                lo, hi = np.where(toward, mid, lo), np.where(toward, hi, mid)
-            t[out] = 0.5 * (lo + hi)
+            rest = np.flatnonzero(np.isnan(cast))
+            for _ in range(10 if len(rest) else 0):
+                mid = 0.5 * (lo[rest] + hi[rest])
+                ins = B.inside(A[rest] + mid[:, None] * (C[rest] - A[rest]))
+                toward = ins == a_in[rest]  # still on the first end's side
+                lo[rest], hi[rest] = np.where(toward, mid, lo[rest]), np.where(toward, hi[rest], mid)
+            t[out] = np.where(np.isnan(cast), 0.5 * (lo + hi), cast)
         # no point between two pieces near a node: the polygons of the tetrahedra around it would leave
         # slivers (an edge of a hundredth of a cell) that the flow's collision tests cannot keep apart (a
         # crossing of B stays on B: no node lies on B, _ON_B)
