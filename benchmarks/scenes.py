@@ -19,7 +19,7 @@ def scene_with_fields(name: str, overrides: list[str]):
     from fracture.pipeline.stages.fields import fields_from_config
 
     cfg = load_config(CONFIGS / f"{name}.yaml", overrides)
-    cf = build_scene(name, cfg["seed"], cfg["input"]["frames"], cfg["input"]["separation"])
+    cf = build_scene(name, cfg.seed, cfg.input.frames, cfg.input.separation)
     return cfg, cf, fields_from_config(cfg, cf.exterior_V, cf.V, cf.F)
 
 
@@ -29,11 +29,9 @@ def refine(cfg, cf, fs):
 
     from fracture.refine.engine import Refiner, default_search
     from fracture.mesh.fracture_surface import FractureSurface
-    from fracture.pipeline.typed import refine_params
-
     mesh = FractureSurface.from_coarse(cf.V, cf.F, cf.sides)
-    params = refine_params(cfg)
-    log = Refiner(mesh, fs.pyramid, cf.exterior_V, cf.exterior_F, params, np.random.default_rng(cfg["seed"]),
+    params = cfg.refine.params()
+    log = Refiner(mesh, fs.pyramid, cf.exterior_V, cf.exterior_F, params, np.random.default_rng(cfg.seed),
                   search=default_search(params, distance=fs.field("distance"))).run()
     return mesh, log
 

@@ -9,25 +9,28 @@ High values are strong material, low values weak. ``rng`` is a
 ``numpy.random.Generator`` derived from the run seed; it decides noise offsets
 and random placements, so a seed reproduces a field exactly.
 
-:data:`KINDS` registers each kind with its parameter specs, which the config
-loader uses to validate ``strength.layers``; :data:`LAYER_TYPES` makes of each
-kind's specs a frozen dataclass (a layer of that kind, what
-:func:`strength_field` takes), so a layer is one of a union chosen by ``kind``.
+:data:`KINDS` registers each kind with its function and the type of its
+layers (a :class:`fields.params.Section`: its parameters' defaults, ranges and
+descriptions, which the config validates ``strength.layers`` with); a layer is
+one of a union chosen by ``kind`` (:data:`StrengthLayer`), what
+:func:`strength_field` takes.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
-from dataclasses import dataclass, field, fields, is_dataclass, make_dataclass
-from typing import Any, Callable, Mapping
+from dataclasses import dataclass
+from typing import Annotated, Any, Callable, Literal, Mapping, Union
 
 import noise
 import numpy as np
+from pydantic import Field, TypeAdapter
 
 from fields.grid import Grid
 from fields.interpolate import trilinear
 from fields.errors import InputError
-from fields.spec import Spec, python_type, spec_field
+from fields.params import (Bounds, Section, Vec3, bounds, choice, file, integer, number, parameters, text,
+                           vec3)
 from fields.tolerances import tol
 
 _AXES = ("x", "y", "z")
@@ -292,115 +295,149 @@ def volume(U, frame, rng, *, path, bounds):
     return trilinear(Grid.from_bounds(lo, hi, values.shape), values, frame.to_material(U))
 
 
-def _p(default, type="float", **kw) -> Spec:
-    return Spec(default, type, **kw)
-
-
 _STRENGTH = dict(lo=-10.0, hi=10.0)
+Axis = Literal["x", "y", "z"]
 
-KINDS: dict[str, tuple[Callable, dict[str, Spec]]] = {
-    "marble": (marble, {
-        "vein_frequency": _p(2.5, lo=0.0, hi=100.0, doc="veins per unit length"),
-        "vein_direction": _p([1.0, 0.35, 0.2], "vec3", doc="direction across the veins"),
-        "turbulence": _p(4.0, lo=0.0, hi=50.0, doc="phase distortion of the veins"),
-        "turbulence_frequency": _p(2.0, lo=0.0, hi=100.0),
-        "hard_fraction": _p(0.75, lo=0.0, hi=1.0, doc="share of space in the hard, grainy region (the rest: soft veins)"),
-        "edge_width": _p(0.15, lo=1e-3, hi=2.0, doc="softness of the region border (in sine units)"),
-        "hard_strength": _p(0.85, **_STRENGTH),
-        "grain_frequency": _p(24.0, lo=0.0, hi=400.0, doc="grain lattice frequency in the hard region"),
-        "grain_octaves": _p(3, "int", lo=1, hi=8),
-        "grain_contrast": _p(0.35, **_STRENGTH),
-        "soft_strength": _p(0.25, **_STRENGTH),
-        "soft_frequency": _p(3.0, lo=0.0, hi=400.0),
-        "soft_contrast": _p(0.15, **_STRENGTH),
-    }),
-    "elongated": (elongated, {
-        "axis": _p("z", "str", choices=_AXES, doc="direction of the elongated features"),
-        "frequency": _p(12.0, lo=0.0, hi=400.0),
-        "stretch": _p(6.0, lo=1.0, hi=1000.0, doc="feature length along the axis / across it"),
-        "octaves": _p(3, "int", lo=1, hi=8),
-        "mean": _p(0.5, **_STRENGTH),
-        "contrast": _p(0.5, **_STRENGTH),
-    }),
-    "fibres": (fibres, {
-        "axis": _p("z", "str", choices=_AXES, doc="direction of the fibres"),
-        "bundle_size": _p(0.08, lo=1e-4, hi=10.0, doc="spacing of the fibre bundles across the axis"),
-        "interface_width": _p(0.012, lo=1e-6, hi=1.0, doc="width of the weak layer between two bundles"),
-        "interface_strength": _p(0.0, **_STRENGTH, doc="strength on the interfaces between bundles"),
-        "bundle_strength": _p(1.0, **_STRENGTH, doc="mean strength inside a bundle"),
-        "defect_length": _p(0.1, lo=1e-4, hi=100.0, doc="length along the axis of a bundle's weak and strong places"),
-        "defect_contrast": _p(0.4, **_STRENGTH, doc="how much a bundle's strength varies along the axis"),
-    }),
-    "radial": (radial, {
-        "axis": _p("z", "str", choices=_AXES),
-        "center": _p(None, "vec3", nullable=True, doc="a point on the axis (unit coordinates); null: box centre"),
-        "radius": _p(None, lo=1e-6, nullable=True, doc="unit coordinates; null: inscribed radius"),
-        "inner": _p(0.2, **_STRENGTH, doc="strength on the axis"),
-        "outer": _p(1.0, **_STRENGTH, doc="strength at the radius and beyond"),
-        "exponent": _p(2.0, lo=0.01, hi=100.0),
-    }),
-    "bricks": (bricks, {
-        "length_axis": _p("x", "str", choices=_AXES),
-        "height_axis": _p("y", "str", choices=_AXES),
-        "brick_length": _p(0.1, lo=1e-4, hi=10.0),
-        "brick_height": _p(0.05, lo=1e-4, hi=10.0),
-        "mortar": _p(0.01, lo=0.0, hi=1.0, doc="joint width"),
-        "brick_strength": _p(1.0, **_STRENGTH),
-        "mortar_strength": _p(0.8, **_STRENGTH),
-        "interface_strength": _p(0.0, **_STRENGTH, doc="strength on brick-mortar boundaries"),
-        "interface_width": _p(0.003, lo=1e-6, hi=1.0,
-                              doc="width of the weak layer on each brick-mortar boundary; keep it under a third "
-                                  "of the joint, so the mortar between two layers stays strong"),
-        "noise_contrast": _p(0.05, **_STRENGTH),
-        "noise_frequency": _p(20.0, lo=0.0, hi=400.0),
-    }),
-    "inclusions": (inclusions, {
-        "count": _p(12, "int", lo=0, hi=10000),
-        "size": _p(0.15, lo=1e-4, hi=10.0, doc="cube edge length"),
-        "matrix_strength": _p(0.2, **_STRENGTH),
-        "inclusion_strength": _p(1.0, **_STRENGTH),
-        "softness": _p(0.01, lo=1e-6, hi=1.0),
-        "noise_contrast": _p(0.05, **_STRENGTH),
-        "noise_frequency": _p(6.0, lo=0.0, hi=400.0),
-    }),
-    "grain": (grain, {
-        "fibres": _p("along", "str", choices=("along", "around"), doc="the fibres run along the axis or around it"),
-        "axis": _p("z", "str", choices=_AXES),
-        "center": _p(None, "vec3", nullable=True, doc="around: a point on the axis (unit coordinates); null: box centre"),
-        "ratio": _p(3.0, lo=1.0, hi=20.0, doc="cost of a crack across the fibres over one along them"),
-    }),
-    "volume": (volume, {
-        "path": _p(None, "path", doc=".npy file with a 3D array of strengths"),
-        "bounds": _p(None, "bounds", nullable=True, doc="material-space box of the volume; null: the object's box"),
-    }),
+
+class Layer(Section):
+    """A layer of zeta: ``weight`` times its kind's function of its parameters."""
+
+    kind: str = text("", "the kind of this layer")
+    weight: float = number(1.0, -100.0, 100.0, "factor of this layer in the sum")
+
+
+class MarbleLayer(Layer):
+    """Marble: a hard, grainy body and soft veins (:func:`marble`)."""
+
+    kind: Literal["marble"] = choice("marble", "the kind of this layer")
+    vein_frequency: float = number(2.5, 0.0, 100.0, "veins per unit length")
+    vein_direction: Vec3 = vec3([1.0, 0.35, 0.2], "direction across the veins")
+    turbulence: float = number(4.0, 0.0, 50.0, "phase distortion of the veins")
+    turbulence_frequency: float = number(2.0, 0.0, 100.0)
+    hard_fraction: float = number(0.75, 0.0, 1.0, "share of space in the hard, grainy region (the rest: soft veins)")
+    edge_width: float = number(0.15, 1e-3, 2.0, "softness of the region border (in sine units)")
+    hard_strength: float = number(0.85, **_STRENGTH)
+    grain_frequency: float = number(24.0, 0.0, 400.0, "grain lattice frequency in the hard region")
+    grain_octaves: int = integer(3, 1, 8)
+    grain_contrast: float = number(0.35, **_STRENGTH)
+    soft_strength: float = number(0.25, **_STRENGTH)
+    soft_frequency: float = number(3.0, 0.0, 400.0)
+    soft_contrast: float = number(0.15, **_STRENGTH)
+
+
+class ElongatedLayer(Layer):
+    """Noise stretched along an axis (:func:`elongated`)."""
+
+    kind: Literal["elongated"] = choice("elongated", "the kind of this layer")
+    axis: Axis = choice("z", "direction of the elongated features")
+    frequency: float = number(12.0, 0.0, 400.0)
+    stretch: float = number(6.0, 1.0, 1000.0, "feature length along the axis / across it")
+    octaves: int = integer(3, 1, 8)
+    mean: float = number(0.5, **_STRENGTH)
+    contrast: float = number(0.5, **_STRENGTH)
+
+
+class FibresLayer(Layer):
+    """Bundles of fibres along an axis with weak interfaces between them (:func:`fibres`)."""
+
+    kind: Literal["fibres"] = choice("fibres", "the kind of this layer")
+    axis: Axis = choice("z", "direction of the fibres")
+    bundle_size: float = number(0.08, 1e-4, 10.0, "spacing of the fibre bundles across the axis")
+    interface_width: float = number(0.012, 1e-6, 1.0, "width of the weak layer between two bundles")
+    interface_strength: float = number(0.0, doc="strength on the interfaces between bundles", **_STRENGTH)
+    bundle_strength: float = number(1.0, doc="mean strength inside a bundle", **_STRENGTH)
+    defect_length: float = number(0.1, 1e-4, 100.0, "length along the axis of a bundle's weak and strong places")
+    defect_contrast: float = number(0.4, doc="how much a bundle's strength varies along the axis", **_STRENGTH)
+
+
+class RadialLayer(Layer):
+    """Strength growing with the distance to an axis (:func:`radial`)."""
+
+    kind: Literal["radial"] = choice("radial", "the kind of this layer")
+    axis: Axis = choice("z")
+    center: Vec3 | None = vec3(None, "a point on the axis (unit coordinates); null: box centre")
+    radius: float | None = number(None, 1e-6, doc="unit coordinates; null: inscribed radius")
+    inner: float = number(0.2, doc="strength on the axis", **_STRENGTH)
+    outer: float = number(1.0, doc="strength at the radius and beyond", **_STRENGTH)
+    exponent: float = number(2.0, 0.01, 100.0)
+
+
+class BricksLayer(Layer):
+    """Bricks in a running bond, mortar joints and weak brick-mortar boundaries (:func:`bricks`)."""
+
+    kind: Literal["bricks"] = choice("bricks", "the kind of this layer")
+    length_axis: Axis = choice("x")
+    height_axis: Axis = choice("y")
+    brick_length: float = number(0.1, 1e-4, 10.0)
+    brick_height: float = number(0.05, 1e-4, 10.0)
+    mortar: float = number(0.01, 0.0, 1.0, "joint width")
+    brick_strength: float = number(1.0, **_STRENGTH)
+    mortar_strength: float = number(0.8, **_STRENGTH)
+    interface_strength: float = number(0.0, doc="strength on brick-mortar boundaries", **_STRENGTH)
+    interface_width: float = number(0.003, 1e-6, 1.0, "width of the weak layer on each brick-mortar boundary; keep "
+                                    "it under a third of the joint, so the mortar between two layers stays strong")
+    noise_contrast: float = number(0.05, **_STRENGTH)
+    noise_frequency: float = number(20.0, 0.0, 400.0)
+
+
+class InclusionsLayer(Layer):
+    """Strong cubes in a weak matrix (:func:`inclusions`)."""
+
+    kind: Literal["inclusions"] = choice("inclusions", "the kind of this layer")
+    count: int = integer(12, 0, 10000)
+    size: float = number(0.15, 1e-4, 10.0, "cube edge length")
+    matrix_strength: float = number(0.2, **_STRENGTH)
+    inclusion_strength: float = number(1.0, **_STRENGTH)
+    softness: float = number(0.01, 1e-6, 1.0)
+    noise_contrast: float = number(0.05, **_STRENGTH)
+    noise_frequency: float = number(6.0, 0.0, 400.0)
+
+
+class GrainLayer(Layer):
+    """The direction of a material's fibres, which makes cracks across them dear (:func:`grain`)."""
+
+    kind: Literal["grain"] = choice("grain", "the kind of this layer")
+    fibres: Literal["along", "around"] = choice("along", "the fibres run along the axis or around it")
+    axis: Axis = choice("z")
+    center: Vec3 | None = vec3(None, "around: a point on the axis (unit coordinates); null: box centre")
+    ratio: float = number(3.0, 1.0, 20.0, "cost of a crack across the fibres over one along them")
+
+
+class VolumeLayer(Layer):
+    """Strengths read from a 3D array (:func:`volume`)."""
+
+    kind: Literal["volume"] = choice("volume", "the kind of this layer")
+    path: str = file(..., ".npy file with a 3D array of strengths")
+    bounds: Bounds | None = bounds(None, "material-space box of the volume; null: the object's box")
+
+
+#: Each kind's function and the type of its layers.
+KINDS: dict[str, tuple[Callable, type[Layer]]] = {
+    "marble": (marble, MarbleLayer),
+    "elongated": (elongated, ElongatedLayer),
+    "fibres": (fibres, FibresLayer),
+    "radial": (radial, RadialLayer),
+    "bricks": (bricks, BricksLayer),
+    "inclusions": (inclusions, InclusionsLayer),
+    "grain": (grain, GrainLayer),
+    "volume": (volume, VolumeLayer),
 }
 
-LAYER_COMMON = {"weight": _p(1.0, lo=-100.0, hi=100.0, doc="factor of this layer in the sum")}
+#: The type of a layer of each kind.
+LAYER_TYPES: dict[str, type[Layer]] = {kind: cls for kind, (_, cls) in KINDS.items()}
+
+#: A layer of any kind, chosen by its ``kind``.
+StrengthLayer = Annotated[Union[tuple(LAYER_TYPES.values())], Field(discriminator="kind")]
+_LAYER = TypeAdapter(StrengthLayer)
 
 
-
-def _layer_type(kind: str, specs: dict[str, Spec]) -> type:
-    name = "".join(part.title() for part in kind.split("_")) + "Layer"
-    body = [("kind", str, field(default=kind, metadata=dict(doc="the kind of this layer")))]
-    for key, spec in {**LAYER_COMMON, **specs}.items():
-        body.append((key, python_type(spec), spec_field(spec)))
-    cls = make_dataclass(name, body, frozen=True)
-    cls.__module__ = __name__
-    cls.__doc__ = f"A {kind} layer of zeta: ``weight`` times :func:`{KINDS[kind][0].__name__}` of its parameters."
-    return cls
-
-
-#: A frozen dataclass per kind, chosen by a layer's ``kind``.
-LAYER_TYPES: dict[str, type] = {kind: _layer_type(kind, specs) for kind, (_, specs) in KINDS.items()}
-
-
-def as_layer(layer: Any):
-    """A layer as its kind's dataclass (:data:`LAYER_TYPES`), from a mapping as the config holds it."""
-    if is_dataclass(layer):
+def as_layer(layer: Any) -> Layer:
+    """A layer as its kind's type (:data:`LAYER_TYPES`), from a mapping as a config file holds it."""
+    if isinstance(layer, Layer):
         return layer
     if not isinstance(layer, Mapping) or layer.get("kind") not in LAYER_TYPES:
         raise InputError(f"a strength layer must name its kind, one of {', '.join(LAYER_TYPES)}; got {layer!r}")
-    return LAYER_TYPES[layer["kind"]](**layer)
+    return _LAYER.validate_python(dict(layer))
 
 
 def strength_field(X: np.ndarray, bounds, layers: list, seed: int, normalize: bool = True) -> np.ndarray:
@@ -428,7 +465,7 @@ def strength_field(X: np.ndarray, bounds, layers: list, seed: int, normalize: bo
     U = frame.to_unit(X)
     zeta = np.zeros(U.shape[0])
     for i, layer in enumerate(map(as_layer, layers)):
-        params = {f.name: getattr(layer, f.name) for f in fields(layer) if f.name not in ("kind", "weight")}
+        params = {k: v for k, v in parameters(layer).items() if k not in ("kind", "weight")}
         zeta += layer.weight * KINDS[layer.kind][0](U, frame, np.random.default_rng([seed, i]), **params)
     if normalize:
         zeta = normalize01(zeta)

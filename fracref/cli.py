@@ -212,7 +212,7 @@ def _main(argv: list[str] | None) -> int:
             sys.stdout.write(dump_config(cfg))
             return 0
         runner.stages_until(args.until)  # reject a bad --until before any work
-        out = args.out if args.out is not None else Path("runs") / cfg["name"]
+        out = args.out if args.out is not None else Path("runs") / cfg.name
         done = runner.run(cfg, out, until=args.until, force=args.force, progress=not args.quiet,
                           cache=cache_from_args(args))
         if not args.quiet:
@@ -276,9 +276,9 @@ def _sweep(args) -> int:
     if not 1 <= args.jobs <= 1024:
         raise ConfigError("--jobs", "", f"got {args.jobs}, expected a number of points at once in 1..1024")
     cfg = load_config(args.config, args.overrides)
-    grid = parse_grid(args.grid) if args.grid else cfg["sweep"]["grid"]
+    grid = parse_grid(args.grid) if args.grid else cfg.sweep.grid
     runner.stages_until(args.until)
-    out = args.out if args.out is not None else Path("runs") / f"{cfg['name']}-sweep"
+    out = args.out if args.out is not None else Path("runs") / f"{cfg.name}-sweep"
     state = run_sweep(args.config, grid, out, args.overrides, args.jobs, args.backend, args.address, args.until,
                       args.cache_dir, not args.no_cache, progress=not args.quiet)
     names = finished(state)

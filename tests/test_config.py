@@ -27,16 +27,16 @@ def test_there_are_experiments_and_groups():
 @pytest.mark.parametrize("path", EXPERIMENTS, ids=lambda p: p.name)
 def test_every_experiment_loads(path):
     cfg = load_config(path)
-    assert cfg["name"] == path.stem
+    assert cfg.name == path.stem
     for key in ("exterior", "fracture"):
-        if cfg["input"][key] is not None:
-            assert Path(cfg["input"][key]).is_absolute() and Path(cfg["input"][key]).is_file()
+        if getattr(cfg.input, key) is not None:
+            assert Path(getattr(cfg.input, key)).is_absolute() and Path(getattr(cfg.input, key)).is_file()
 
 
 @pytest.mark.parametrize("group", GROUPS, ids=lambda p: f"{p.parent.name}/{p.name}")
 def test_every_group_validates_on_the_defaults(tmp_path, group):
     cfg = load_config(write(tmp_path / "x.yaml", f"defaults: [{group.with_suffix('')}]\n"))
-    assert cfg["name"] == "x"
+    assert cfg.name == "x"
 
 
 def test_defaults_fill_everything_and_experiment_overrides(tmp_path, slab_meshes):
@@ -46,18 +46,18 @@ def test_defaults_fill_everything_and_experiment_overrides(tmp_path, slab_meshes
         grid: {resolution: [10, 11, 12]}
         input: {exterior: slab.obj}
         """))
-    assert cfg["grid"] == {"resolution": [10, 11, 12], "padding": 0.1, "max_memory_gb": 8.0}
-    assert cfg["psi"]["stress_weight"] == 2.0 and cfg["psi"]["strength_weight"] == 1.0
-    assert cfg["pyramid"]["levels"] == 5
-    assert cfg["input"]["exterior"] == str(slab_meshes[0].resolve())
-    assert cfg["strength"]["layers"][0]["kind"] == "marble"
-    assert "grain_frequency" in cfg["strength"]["layers"][0]  # layer defaults filled in
+    assert cfg.tree()["grid"] == {"resolution": [10, 11, 12], "padding": 0.1, "max_memory_gb": 8.0}
+    assert cfg.psi.stress_weight == 2.0 and cfg.psi.strength_weight == 1.0
+    assert cfg.pyramid.levels == 5
+    assert cfg.input.exterior == str(slab_meshes[0].resolve())
+    assert cfg.strength.layers[0].kind == "marble"
+    assert "grain_frequency" in cfg.tree()["strength"]["layers"][0]  # layer defaults filled in
 
 
 def test_resolved_config_round_trips(tmp_path, small_config):
     cfg = load_config(small_config)
     again = load_config(write(tmp_path / "resolved.yaml", dump_config(cfg)))
-    assert again == {**cfg, "name": "small"}
+    assert again.tree() == {**cfg.tree(), "name": "small"}
 
 
 def test_paths_are_relative_to_the_file_that_sets_them(tmp_path, slab_meshes):
@@ -66,7 +66,7 @@ def test_paths_are_relative_to_the_file_that_sets_them(tmp_path, slab_meshes):
     (sub / "mesh.obj").write_text(slab_meshes[0].read_text())
     write(sub / "input.yaml", "input: {exterior: mesh.obj}\n")
     cfg = load_config(write(tmp_path / "exp.yaml", "defaults: [group/input]\n"))
-    assert cfg["input"]["exterior"] == str((sub / "mesh.obj").resolve())
+    assert cfg.input.exterior == str((sub / "mesh.obj").resolve())
 
 
 def _error(tmp_path, text, overrides=()):
@@ -138,10 +138,10 @@ def test_yaml_problems(tmp_path):
 def test_set_overrides(tmp_path, small_config):
     cfg = load_config(small_config, ["psi.stress_weight=3", "grid.resolution=[8, 9, 10]",
                                      "strength.layers[0].grain_frequency=2.5", "name=other"])
-    assert cfg["psi"]["stress_weight"] == 3.0
-    assert cfg["grid"]["resolution"] == [8, 9, 10]
-    assert cfg["strength"]["layers"][0]["grain_frequency"] == 2.5
-    assert cfg["name"] == "other"
+    assert cfg.psi.stress_weight == 3.0
+    assert cfg.grid.resolution == [8, 9, 10]
+    assert cfg.strength.layers[0].grain_frequency == 2.5
+    assert cfg.name == "other"
     for bad, words in [("psi.stress_weight", "expected key.path=value"),
                        ("psi.stress_weight=-2", "--set psi.stress_weight=-2: psi.stress_weight: got -2"),
                        ("psi.typo=1", "psi.typo: unknown key"),
@@ -166,20 +166,26 @@ def test_dumped_config_is_plain_yaml(small_config):
 def test_explain_says_what_a_key_means_from_the_same_declarations_the_code_uses():
     """``fracref config --explain``: a key's default, range and description, a section's keys; the
     refine section is the refinement's own parameter type (its defaults are RefineParams')."""
-    from dataclasses import fields
-
-    from fracture.pipeline.config import SCHEMA, explain
+    from fracture.pipeline.config import explain
+    from fracture.pipeline.schema import RefineSection
     from fracture.refine.params import RefineParams
 
     assert explain("refine.step") == ("refine.step = 0.5: a number in [0.0001, 10]. Nominal move per iteration "
                                       "(grid cells) where grad psi has its root mean square")
     assert explain("strength.layers.bricks.mortar").startswith("strength.layers.bricks.mortar = 0.01: a number in [0, 1]")
+    assert explain("strength.layers.radial.center").startswith(
+        "strength.layers.radial.center = None: a list of 3 numbers (or null)")
     lines = explain("refine").splitlines()
-    assert [line.split(" = ")[0] for line in lines] == [f"refine.{k}" for k in SCHEMA["refine"]]
-    assert {f.name: f.default for f in fields(RefineParams)} == {
-        k: p.default for k, p in SCHEMA["refine"].items() if k != "snapshots"}
+    assert [line.split(" = ")[0] for line in lines] == [f"refine.{k}" for k in RefineSection.model_fields]
+    assert list(RefineSection.model_fields) == [*RefineParams.model_fields, "snapshots"]
+    assert RefineSection().params() == RefineParams()
+    assert [line.split(" = ")[0] for line in explain("strength.layers.grain").splitlines()] == [
+        "strength.layers.grain.weight", "strength.layers.grain.fibres", "strength.layers.grain.axis",
+        "strength.layers.grain.center", "strength.layers.grain.ratio"]
     with pytest.raises(ConfigError, match="unknown key 'stpe' after refine; expected one of iterations"):
         explain("refine.stpe")
+    with pytest.raises(ConfigError, match="unknown key 'granite' after strength.layers; expected one of marble"):
+        explain("strength.layers.granite")
     out = subprocess.run([sys.executable, "-m", "fracref", "config", "--explain", "psi.stress_weight"],
                          capture_output=True, text=True)
     assert out.returncode == 0 and out.stdout.startswith("psi.stress_weight = 0.4: a number in [0, 100]")
@@ -191,71 +197,62 @@ def test_explain_says_what_a_key_means_from_the_same_declarations_the_code_uses(
 def test_every_key_of_the_refine_section_reaches_the_refinement():
     """No key of the config's refine section is dropped on the way to the code: every one but the
     pipeline's own (snapshots) is a RefineParams field, and a key RefineParams lacks is an error."""
-    from fracture.pipeline.typed import refine_params
+    import pydantic
+
+    from fracture.refine.params import RefineParams
 
     cfg = load_config(CONFIGS / "example.yaml", ["refine.step=0.31", "refine.hold=5"])
-    params = refine_params(cfg)
-    assert (params.step, params.hold) == (0.31, 5)
-    cfg["refine"]["not_a_parameter"] = 1
-    with pytest.raises(TypeError, match="not_a_parameter"):
-        refine_params(cfg)
+    params = cfg.refine.params()
+    assert type(params) is RefineParams and (params.step, params.hold) == (0.31, 5)
+    with pytest.raises(pydantic.ValidationError, match="not_a_parameter"):
+        RefineParams(not_a_parameter=1)
 
 
-def test_the_typed_config_holds_every_key_of_the_schema_with_its_value_and_description():
-    """Config: one frozen dataclass per section, generated from the schema; each field has the value the
-    validated tree has, and the schema entry's description in its metadata."""
-    import dataclasses
+def test_the_typed_config_is_one_model_per_section_with_the_values_and_descriptions():
+    """Config: one frozen pydantic model per section; each field holds the value the YAML tree has and
+    describes itself (what --explain and the viewer's tooltips say)."""
+    import pydantic
 
-    from fracture.pipeline.config import SCHEMA
-    from fracture.pipeline.schema import Param
-    from fracture.pipeline.typed import Config, typed_config
+    from fracture.pipeline.config import explain
+    from fracture.pipeline.schema import Config, Section
 
     cfg = load_config(CONFIGS / "wall.yaml", ["psi.stress_weight=0.7", "view.cameras.material.fov=40"])
-    typed = typed_config(cfg)
+    tree = cfg.tree()
 
-    def walk(node, spec, values, where):
-        for key, entry in spec.items():
+    def walk(node, values, where):
+        for key in type(node).model_fields:
             value = getattr(node, key)
-            if isinstance(entry, dict):
-                assert dataclasses.is_dataclass(value), where + key
-                walk(value, entry, values[key], where + key + ".")
-            elif isinstance(entry, Param):
+            if isinstance(value, Section) and not key.isdigit():
+                walk(value, values[key], where + key + ".")
+            elif key != "layers":
                 assert value == values[key], where + key
-                assert {f.name: f for f in dataclasses.fields(node)}[key].metadata["doc"] == entry.doc
-        assert {f.name for f in dataclasses.fields(node)} == set(spec)
+                if where:
+                    assert type(node).model_fields[key].description[1:] in explain(where + key), where + key
+        assert set(type(node).model_fields) == set(values)
 
-    walk(typed, SCHEMA, cfg, "")
-    assert (typed.psi.stress_weight, typed.view.cameras.material.fov) == (0.7, 40.0)
-    with pytest.raises(dataclasses.FrozenInstanceError):
-        typed.psi.stress_weight = 1.0
-    assert Config().psi.stress_weight == SCHEMA["psi"]["stress_weight"].default
+    walk(cfg, tree, "")
+    assert (cfg.psi.stress_weight, cfg.view.cameras.material.fov) == (0.7, 40.0)
+    with pytest.raises(pydantic.ValidationError, match="frozen"):
+        cfg.psi.stress_weight = 1.0
+    assert Config().psi.stress_weight == 0.4
 
 
 def test_strength_layers_are_typed_by_their_kind_and_give_the_same_field():
-    """strength.layers is a tuple of the kinds' dataclasses (a union chosen by kind); the field of typed
+    """strength.layers is a list of the kinds' models (a union chosen by kind); the field of typed
     layers is the field of the mappings the config file gives."""
     import numpy as np
 
     from fields.errors import InputError
     from fields.strength import LAYER_TYPES, as_layer, strength_field
-    from fracture.pipeline.typed import typed_config
 
     cfg = load_config(CONFIGS / "wall.yaml")
-    layers = typed_config(cfg).strength.layers
-    assert [type(layer) for layer in layers] == [LAYER_TYPES[layer["kind"]] for layer in cfg["strength"]["layers"]]
-    assert layers[0].mortar == cfg["strength"]["layers"][0]["mortar"]
+    layers = cfg.strength.layers
+    tree = cfg.tree()["strength"]["layers"]
+    assert [type(layer) for layer in layers] == [LAYER_TYPES[layer["kind"]] for layer in tree]
+    assert layers[0].mortar == tree[0]["mortar"]
     X = np.random.default_rng(0).random((500, 3))
     bounds = ([0.0, 0.0, 0.0], [1.0, 1.0, 1.0])
-    assert np.array_equal(strength_field(X, bounds, layers, 3), strength_field(X, bounds, cfg["strength"]["layers"], 3))
+    assert np.array_equal(strength_field(X, bounds, layers, 3), strength_field(X, bounds, tree, 3))
     assert LAYER_TYPES["radial"]().inner == 0.2
     with pytest.raises(InputError, match="kind"):
         as_layer({"kind": "granite"})
-
-
-def test_a_tree_edited_after_validation_loses_no_key_on_the_way_to_the_typed_config():
-    from fracture.pipeline.typed import typed_config
-
-    cfg = load_config(CONFIGS / "example.yaml")
-    cfg["psi"]["stres_weight"] = 2.0
-    with pytest.raises(TypeError, match="stres_weight"):
-        typed_config(cfg)

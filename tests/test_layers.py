@@ -95,7 +95,7 @@ def test_no_epsilon_is_typed_inline_in_an_expression():
     small = re.compile(r"(?<![\w.])\d+(\.\d+)?e-\d+")
     declared = [re.compile(p) for p in (
         r"^\s*[A-Z_][A-Z0-9_]*\s*(:[^=]*)?=",  # a module constant (its reason on the lines above)
-        r"\b(lo|hi)=|_p\(|Param\(",  # a parameter's declared range or default
+        r"\b(lo|hi)=|\b(number|integer|vec3|int3)\(",  # a parameter's declared range or default
         r"\w+\s*(:\s*[\w\[\], |]+)?=\s*\d+(\.\d+)?e-\d+\s*[,)]",  # a keyword argument's default
     )]
     found = []

@@ -10,7 +10,9 @@ FRAME = UnitFrame(*BOUNDS)
 
 
 def params(kind, **changes):
-    return {**{k: p.default for k, p in KINDS[kind][1].items()}, **changes}
+    defaults = {k: f.get_default(call_default_factory=True) for k, f in KINDS[kind][1].model_fields.items()
+                if k not in ("kind", "weight")}
+    return {**defaults, **changes}
 
 
 def layer(kind, **changes):

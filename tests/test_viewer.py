@@ -163,7 +163,7 @@ def test_rerun_in_the_window_gives_a_new_result_without_freezing_it(run_dir, tmp
     assert res["live_updates"] >= 1  # iterations were drawn while the worker ran
     assert res["ticks"] >= 2  # the window kept ticking while the worker ran (no wall-clock bound)
     saved = load_config(res["saved"])
-    assert saved["psi"]["stress_weight"] == 0.0
+    assert saved.psi.stress_weight == 0.0
     # the invalid step was reported in the window, and nothing ran
     assert any("refine.step" in e for e in res["errors"])
 
@@ -317,7 +317,7 @@ def test_saved_views_come_back_and_the_window_fits_its_default_size(run_dir, tmp
     # Save config holds the same view, and the pipeline reads the file
     cfg = load_config(res["saved_config"])
     state = read_view_file(res["saved_config"])
-    assert cfg["view"]["iteration"] == first["iteration"] and state.view == read_view_file(tmp_path / "view.yaml").view
+    assert cfg.view.iteration == first["iteration"] and state.view == read_view_file(tmp_path / "view.yaml").view
     compare = read(res["compare"])
     assert compare.shape == (360, 640, 3)
     assert content_share(compare[:, :320]) > 0.05 and content_share(compare[:, 320:]) > 0.05

@@ -36,7 +36,7 @@ from fields.colormap import colorbar
 from fracture.io import layout
 from fracture.io.atomic import atomic_write_text
 from fracture.errors import ConfigError, InputError, ResultError, StageError
-from fracture.pipeline.config import explain
+from fracture.pipeline.config import Config, explain
 from viewer.data import FIELDS, RunData, Surface, SweepPoint, read_sweep
 from viewer.exports import Exports, numbered
 from viewer.looks import (
@@ -697,7 +697,7 @@ class Viewer:
             set_key(cfg, key, edit.int_value if key in self._integer else edit.double_value)
         return cfg
 
-    def checked_config(self) -> tuple[dict, str]:
+    def checked_config(self) -> tuple[Config, str]:
         """The side panel's config, validated as ``fracref run`` would read it, and its YAML."""
         from fracture.pipeline.config import check_config, dump_config
 
@@ -827,7 +827,7 @@ def open_target(target: Path, out: Path | None) -> RunData:
     if not target.is_file():
         raise InputError(f"{target}: neither a run directory nor a config file")
     cfg = load_config(target)
-    out = Path(out) if out is not None else Path("runs") / cfg["name"]
+    out = Path(out) if out is not None else Path("runs") / cfg.name
     if not (out / layout.MANIFEST).is_file():
         print(f"running {target} into {out} first ...")
         runner.run(cfg, out, progress=True, cache=StageCache())

@@ -16,9 +16,9 @@ import numpy as np
 import yaml
 
 from fracture.io.atomic import atomic_write_text
-from fracture.pipeline.config import SCHEMA, read_yaml
+from fracture.pipeline.config import read_yaml
 from fracture.errors import ConfigError
-from fracture.pipeline.schema import validate
+from fracture.pipeline.schema import ViewSection, validate
 from viewer.looks import CameraPose, View
 from viewer.tolerances import view_tol
 
@@ -35,7 +35,7 @@ class ViewState:
     def to_section(self) -> dict:
         """The config's ``view:`` section."""
         v = asdict(self.view)
-        out = {k: v[k] for k in SCHEMA["view"] if k != "cameras"}
+        out = {k: v[k] for k in ViewSection.model_fields if k != "cameras"}
         out["frame"] = self.view.frame + 1
         out["cameras"] = {}
         for panel in PANELS:
@@ -52,12 +52,12 @@ def _list(x) -> list[float]:
 
 def from_section(section: dict | None, where: str) -> ViewState:
     """A config's ``view:`` section (validated; defaults for what it leaves out) as a :class:`ViewState`."""
-    section = validate({} if section is None else section, SCHEMA["view"], lambda key: where, prefix="view")
-    view = View(**{k: section[k] for k in ("field", "axis", "offset", "level", "cutaway", "iteration", "color_by",
-                                          "overlay_coarse")}, frame=section["frame"] - 1)
+    section = validate({} if section is None else section, lambda key: where, ViewSection, prefix="view")
+    view = View(**{k: getattr(section, k) for k in ("field", "axis", "offset", "level", "cutaway", "iteration",
+                                                    "color_by", "overlay_coarse")}, frame=section.frame - 1)
     cameras = {}
     for panel in PANELS:
-        c = section["cameras"][panel]
+        c = getattr(section.cameras, panel).model_dump()
         given = [c[k] is not None for k in ("eye", "center", "up")]
         if not any(given):
             cameras[panel] = None

@@ -43,6 +43,7 @@ from pathlib import Path
 from typing import Any
 
 from fracture.io.atomic import process_alive
+from fracture.pipeline.schema import Config
 
 # The config sections each stage reads (its result depends on nothing else but the stage before it).
 STAGE_READS = {
@@ -124,9 +125,10 @@ def digest(*parts: Any) -> str:
     return h.hexdigest()
 
 
-def stage_key(name: str, cfg: dict, previous: str) -> str:
+def stage_key(name: str, cfg: Config, previous: str) -> str:
     """The key of stage ``name`` of a run of ``cfg`` after a stage keyed ``previous`` (module notes)."""
-    return digest(name, {k: cfg.get(k) for k in STAGE_READS[name]}, previous, code_version())
+    tree = cfg.tree()
+    return digest(name, {k: tree[k] for k in STAGE_READS[name]}, previous, code_version())
 
 
 @dataclass

@@ -6,7 +6,6 @@ import json
 import logging
 import sys
 from dataclasses import dataclass, field, fields
-from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping
 
@@ -14,7 +13,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from fracture.io.atomic import png_bytes
-from fracture.pipeline.typed import Config, typed_config
+from fracture.pipeline.schema import Config
 
 log = logging.getLogger(__name__)
 
@@ -53,7 +52,7 @@ class Products:
 class RunContext:
     """What a stage sees: the config, its output directory and earlier products."""
 
-    cfg: dict
+    config: Config
     dir: Path
     progress: bool = True
     products: Products = field(default_factory=lambda: Products())
@@ -70,11 +69,6 @@ class RunContext:
     # a file saved so is whole once the run waits for these (before its manifest), not on return
     writer: Any = None
     pending: list = field(default_factory=list)
-
-    @cached_property
-    def config(self) -> Config:
-        """The config as typed records (:func:`~fracture.pipeline.typed.typed_config`), made once per run."""
-        return typed_config(self.cfg)
 
     def tell(self, event: str, **data) -> None:
         if self.listener is not None:

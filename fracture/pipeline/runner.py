@@ -100,7 +100,7 @@ def _run_stage(ctx: RunContext, stage: Stage, keep_products: bool, out: Path, wr
     from fracture.pipeline.cache import stage_key
 
     previous = next(reversed(ctx.keys.values()), "")
-    key = ctx.keys[name] = stage_key(name, ctx.cfg, previous)
+    key = ctx.keys[name] = stage_key(name, ctx.config, previous)
     entry = cache.load(name, key)
     products = cache.restore(entry, ctx.dir) if entry is not None else None
     if products is not None:
@@ -127,13 +127,13 @@ def _stored(entry: Path | None) -> str:
     return "stored" if entry is not None else "not stored (the cache cannot be written)"
 
 
-def run(cfg: dict, out: str | Path, until: str | None = None, force: bool = False, progress: bool = True,
+def run(cfg: Config, out: str | Path, until: str | None = None, force: bool = False, progress: bool = True,
         listener=None, cache=None, stages: tuple[Stage, ...] = STAGES) -> Path:
     """Run the configured stages into the run directory ``out``.
 
     Parameters
     ----------
-    cfg : dict
+    cfg : Config
         A resolved config from :func:`fracture.pipeline.config.load_config`.
     out : str or Path
         Run directory; must not exist (or be empty) unless ``force``.
@@ -162,8 +162,8 @@ def run(cfg: dict, out: str | Path, until: str | None = None, force: bool = Fals
     chosen = stages_until(until, stages)
     started = datetime.now(timezone.utc)
     manifest: dict[str, Any] = {
-        "name": cfg["name"],
-        "seed": cfg["seed"],
+        "name": cfg.name,
+        "seed": cfg.seed,
         "started": started.isoformat(timespec="seconds"),
         "python": platform.python_version(),
         "platform": platform.platform(),
@@ -174,7 +174,7 @@ def run(cfg: dict, out: str | Path, until: str | None = None, force: bool = Fals
     # order given (an entry copies its stage's files), all before the run is complete and before a
     # failed run's directory is removed
     with staged_directory(out, force) as staging, ThreadPoolExecutor(1, "fracref-writer") as writer:
-        ctx = RunContext(cfg=cfg, dir=staging, progress=progress, listener=listener, cache=cache, writer=writer)
+        ctx = RunContext(config=cfg, dir=staging, progress=progress, listener=listener, cache=cache, writer=writer)
         ctx.path(layout.CONFIG).write_text(dump_config(cfg), encoding="utf-8")
         for stage in chosen:
             t0 = time.perf_counter()

@@ -1,270 +1,342 @@
-"""Declarative parameter specs and their validation.
+"""The config's schema: one pydantic model per section, each key declared once.
 
-A config schema is a nested ``dict`` whose leaves are :class:`Param` (a single
-value) or :class:`Layers` (a list of tagged sub-sections, each validated by the
-spec of its ``kind``). :func:`validate` walks a user tree against a schema and
-raises :class:`ConfigError` naming the file, the key path, what was given and
-what was expected.
+Every key is a field of a :class:`fields.params.Section` with its type, default,
+range and description; the strength layers are a union chosen by ``kind``
+(:data:`fields.strength.StrengthLayer`), and the ``refine`` section is the
+refinement's own :class:`~fracture.refine.params.RefineParams` with the
+pipeline's key added. :func:`validate` turns a merged YAML tree into a
+:class:`Config`, or raises :class:`~fracture.errors.ConfigError` naming the
+file that set the value, the key path, what was given and what was expected;
+:func:`explain` says what a key means (``fracref config --explain`` and the
+viewer's tooltips).
 """
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, field
-from typing import Any, Callable, Mapping
+from typing import Any, Callable, Literal, Mapping
 
-from fields.spec import Spec
+from pydantic import BaseModel, Field, ValidationError
+
+from fields.colormap import NAMES as COLORMAPS
+from fields.params import (Int3, KeyGrid, Section, Vec3, choice, describe, expected, file, flag, folder, int3, integer,
+                           key_grid, number, text, vec3)
+from fields.strength import LAYER_TYPES, Layer, MarbleLayer, StrengthLayer
 from fracture.errors import ConfigError
+from fracture.refine.params import RefineParams
 
-_TYPE_WORDS = {
-    "float": "a number",
-    "int": "an integer",
-    "bool": "true or false",
-    "str": "a string",
-    "path": "a file path (string)",
-    "dir": "a directory path (string)",
-    "vec3": "a list of 3 numbers",
-    "int3": "an integer or a list of 3 integers",
-    "bounds": "a list of two points [[x0, y0, z0], [x1, y1, z1]] with x0 < x1, y0 < y1, z0 < z1",
-    "grid": "a mapping of config keys (e.g. psi.stress_weight) to non-empty lists of values",
-}
+Axis = Literal["x", "y", "z"]
 
 
-def _describe(value: Any) -> str:
+class InputSection(Section):
+    """The coarse fracture animation to refine."""
+
+    kind: Literal["meshes", "mesh_sequence", "usd", "scene"] = choice(
+        "meshes", "meshes: exterior + coarse fracture surface files (no motion); mesh_sequence: per-frame piece "
+        "meshes; usd: one USD file of animated pieces; scene: a built-in example")
+    scene: Literal["bunny", "branch", "wall", "clay", "jello"] = choice("wall", "scene: which built-in example")
+    frames: int = integer(40, 4, 2000, "scene: frames of the coarse animation")
+    exterior: str | None = file(None, "mesh file of the exterior surface B (closed)")
+    fracture: str | None = file(None, "mesh file of the coarse fracture surface")
+    path: str | None = folder(None, "mesh_sequence: folder of per-frame OBJ/PLY files")
+    usd: str | None = file(None, "usd: the USD file (a mesh per piece, time-sampled transforms or points, as Blender "
+                           "and Houdini write them)")
+    glob: str = text("*.obj", "mesh_sequence: file name pattern of the frames (ordered by the number in their names)")
+    up_axis: Literal["auto", "x", "y", "z"] = choice(
+        "auto", "the axis pointing up (auto: a USD file's own, else the one the pieces fall down; Blender's OBJ "
+        "exporter writes y by default; z for meshes, a still object); the viewer's cameras and the USD output use it")
+    lattice: int = integer(2, 2, 16, "mesh_sequence: lattice nodes per axis fitted to a piece that deforms")
+    separation: float = number(1e-3, 1e-7, 0.5, "distance at which two sides count as separated, relative to the box "
+                               "diagonal")
+
+
+class GridSection(Section):
+    """The field grid."""
+
+    resolution: Int3 = int3(50, 4, 1024, "nodes along the longest axis, or [nx, ny, nz] (e.g. [150, 50, 10])")
+    padding: float = number(0.05, 0.0, 1.0, "grid margin around the object, relative to its largest extent")
+    max_memory_gb: float = number(8.0, 0.01, 1e5, "refuse a grid whose fields would need more memory than this (GB)")
+
+
+class StrengthSection(Section):
+    """The material strength zeta (Section 4.2)."""
+
+    layers: list[StrengthLayer] = Field(default_factory=lambda: [MarbleLayer()], min_length=1,
+                                        description="layers of zeta, each of its kind's type")
+    normalize: bool = flag(True, "rescale the summed layers to [0, 1]")
+
+
+class StressSection(Section):
+    """The stress estimate xi (Section 4.3)."""
+
+    length: float = number(0.1, 1e-4, 10.0, "decay length of the stress estimate, relative to the object's box "
+                           "diagonal")
+
+
+class PsiSection(Section):
+    """psi = strength_weight zeta - stress_weight xi."""
+
+    strength_weight: float = number(1.0, 0.0, 100.0, "weight of zeta in psi")
+    stress_weight: float = number(0.4, 0.0, 100.0, "weight of xi in psi; larger keeps the result closer to the "
+                                  "coarse surface")
+
+
+class PyramidSection(Section):
+    """The Gaussian pyramid of psi."""
+
+    levels: int = integer(5, 1, 8, "Gaussian pyramid levels (the paper uses 4 to 6)")
+    sigma: float = number(1.0, 0.01, 64.0, "width of level 1 in voxels; doubles per level")
+
+
+class RefineSection(RefineParams):
+    """The refinement's parameters and the pipeline's keys of its stage."""
+
+    snapshots: bool = flag(True, "save every iteration for the viewer (refined/iterations.*)")
+
+    def params(self) -> RefineParams:
+        """The refinement's own parameters (without the pipeline's keys)."""
+        return RefineParams(**{k: getattr(self, k) for k in RefineParams.model_fields})
+
+
+class AnimateSection(Section):
+    """The high-resolution pieces and their motion (Section 5)."""
+
+    obj_frames: bool = flag(False, "also write frames/frame_NNNN.obj (one object per piece, faces in the materials "
+                            "exterior and interior; the USD file holds every frame already)")
+    ply_frames: bool = flag(False, "also write frames/frame_NNNN.ply (all pieces, face property piece)")
+    usd: bool = flag(True, "write animation/pieces.usdc: one mesh per piece, points per frame, interior and exterior "
+                     "materials (Blender: File > Import > Universal Scene Description)")
+    fps: float = number(24.0, 0.1, 1000.0, "frame rate recorded in the USD file")
+    check_samples: int = integer(20000, 1000, 10_000_000, "random points at which the pieces' winding numbers are "
+                                 "checked (their volumes, no overlap); every run checks its pieces")
+
+
+def _camera(panel: str) -> type[Section]:
+    class Camera(Section):
+        eye: Vec3 | None = vec3(None, f"{panel} panel: the camera's position; null: fitted")
+        center: Vec3 | None = vec3(None, f"{panel} panel: the point looked at")
+        up: Vec3 | None = vec3(None, f"{panel} panel: the screen's up")
+        fov: float = number(35.0, 1.0, 150.0, f"{panel} panel: vertical field of view in degrees")
+
+    Camera.__name__ = Camera.__qualname__ = f"{panel.title()}Camera"
+    Camera.__doc__ = f"The {panel} panel's camera."
+    return Camera
+
+
+MaterialCamera, IterationsCamera, AnimationCamera = (_camera(p) for p in ("material", "iterations", "animation"))
+
+
+class CamerasSection(Section):
+    """Each panel's camera."""
+
+    material: MaterialCamera = Field(default_factory=MaterialCamera)
+    iterations: IterationsCamera = Field(default_factory=IterationsCamera)
+    animation: AnimationCamera = Field(default_factory=AnimationCamera)
+
+
+class ViewSection(Section):
+    """What ``fracref view`` and ``fracref render`` show first; nothing the pipeline reads."""
+
+    field: Literal["psi", "zeta", "xi"] = choice("psi", "material panel: the field sliced")
+    axis: Axis = choice("z", "material panel: the slice's normal axis")
+    offset: float = number(0.5, 0.0, 1.0, "material panel: the slice's relative position")
+    level: int = integer(0, 0, 64, "material panel: psi's pyramid level (0 = finest)")
+    cutaway: bool = flag(False, "material panel: the pieces below the slice")
+    iteration: int = integer(-1, -1, doc="iterations panel: the iteration shown (-1: the last)")
+    color_by: Literal["psi", "speed"] = choice("psi", "iterations panel: the surface's colours")
+    frame: int = integer(1, 1, doc="animation panel: the frame shown (1 = the first)")
+    overlay_coarse: bool = flag(False, "animation panel: the coarse pieces see-through")
+    cameras: CamerasSection = Field(default_factory=CamerasSection)
+
+
+class SweepSection(Section):
+    """What ``fracref sweep`` runs; nothing a single run reads."""
+
+    grid: KeyGrid = key_grid({}, "config keys and the values a sweep runs (every combination), e.g. "
+                             "{psi.stress_weight: [0.2, 0.6, 2], seed: [0, 1, 2]}")
+
+
+class PreviewSection(Section):
+    """The fields stage's preview images."""
+
+    axis: Axis | None = choice(None, "normal of the preview slices; null: the axis with the fewest nodes")
+    offset: float = number(0.5, 0.0, 1.0, "relative position of the preview slices")
+    colormap: Literal[COLORMAPS] = choice("viridis", "colour map of the preview slices")
+
+
+class Config(Section):
+    """An experiment: every key of every section (a file lists only what it changes)."""
+
+    name: str | None = text(None, "experiment name; null: the config file's name")
+    seed: int = integer(0, 0, 2**32 - 1, "seed of every random choice of the run")
+    input: InputSection = Field(default_factory=InputSection)
+    grid: GridSection = Field(default_factory=GridSection)
+    strength: StrengthSection = Field(default_factory=StrengthSection)
+    stress: StressSection = Field(default_factory=StressSection)
+    psi: PsiSection = Field(default_factory=PsiSection)
+    pyramid: PyramidSection = Field(default_factory=PyramidSection)
+    refine: RefineSection = Field(default_factory=RefineSection)
+    animate: AnimateSection = Field(default_factory=AnimateSection)
+    view: ViewSection = Field(default_factory=ViewSection)
+    sweep: SweepSection = Field(default_factory=SweepSection)
+    preview: PreviewSection = Field(default_factory=PreviewSection)
+
+    def tree(self) -> dict:
+        """The config as the plain tree a YAML file holds (what is saved beside a run and hashed)."""
+        return self.model_dump(mode="python")
+
+
+# -- validation --------------------------------------------------------------------------------------------
+def _shown(value: Any) -> str:
+    if value is None:
+        return "null"
     text = repr(value)
     if len(text) > 60:
         text = text[:57] + "..."
     return f"{text} ({type(value).__name__})"
 
 
-class Param(Spec):
-    """One configurable value (the fields of :class:`fields.spec.Spec`, with its checks).
-
-    Parameters
-    ----------
-    default : Any
-        Value used when no config sets it.
-    type : str
-        One of ``float int bool str path vec3 int3 bounds``.
-    lo, hi : float, optional
-        Inclusive range for numbers (each component for vectors).
-    choices : tuple of str, optional
-        Allowed values for strings.
-    nullable : bool
-        Whether ``null`` is allowed (meaning "automatic" or "none").
-    doc : str
-        One line for ``fracref config --explain`` and the viewer's tooltips.
-    """
-
-    __slots__ = ()
-
-    def expected(self) -> str:
-        text = _TYPE_WORDS[self.type]
-        if self.choices:
-            text = "one of " + ", ".join(repr(c) for c in self.choices)
-        elif self.lo is not None and self.hi is not None:
-            text += f" in [{self.lo:g}, {self.hi:g}]"
-        elif self.lo is not None:
-            text += f" >= {self.lo:g}"
-        elif self.hi is not None:
-            text += f" <= {self.hi:g}"
-        if self.nullable:
-            text += " (or null)"
-        return text
-
-    def check(self, value: Any, where: str, key: str) -> Any:
-        """Return ``value`` converted to its canonical Python form, or raise."""
-        if value is None:
-            if self.nullable:
-                return None
-            raise ConfigError(where, key, f"got null, expected {self.expected()}")
-        try:
-            out = _CONVERT[self.type](value)
-        except (TypeError, ValueError):
-            raise ConfigError(where, key, f"got {_describe(value)}, expected {self.expected()}") from None
-        if self.choices is not None and out not in self.choices:
-            raise ConfigError(where, key, f"got {_describe(value)}, expected {self.expected()}")
-        numbers = out if isinstance(out, list) else [out]
-        if self.type == "bounds":
-            numbers = [c for point in out for c in point]
-        for x in numbers:
-            if isinstance(x, (int, float)) and not isinstance(x, bool):
-                if (self.lo is not None and x < self.lo) or (self.hi is not None and x > self.hi):
-                    raise ConfigError(where, key, f"got {_describe(value)}, expected {self.expected()}")
-        return out
+def _section_type(annotation) -> type[Section] | None:
+    return annotation if isinstance(annotation, type) and issubclass(annotation, BaseModel) else None
 
 
-def _number(value: Any) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise TypeError
-    if not math.isfinite(value):
-        raise ValueError
-    return float(value)
+def _is_layers(model: type[BaseModel], name: str) -> bool:
+    return model is StrengthSection and name == "layers"
 
 
-def _integer(value: Any) -> int:
-    if isinstance(value, bool) or not isinstance(value, int):
-        raise TypeError
-    return int(value)
+def _layers_expected() -> str:
+    return "a list of at least 1 sections, each with kind: one of " + ", ".join(repr(k) for k in LAYER_TYPES)
 
 
-def _boolean(value: Any) -> bool:
-    if not isinstance(value, bool):
-        raise TypeError
-    return value
-
-
-def _string(value: Any) -> str:
-    if not isinstance(value, str) or not value:
-        raise TypeError
-    return value
-
-
-def _vec3(value: Any) -> list[float]:
-    if not isinstance(value, (list, tuple)) or len(value) != 3:
-        raise TypeError
-    return [_number(v) for v in value]
-
-
-def _int3(value: Any) -> int | list[int]:
+def _lists(value: Any) -> Any:
+    """Tuples as lists (a tree made in code holds tuples where a YAML file has lists)."""
+    if isinstance(value, Mapping):
+        return {k: _lists(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        if len(value) != 3:
-            raise TypeError
-        return [_integer(v) for v in value]
-    return _integer(value)
+        return [_lists(v) for v in value]
+    return value
 
 
-def _bounds(value: Any) -> list[list[float]]:
-    if not isinstance(value, (list, tuple)) or len(value) != 2:
-        raise TypeError
-    lo, hi = _vec3(value[0]), _vec3(value[1])
-    if not all(a < b for a, b in zip(lo, hi)):
-        raise ValueError
-    return [lo, hi]
+def _problem(error: dict, tree: Any, model: type[BaseModel], origin: Callable[[str], str], prefix: str
+             ) -> ConfigError:
+    """The user's words for one of pydantic's errors: which key, set where, what was given and expected."""
+    loc = list(error["loc"])
+    key, node, i = prefix, tree, 0
+
+    def join(key: str, part) -> str:
+        return f"{key}[{part}]" if isinstance(part, int) else (f"{key}.{part}" if key else str(part))
+
+    while i < len(loc):
+        part = loc[i]
+        if part not in model.model_fields:  # a key the section does not know
+            allowed = ", ".join(sorted(model.model_fields))
+            where = join(key, part)
+            return ConfigError(origin(where), where, f"unknown key; expected one of: {allowed}")
+        key = join(key, part)
+        node = node.get(part) if isinstance(node, Mapping) else None
+        sub = _section_type(model.model_fields[part].annotation)
+        if _is_layers(model, part) and i + 1 < len(loc) and isinstance(loc[i + 1], int):
+            index = loc[i + 1]
+            item = node[index] if isinstance(node, list) and index < len(node) else None
+            key_i = join(key, index)
+            if error["type"] == "union_tag_invalid":
+                kind = item.get("kind") if isinstance(item, Mapping) else item
+                return ConfigError(origin(key), f"{key_i}.kind", f"got {_shown(kind)}, expected one of "
+                                   + ", ".join(repr(k) for k in LAYER_TYPES))
+            if error["type"] in ("union_tag_not_found", "model_attributes_type", "dict_type"):
+                return ConfigError(origin(key), key_i, f"got {_shown(item)}, expected a section with a 'kind' key")
+            # (layers, index, kind, field...): on into the layer's own type; a list is set by one file as a whole
+            model, node, key, i = LAYER_TYPES[loc[i + 2]], item, key_i, i + 3
+            continue
+        if _is_layers(model, part):
+            return ConfigError(origin(key), key, f"got {_shown(node)}, expected {_layers_expected()}")
+        if sub is not None and i + 1 < len(loc):
+            model, i = sub, i + 1
+            continue
+        if sub is not None:
+            return ConfigError(origin(key), key, f"got {_shown(node)}, expected a mapping of keys")
+        if error["type"] == "missing":
+            return ConfigError(origin(key), key, f"missing, expected {expected(model, part)}")
+        return ConfigError(origin(key), key, f"got {_shown(node)}, expected {expected(model, part)}")
+    where = prefix or "(top level)"
+    return ConfigError(origin(prefix), where, f"got {_shown(tree)}, expected a mapping of keys")
 
 
-def _grid(value: Any) -> dict[str, list]:
-    if not isinstance(value, Mapping):
-        raise TypeError
-    for key, values in value.items():
-        if not isinstance(key, str) or not key or not isinstance(values, list) or not values:
-            raise TypeError
-    return {k: list(v) for k, v in value.items()}
-
-
-_CONVERT: dict[str, Callable[[Any], Any]] = {
-    "float": _number,
-    "int": _integer,
-    "bool": _boolean,
-    "str": _string,
-    "path": _string,
-    "dir": _string,
-    "vec3": _vec3,
-    "int3": _int3,
-    "bounds": _bounds,
-    "grid": _grid,
-}
-
-
-@dataclass(frozen=True)
-class Layers:
-    """A list of sections, each tagged by ``kind`` and validated by that kind's schema.
-
-    Every item may also carry the keys of ``common`` (e.g. a ``weight``).
-    """
-
-    kinds: Mapping[str, Mapping[str, Param]]
-    common: Mapping[str, Param] = field(default_factory=dict)
-    default: tuple = ()
-    min_items: int = 1
-
-    def expected(self) -> str:
-        return f"a list of at least {self.min_items} sections, each with kind: one of " + ", ".join(
-            repr(k) for k in self.kinds
-        )
-
-
-def schema_defaults(schema: Mapping[str, Any]) -> dict:
-    """The tree of default values of a schema."""
-    out: dict = {}
-    for key, spec in schema.items():
-        if isinstance(spec, Param):
-            out[key] = spec.default
-        elif isinstance(spec, Layers):
-            out[key] = [dict(item) for item in spec.default]
-        else:
-            out[key] = schema_defaults(spec)
-    return out
-
-
-def validate(
-    tree: Any,
-    schema: Mapping[str, Any],
-    origin: Callable[[str], str],
-    resolve_path: Callable[[str, str, str], str] | None = None,
-    prefix: str = "",
-) -> dict:
-    """Check ``tree`` against ``schema`` and return a new, fully populated tree.
-
-    Parameters
-    ----------
-    tree : dict
-        User values (already merged over the defaults).
-    schema : dict
-        Nested dict of :class:`Param` / :class:`Layers` / dict.
-    origin : callable
-        Maps a dotted key path to the file (or ``--set``) that set it.
-    resolve_path : callable, optional
-        ``resolve_path(key, value, type)`` turns a ``path`` or ``dir`` param
-        into an absolute path (relative to the file that set it).
-    prefix : str
-        Key path of ``tree`` inside the whole config.
-    """
+def validate(tree: Any, origin: Callable[[str], str], model: type[Section] = Config, prefix: str = "") -> Section:
+    """``tree`` (a merged YAML tree) as ``model``; raises :class:`ConfigError` for the first problem found,
+    unknown keys first. ``origin`` maps a dotted key path to the file (or ``--set``) that set it; ``prefix``
+    is the tree's own key path in a whole config."""
+    tree = _lists(tree)
     if not isinstance(tree, Mapping):
-        raise ConfigError(origin(prefix), prefix or "(top level)", f"got {_describe(tree)}, expected a mapping of keys")
-    unknown = [k for k in tree if k not in schema]
-    if unknown:
-        key = f"{prefix}.{unknown[0]}" if prefix else str(unknown[0])
-        allowed = ", ".join(sorted(schema))
-        raise ConfigError(origin(key), key, f"unknown key; expected one of: {allowed}")
-    out = {}
-    for key, spec in schema.items():
-        path = f"{prefix}.{key}" if prefix else key
-        value = tree.get(key, schema_defaults({key: spec})[key])
-        if isinstance(spec, Param):
-            value = spec.check(value, origin(path), path)
-            if spec.type in ("path", "dir") and value is not None and resolve_path is not None:
-                value = resolve_path(path, value, spec.type)
-            out[key] = value
-        elif isinstance(spec, Layers):
-            out[key] = _validate_layers(value, spec, origin, resolve_path, path)
+        raise ConfigError(origin(prefix), prefix or "(top level)", f"got {_shown(tree)}, expected a mapping of keys")
+    try:
+        return model.model_validate(tree)
+    except ValidationError as exc:
+        errors = sorted(exc.errors(), key=lambda e: e["type"] != "extra_forbidden")
+        raise _problem(errors[0], tree, model, origin, prefix) from None
+
+
+def resolve_paths(section: Section, resolve: Callable[[str, str, str], str], prefix: str = "") -> Section:
+    """``section`` with every file and directory path made absolute by ``resolve(key, value, kind)``."""
+    from fields.params import field_meta
+
+    update = {}
+    for name, f in type(section).model_fields.items():
+        value = getattr(section, name)
+        key = f"{prefix}.{name}" if prefix else name
+        word = field_meta(type(section), name).get("word")
+        if word in ("path", "dir") and value is not None:
+            update[name] = resolve(key, value, word)
+        elif isinstance(value, Section):
+            update[name] = resolve_paths(value, resolve, key)
+        elif isinstance(value, list) and value and all(isinstance(v, Layer) for v in value):
+            update[name] = [resolve_paths(v, lambda _k, v, w, k=key: resolve(k, v, w), f"{key}[{j}]")
+                            for j, v in enumerate(value)]
+    return section.model_copy(update=update)
+
+
+def defaults() -> dict:
+    """The tree of every default."""
+    return Config().tree()
+
+
+# -- explanations ------------------------------------------------------------------------------------------
+def explain(key: str) -> str:
+    """What a config key means: its default, what it accepts and its description; for a section (or
+    ``strength.layers``, ``strength.layers.KIND``) every key in it, one per line. A strength layer's
+    key is named by its kind (``strength.layers.bricks.mortar``). Raises :class:`ConfigError` for an
+    unknown key. The viewer's tooltips say the same."""
+    parts = [p for p in key.replace("[", ".").replace("]", "").split(".") if p]
+    model: type[BaseModel] = Config
+    leaf: str | None = None
+    layers = False  # at strength.layers, before a kind
+    for i, part in enumerate(parts):
+        if leaf is not None:
+            raise ConfigError("--explain", key, f"unknown key {part!r} after {'.'.join(parts[:i])}")
+        if layers and part in LAYER_TYPES:
+            model, layers = LAYER_TYPES[part], False
+        elif layers and part in Layer.model_fields:
+            leaf, model, layers = part, Layer, False
+        elif not layers and part in model.model_fields:
+            sub = _section_type(model.model_fields[part].annotation)
+            if _is_layers(model, part):
+                layers = True
+            elif sub is not None:
+                model = sub
+            else:
+                leaf = part
         else:
-            out[key] = validate(value, spec, origin, resolve_path, path)
-    return out
+            keys = (list(LAYER_TYPES) + list(Layer.model_fields)) if layers else list(model.model_fields)
+            raise ConfigError("--explain", key, f"unknown key {part!r}"
+                              + (f" after {'.'.join(parts[:i])}" if i else "")
+                              + (f"; expected one of {', '.join(keys)}" if keys else ""))
+    name = ".".join(parts)
+    if leaf is not None:
+        return describe(model, leaf, name)
+    if layers:
+        return "\n".join([f"{name}: {_layers_expected()}"]
+                         + [f"{name}.{kind}: --explain {name}.{kind} lists its keys" for kind in LAYER_TYPES])
+    keys = [k for k in model.model_fields if not (issubclass(model, Layer) and k == "kind")]
+    return "\n".join(explain(f"{name}.{k}" if name else k) for k in keys)
 
 
-def _validate_layers(
-    value: Any,
-    spec: Layers,
-    origin: Callable[[str], str],
-    resolve_path: Callable[[str, str, str], str] | None,
-    path: str,
-) -> list[dict]:
-    # A list is set as a whole by one file: its items report (and resolve
-    # their paths against) that file.
-    if not isinstance(value, list) or len(value) < spec.min_items:
-        raise ConfigError(origin(path), path, f"got {_describe(value)}, expected {spec.expected()}")
-    items = []
-    for i, item in enumerate(value):
-        key = f"{path}[{i}]"
-        if not isinstance(item, Mapping) or "kind" not in item:
-            raise ConfigError(origin(path), key, f"got {_describe(item)}, expected a section with a 'kind' key")
-        kind = item["kind"]
-        if kind not in spec.kinds:
-            raise ConfigError(origin(path), f"{key}.kind", f"got {_describe(kind)}, expected one of " + ", ".join(repr(k) for k in spec.kinds))
-        sub_schema = {**spec.common, **spec.kinds[kind]}
-        body = {k: v for k, v in item.items() if k != "kind"}
-        item_resolve = None if resolve_path is None else (lambda _k, v, kind, p=path: resolve_path(p, v, kind))
-        checked = validate(body, sub_schema, lambda _k, p=path: origin(p), item_resolve, key)
-        items.append({"kind": kind, **checked})
-    return items
+__all__ = ["Config", "explain", "validate", "resolve_paths", "defaults"]

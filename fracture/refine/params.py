@@ -1,57 +1,45 @@
 """The refinement's parameters: one typed record that is both the code's parameter type and the
-config's ``refine`` section (:mod:`fracture.pipeline.config` reads its defaults, ranges and
-descriptions from the fields' metadata). Lengths are in grid cells (the finest spacing)."""
+config's ``refine`` section (:mod:`fracture.pipeline.schema` extends it with the pipeline's own
+keys). Lengths are in grid cells (the finest spacing)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields
+from typing import Literal
+
+from fields.params import Section, choice, integer, number
 
 
-def _p(default, lo, hi, doc):
-    return field(default=default, metadata=dict(lo=lo, hi=hi, doc=doc))
+class RefineParams(Section):
+    """Thresholds of the refinement (Sections 4.3, 4.4); see each field's description."""
 
-
-def _choice(default, choices, doc):
-    return field(default=default, metadata=dict(lo=None, hi=None, doc=doc, choices=choices))
-
-
-@dataclass(frozen=True)
-class RefineParams:
-    """Thresholds of the refinement (Sections 4.3, 4.4); see each field's ``doc``."""
-
-    iterations: int = _p(60, 0, 10000, "largest number of iterations of the flow, all stages")
-    stage_iterations: int = _p(15, 1, 10000, "largest number of iterations of one stage of the coarse-to-fine schedule")
-    coarse_levels: int = _p(2, 1, 8, "every stage follows the mean of this many consecutive pyramid levels: the "
-                            "first the coarsest, each next one a level finer; the last stage follows level 0 alone; "
-                            "pyramid.levels gives one stage on every level (the paper's field)")
-    tolerance: float = _p(0.02, 0.0, 10.0, "a stage has settled when the mean vertex move of an iteration is below "
-                          "this (grid cells) and it split at most 0.5 % of the triangles")
-    step: float = _p(0.5, 1e-4, 10.0, "nominal move per iteration (grid cells) where grad psi has its root mean square")
-    max_move: float = _p(1.0, 1e-3, 10.0, "largest move of a vertex per iteration (grid cells)")
-    fold: float = _p(0.5, 1e-3, 0.9, "largest move of a triangle's corners relative to each other per iteration, as "
-                     "a fraction of its smallest altitude (no triangle turns over within a step)")
-    split_distance: float = _p(0.15, 0.0, 10.0, "split where a sample leaves its triangle by more than this in a "
-                               "nominal step (grid cells): where psi varies across the triangle")
-    tension: float = _p(0.05, 1e-4, 10.0, "psi is shifted so its minimum is this fraction of its range (surface "
-                        "tension)")
-    min_edge: float = _p(0.1, 1e-4, 10.0, "samples closer than this to a corner are skipped in the last stage (grid "
-                         "cells; earlier stages keep half their finest level's width)")
-    max_triangles: int = _p(200000, 10, 20_000_000, "no splits beyond this many triangles")
-    thickness: float = _p(1e-6, 0.0, 1.0, "closer than this counts as a collision (grid cells)")
-    hold: int = _p(3, 0, 100, "iterations a vertex stopped by a collision stays stopped")
-    search: str = _choice("none", ("graphcut", "none"),
-                          "graphcut: before the flow, the band around the coarse surface is searched for the surface "
-                          "of least integral of psi by a minimum cut (fracture/refine/search.py), and the flow polishes "
-                          "it on the finest level alone (its effect per scene: benchmarks/README.md); none: the flow "
-                          "alone, coarse to fine")
-    band: float = _p(10.0, 1.0, 200.0, "the search moves the surface at most this far from the coarse one (grid cells)")
-    core: float = _p(0.25, 0.0, 1.0, "the search leaves each piece the grid nodes farther from the coarse surface than "
-                     "this fraction of the piece's depth (a minimum cut favours small pieces: without a core a small "
-                     "piece could be cut down to a sliver)")
-
-
-def described_fields() -> list[tuple[str, type, object, dict]]:
-    """``(name, type, default, metadata)`` of every parameter, in order."""
-    types = {"int": int, "float": float, "str": str}
-    return [(f.name, types[f.type] if isinstance(f.type, str) else f.type, f.default, dict(f.metadata))
-            for f in fields(RefineParams)]
+    iterations: int = integer(60, 0, 10000, "largest number of iterations of the flow, all stages")
+    stage_iterations: int = integer(15, 1, 10000, "largest number of iterations of one stage of the coarse-to-fine "
+                                    "schedule")
+    coarse_levels: int = integer(2, 1, 8, "every stage follows the mean of this many consecutive pyramid levels: the "
+                                 "first the coarsest, each next one a level finer; the last stage follows level 0 "
+                                 "alone; pyramid.levels gives one stage on every level (the paper's field)")
+    tolerance: float = number(0.02, 0.0, 10.0, "a stage has settled when the mean vertex move of an iteration is "
+                              "below this (grid cells) and it split at most 0.5 % of the triangles")
+    step: float = number(0.5, 1e-4, 10.0, "nominal move per iteration (grid cells) where grad psi has its root mean "
+                         "square")
+    max_move: float = number(1.0, 1e-3, 10.0, "largest move of a vertex per iteration (grid cells)")
+    fold: float = number(0.5, 1e-3, 0.9, "largest move of a triangle's corners relative to each other per iteration, "
+                         "as a fraction of its smallest altitude (no triangle turns over within a step)")
+    split_distance: float = number(0.15, 0.0, 10.0, "split where a sample leaves its triangle by more than this in a "
+                                   "nominal step (grid cells): where psi varies across the triangle")
+    tension: float = number(0.05, 1e-4, 10.0, "psi is shifted so its minimum is this fraction of its range (surface "
+                            "tension)")
+    min_edge: float = number(0.1, 1e-4, 10.0, "samples closer than this to a corner are skipped in the last stage "
+                             "(grid cells; earlier stages keep half their finest level's width)")
+    max_triangles: int = integer(200000, 10, 20_000_000, "no splits beyond this many triangles")
+    thickness: float = number(1e-6, 0.0, 1.0, "closer than this counts as a collision (grid cells)")
+    hold: int = integer(3, 0, 100, "iterations a vertex stopped by a collision stays stopped")
+    search: Literal["graphcut", "none"] = choice(
+        "none", "graphcut: before the flow, the band around the coarse surface is searched for the surface of least "
+        "integral of psi by a minimum cut (fracture/refine/search.py), and the flow polishes it on the finest level "
+        "alone (its effect per scene: benchmarks/README.md); none: the flow alone, coarse to fine")
+    band: float = number(10.0, 1.0, 200.0, "the search moves the surface at most this far from the coarse one (grid "
+                         "cells)")
+    core: float = number(0.25, 0.0, 1.0, "the search leaves each piece the grid nodes farther from the coarse surface "
+                         "than this fraction of the piece's depth (a minimum cut favours small pieces: without a core a "
+                         "small piece could be cut down to a sliver)")

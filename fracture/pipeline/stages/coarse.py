@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from dataclasses import replace
 from typing import Mapping
 
 import numpy as np
@@ -13,10 +12,10 @@ from fracture.io import layout
 from fracture.io.meshes import read_mesh
 from fracture.io.ply import write_ply
 from fracture.pipeline.context import RunContext
-from fracture.pipeline.typed import ConfigInput
+from fracture.pipeline.schema import InputSection
 
 
-def coarse_from_meshes(inp: ConfigInput | Mapping) -> CoarseFracture:
+def coarse_from_meshes(inp: InputSection | Mapping) -> CoarseFracture:
     """A still object from an exterior and a coarse fracture surface (``input.kind: meshes``).
 
     Incomplete cuts are extended (virtual fracture) and the components found
@@ -30,7 +29,7 @@ def coarse_from_meshes(inp: ConfigInput | Mapping) -> CoarseFracture:
     from fracture.coarse.virtual import extend_cuts
 
     if isinstance(inp, Mapping):  # the section as a plain mapping; the keys it lacks take their defaults
-        inp = replace(ConfigInput(), **inp)
+        inp = InputSection(**inp)
     missing = [k for k in ("exterior", "fracture") if not getattr(inp, k)]
     if missing:
         raise InputError("coarse: input.kind 'meshes' needs the object's exterior and coarse fracture surface; set "

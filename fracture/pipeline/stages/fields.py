@@ -10,7 +10,7 @@ from fields.slices import axis_slice, slice_image
 from fracture.errors import ConfigError
 from fracture.io import layout
 from fracture.pipeline.context import RunContext
-from fracture.pipeline.typed import Config, typed_config
+from fracture.pipeline.schema import Config
 
 PREVIEW_FIELDS = ("zeta", "xi", "psi")
 # Target width in pixels of one preview slice (pixels are repeated up to it).
@@ -18,11 +18,11 @@ _PREVIEW_WIDTH = 400
 _PREVIEW_GAP = 8
 
 
-def fields_from_config(cfg: Config | dict, BV: np.ndarray, SV: np.ndarray, SF: np.ndarray, step=None, zeta=None,
+def fields_from_config(cfg: Config, BV: np.ndarray, SV: np.ndarray, SF: np.ndarray, step=None, zeta=None,
                        distance=None, pyramids=None):
     """:func:`fields.build.build_fields` with the parameters of a resolved config (``zeta``, ``distance`` and
     ``pyramids``: parts known already, see there)."""
-    c = typed_config(cfg)
+    c = cfg
     return build_fields(
         BV, SV, SF,
         resolution=c.grid.resolution,
@@ -42,9 +42,9 @@ def fields_from_config(cfg: Config | dict, BV: np.ndarray, SV: np.ndarray, SF: n
     )
 
 
-def check_grid_memory(cfg: Config | dict, BV: np.ndarray) -> None:
+def check_grid_memory(cfg: Config, BV: np.ndarray) -> None:
     """Refuse, before allocating, a grid whose fields need more than ``grid.max_memory_gb``."""
-    c = typed_config(cfg)
+    c = cfg
     grid = grid_for(BV, c.grid.resolution, c.grid.padding)
     need = fields_memory(grid.size, c.pyramid.levels) / 1e9
     if need > c.grid.max_memory_gb:
@@ -56,7 +56,7 @@ def check_grid_memory(cfg: Config | dict, BV: np.ndarray) -> None:
 
 
 def fields_stage(ctx: RunContext) -> None:
-    cfg = ctx.cfg
+    cfg = ctx.config
     (BV, BF), cf = ctx.products.exterior, ctx.products.coarse
     check_grid_memory(cfg, BV)
     known = cached_parts(ctx) if ctx.cache is not None else {}
@@ -91,7 +91,7 @@ def known_key(ctx: RunContext, name: str) -> str:
     (``xi pyramid``): what each depends on of the config, and the coarse stage (its exterior and surface)."""
     from fracture.pipeline.cache import code_version, digest
 
-    cfg = ctx.cfg
+    cfg = ctx.config.tree()
     depends = {"zeta": (cfg["strength"], cfg["seed"]), "distance": (),
                "zeta pyramid": (cfg["strength"], cfg["seed"], cfg["pyramid"]),
                "xi pyramid": (cfg["stress"], cfg["pyramid"])}[name]

@@ -27,7 +27,6 @@ from fracture.refine.engine import Refiner, default_search
 from fracture.refine.untangle import require_uncrossed
 from fracture.mesh.fracture_surface import FractureSurface
 from fracture.pipeline.context import RunContext
-from fracture.pipeline.typed import refine_params
 
 _log = logging.getLogger(__name__)
 
@@ -36,7 +35,7 @@ def refine_stage(ctx: RunContext) -> None:
     cf = ctx.products.coarse
     fs = ctx.products.fields
     config = ctx.config
-    params = refine_params(config)
+    params = config.refine.params()
     mesh = FractureSurface.from_coarse(cf.V, cf.F, cf.sides)
     BV, BF = ctx.products.exterior
     grain = getattr(fs, "grain", None)
