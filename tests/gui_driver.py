@@ -45,7 +45,7 @@ def _origin(app, v) -> tuple[int, int]:
 
 def _drag(app, v, origin, i: int, dx: int = 120, dy: int = 40, button: int = 1) -> None:
     """A real mouse drag from the middle of panel ``i``."""
-    f = v.scenes[i].frame
+    f = v.panels[i].widget.frame
     x, y = origin[0] + f.x + f.width // 2, origin[1] + f.y + f.height // 2
     _xdotool(app, "mousemove", x, y)
     _xdotool(app, "mousedown", button)
@@ -59,8 +59,8 @@ def _panel_content(app, v, i: int) -> dict:
     the content's centre as a fraction of the panel (0.5, 0.5 is the middle)."""
     import numpy as np
 
-    f = v.scenes[i].frame
-    img = np.asarray(app.render_to_image(v.scenes[i].scene, f.width, f.height))[..., :3].astype(int)
+    f = v.panels[i].widget.frame
+    img = np.asarray(app.render_to_image(v.panels[i].scene, f.width, f.height))[..., :3].astype(int)
     mask = np.abs(img - img[0, 0]).sum(axis=2) > 30
     ys, xs = np.nonzero(mask)
     centre = [float(xs.mean() / f.width), float(ys.mean() / f.height)] if len(xs) else [None, None]
@@ -72,7 +72,7 @@ def _cameras(v) -> list:
 
     return [np.concatenate([np.asarray(sw.scene.camera.get_model_matrix()).ravel(),
                             np.asarray(sw.scene.camera.get_projection_matrix()).ravel()]).tolist()
-            for sw in v.scenes]
+            for sw in (p.widget for p in v.panels)]
 
 
 def navigate(app, v, out) -> dict:
@@ -85,17 +85,17 @@ def navigate(app, v, out) -> dict:
         res["after_drag"].append(_panel_content(app, v, i))
     res["moved"] = _cameras(v)
     v.reset_view()
-    v.link_box.checked = True
+    v.animation.link_box.checked = True
     _drag(app, v, origin, 1, dx=-150, dy=60)
     for _ in range(5):
         app.run_one_tick()
     res["linked"] = [_panel_content(app, v, i) for i in range(3)]
     import numpy as np
 
-    M = [np.asarray(sw.scene.camera.get_model_matrix()) for sw in v.scenes]
+    M = [np.asarray(sw.scene.camera.get_model_matrix()) for sw in (p.widget for p in v.panels)]
     res["linked_forward"] = [(-m[:3, 2]).tolist() for m in M]
     before = _cameras(v)
-    v.export_w.int_value, v.export_h.int_value, v.export_fps.int_value = 640, 360, 5
+    v.side.export_w.int_value, v.side.export_h.int_value, v.side.export_fps.int_value = 640, 360, 5
     res["screenshot"] = str(v.exports.screenshot("all panels", out / "shot.png"))
     v.exports.screenshot("iterations", out / "shot_it.png")
     v.exports.export_video("iterations", out / "it.mp4")
@@ -103,9 +103,9 @@ def navigate(app, v, out) -> dict:
         app.run_one_tick()
     res["cameras_before_export"], res["cameras_after_export"] = before, _cameras(v)
     res["after_export"] = [_panel_content(app, v, i) for i in range(3)]
-    v.link_box.checked = False
+    v.animation.link_box.checked = False
     _drag(app, v, origin, 2)
-    f = v.scenes[2].frame
+    f = v.panels[2].widget.frame
     _xdotool(app, "mousemove", origin[0] + f.x + f.width // 2, origin[1] + f.y + f.height // 2)
     _xdotool(app, "key", "r")
     for j in (0, 1):  # the key reset panel 2 only
@@ -126,18 +126,18 @@ def views(app, v, out) -> dict:
     res: dict = {}
     r = v.window.content_rect
     res["content"] = [r.x, r.y, r.width, r.height]
-    widgets = {"fps": v.export_fps, "hold": v.export_hold, "supersample": v.export_scale,
-               "transparent": v.transparent_box, "shot": v.shot_box, "play": v.play_fps, "status": v.status,
-               "cutaway": v.cutaway_box, "preset": v.preset_box, "link": v.link_box,
-               "slice_bar_high": v.slice_bar[3], "surface_bar_high": v.surface_bar[3], "colour": v.color_box}
+    widgets = {"fps": v.side.export_fps, "hold": v.side.export_hold, "supersample": v.side.export_scale,
+               "transparent": v.side.transparent_box, "shot": v.side.shot_box, "play": v.side.play_fps, "status": v.side.status,
+               "cutaway": v.material.cutaway_box, "preset": v.animation.preset_box, "link": v.animation.link_box,
+               "slice_bar_high": v.material.bar[3], "surface_bar_high": v.iterations.bar[3], "colour": v.iterations.color_box}
     res["frames"] = {k: [w.frame.x, w.frame.y, w.frame.width, w.frame.height] for k, w in widgets.items()}
-    res["side"] = [v.side.frame.x, v.side.frame.y, v.side.frame.width, v.side.frame.height]
-    res["panels"] = [[c.frame.x, c.frame.y, c.frame.width, c.frame.height] for c in v.controls]
+    res["side"] = [v.side.widget.frame.x, v.side.widget.frame.y, v.side.widget.frame.width, v.side.widget.frame.height]
+    res["panels"] = [[c.frame.x, c.frame.y, c.frame.width, c.frame.height] for c in (p.controls for p in v.panels)]
     # a view of its own: another slice, iteration, frame and dragged cameras
-    v.set_offset(0.3)
-    v.set_iteration(1)
-    v.set_frame(v.run.n_frames - 1)
-    v.set_cutaway(True)
+    v.material.set_offset(0.3)
+    v.iterations.set_iteration(1)
+    v.animation.set_frame(v.run.n_frames - 1)
+    v.material.set_cutaway(True)
     origin = _origin(app, v)
     for i in range(3):
         _drag(app, v, origin, i, dx=-90, dy=30)
@@ -146,22 +146,22 @@ def views(app, v, out) -> dict:
     res["cameras_first"], first = _cameras(v), asdict(v.view)
     # elsewhere, then back to the saved view (as `fracref view --camera FILE` starts)
     v.reset_view()
-    v.set_offset(0.7)
-    v.set_iteration(0)
-    v.set_cutaway(False)
+    v.material.set_offset(0.7)
+    v.iterations.set_iteration(0)
+    v.material.set_cutaway(False)
     v.show_view(read_view_file(saved_view))
     for _ in range(10):
         app.run_one_tick()
     res["cameras_second"] = _cameras(v)
     res["views"] = [first, asdict(v.view)]
     res["saved_config"] = str(saved_config)
-    v.export_w.int_value, v.export_h.int_value = 640, 360
+    v.side.export_w.int_value, v.side.export_h.int_value = 640, 360
     res["compare"] = str(v.exports.screenshot("coarse vs refined", out / "compare.png"))
-    v.transparent_box.checked = True
-    v.export_scale.int_value = 2
+    v.side.transparent_box.checked = True
+    v.side.export_scale.int_value = 2
     res["transparent"] = str(v.exports.screenshot("animation", out / "transparent.png"))
-    v.transparent_box.checked = False
-    v.export_scale.int_value = 1
+    v.side.transparent_box.checked = False
+    v.side.export_scale.int_value = 1
     res["errors"] = list(v.errors)
 
     # idle: the real event loop with nothing to do, its CPU time against the wall clock's
@@ -189,19 +189,19 @@ def sweep_points(app, v, out, shot) -> dict:
 
     r = {"points": [str(p.dir) for p in v.sweep], "shown": [str(v.run.dir)], "title": [v.window.title]}
     r["shots"] = [shot(1, "point0")]
-    cameras = [v.current_pose(i) for i in range(3)]
-    v.point_box.selected_index = 1
+    cameras = [v.panels[i].current_pose() for i in range(3)]
+    v.side.point_box.selected_index = 1
     v.show_point(1)  # what choosing the second item does (setting the index does not call the handler)
     for _ in range(5):
         app.run_one_tick()
     r["shown"].append(str(v.run.dir))
     r["title"].append(v.window.title)
     r["shots"].append(shot(1, "point1"))
-    r["stress_weight_edit"] = v.edits["psi.stress_weight"].double_value
+    r["stress_weight_edit"] = v.side.edits["psi.stress_weight"].double_value
     r["cameras_kept"] = all(np.allclose(a.eye, b.eye, atol=1e-5) and np.allclose(a.center, b.center, atol=1e-5)
-                            for a, b in zip(cameras, [v.current_pose(i) for i in range(3)]))
+                            for a, b in zip(cameras, [v.panels[i].current_pose() for i in range(3)]))
     origin = _origin(app, v)
-    f = v.scenes[1].frame
+    f = v.panels[1].widget.frame
     _xdotool(app, "mousemove", origin[0] + f.x + f.width // 2, origin[1] + f.y + f.height // 2)
     _xdotool(app, "click", 1)  # the panel takes the keys
     for _ in range(2):
@@ -209,7 +209,7 @@ def sweep_points(app, v, out, shot) -> dict:
         for _ in range(5):
             app.run_one_tick()
         r["shown"].append(str(v.run.dir))
-    r["selected"] = v.point_box.selected_index
+    r["selected"] = v.side.point_box.selected_index
     return r
 
 
@@ -240,20 +240,21 @@ def main() -> None:
     if scenario == "panels":
         # each camera against one fitted afresh to its panel's shape now (before the first layout, the
         # panels had no size and the cameras were fitted to a square)
-        shown = list(v.poses)
-        v.poses = [None, None, None]
-        result["camera_refit"] = [[a.eye.tolist(), v._pose(i).eye.tolist()] for i, a in enumerate(shown)]
+        shown = [p.camera() for p in v.panels]
+        for p in v.panels:
+            p.pose = None
+        result["camera_refit"] = [[a.eye.tolist(), p.camera().eye.tolist()] for a, p in zip(shown, v.panels)]
         result["initial"] = [shot(i, f"panel{i}") for i in range(3)]
-        v.set_iteration(1)
+        v.iterations.set_iteration(1)
         result["iteration1"] = shot(1, "iteration1")
-        v.set_frame(v.run.n_frames - 1)
+        v.animation.set_frame(v.run.n_frames - 1)
         result["frame_last"] = shot(2, "frame_last")
-        v.set_offset(0.2)
+        v.material.set_offset(0.2)
         result["offset"] = shot(0, "offset")
-        v.set_field("zeta")
+        v.material.set_field("zeta")
         result["zeta"] = shot(0, "zeta")
-        v.export_w.int_value, v.export_h.int_value, v.export_fps.int_value = 640, 360, 5
-        v.export_seconds.double_value, v.export_hold.double_value = 0.4, 0.6  # 2 video frames each, 3 more at the end
+        v.side.export_w.int_value, v.side.export_h.int_value, v.side.export_fps.int_value = 640, 360, 5
+        v.side.export_seconds.double_value, v.side.export_hold.double_value = 0.4, 0.6  # 2 video frames each, 3 more at the end
         result["screenshot"] = str(v.exports.screenshot("all panels", out / "window_all.png"))
         v.exports.export_video("animation", out / "window_animation.mp4")
         while v._job is not None:
@@ -270,13 +271,13 @@ def main() -> None:
     elif scenario == "sweep":
         result.update(sweep_points(app, v, out, shot))
     elif scenario == "rerun":
-        result["worker_at_open"] = v._rerunner.alive  # a window only looked at starts no re-run process
+        result["worker_at_open"] = v.rerunner.alive  # a window only looked at starts no re-run process
         before = v.run.iteration(len(v.run.iterations) - 1)
-        v.edits["psi.stress_weight"].double_value = 0.0
-        v.edits["seed"].int_value = v.edits["seed"].int_value + 1
+        v.side.edits["psi.stress_weight"].double_value = 0.0
+        v.side.edits["seed"].int_value = v.side.edits["seed"].int_value + 1
         # a refinement of a few seconds, so that its iterations reach the window while it runs
-        v.edits["refine.iterations"].int_value = 40
-        v.edits["refine.max_triangles"].int_value = 120000
+        v.side.edits["refine.iterations"].int_value = 40
+        v.side.edits["refine.max_triangles"].int_value = 120000
         v.rerun()
         # the ticks while the re-run runs; the one that loads its result and the first renders of
         # that (seconds under Xvfb's software renderer, as when a window opens) come after it
@@ -294,7 +295,7 @@ def main() -> None:
         result["panel"] = shot(1, "after_rerun")
         saved = v.save_config(out / "saved.yaml")
         result["saved"] = str(saved)
-        v.edits["refine.step"].double_value = -1.0  # invalid: the window reports it
+        v.side.edits["refine.step"].double_value = -1.0  # invalid: the window reports it
         v.rerun()
         result["errors"] = v.errors
     (out / "result.json").write_text(json.dumps(result, indent=1))

@@ -234,7 +234,7 @@ def test_run_data_and_view_say_what_is_wrong(run_dir, tmp_path):
 
 
 def test_tunables_round_trip_through_the_config(run_dir):
-    from viewer.app import set_key, tunables
+    from viewer.side import set_key, tunables
     from viewer.data import RunData
 
     cfg = RunData(run_dir).config

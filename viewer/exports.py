@@ -43,9 +43,9 @@ class Exports:
         self.w = window
 
     def _export_size(self) -> tuple[int, int]:
-        w, h = int(self.w.export_w.int_value), int(self.w.export_h.int_value)
+        w, h = int(self.w.side.export_w.int_value), int(self.w.side.export_h.int_value)
         check_size(w, h, "export")
-        k = int(self.w.export_scale.int_value)
+        k = int(self.w.side.export_scale.int_value)
         if max(w, h) * k > 8192:
             raise InputError(f"export: {w}x{h} supersampled {k} times is over 8192 pixels; expected a smaller "
                              "size or less supersampling")
@@ -56,20 +56,21 @@ class Exports:
         v = self.w.view
         if i == 0:
             return Bar(FIELD_CMAPS[v.field], *self.w.run.field_range(v.field, v.level), v.field), slice_title(v)
-        if i == 1 and self.w._iter_range is not None:
-            return Bar(SURFACE_CMAPS[v.color_by], *self.w._iter_range, v.color_by), self.w.iter_label.text
-        return None, self.w.frame_label.text
+        if i == 1 and self.w.iterations.color_range is not None:
+            return (Bar(SURFACE_CMAPS[v.color_by], *self.w.iterations.color_range, v.color_by),
+                    self.w.iterations.label.text)
+        return None, self.w.animation.label.text
 
     def _picture(self, i: int, width: int, height: int, picture: tuple[int, int],
                  transparent: bool | None = None) -> np.ndarray:
         """Panel ``i`` from its current camera, at ``width x height`` with the panel's view over the
         upper-left ``picture`` part (supersampled and matted as the export settings say). The panel's
         camera is put back exactly as it was (the window is unchanged)."""
-        k = int(self.w.export_scale.int_value)
-        transparent = self.w.transparent_box.checked if transparent is None else transparent
-        sw = self.w.scenes[i]
+        k = int(self.w.side.export_scale.int_value)
+        transparent = self.w.side.transparent_box.checked if transparent is None else transparent
+        sw = self.w.panels[i].widget
         cam = sw.scene.camera
-        current = self.w.current_pose(i)
+        current = self.w.panels[i].current_pose()
         near, far = cam.get_near(), cam.get_far()
         # keep all that the panel shows: a narrower picture gets a taller field of view
         f = sw.frame
@@ -99,7 +100,7 @@ class Exports:
         panel's camera."""
         if not self.w.run.has_animation:
             raise InputError("this run has no animation: the coarse and refined pieces are compared in it")
-        scene, t = self.w.scenes[2].scene, self.w.view.frame
+        scene, t = self.w.animation.scene, self.w.view.frame
         coarse, refined = self.w.run.coarse_pieces(t), self.w.run.pieces_at(t)
         figures = []
         try:
@@ -111,7 +112,7 @@ class Exports:
                 show_pieces(scene, pieces)
                 figures.append(self.panel_image(2, half, height, pieces_caption(name, pieces, t)))
         finally:
-            self.w.draw_frame()
+            self.w.animation.draw()
         return annotate.side_by_side(figures)
 
     def screenshot(self, which: str = "all panels", path: str | Path | None = None) -> Path | None:
@@ -145,15 +146,15 @@ class Exports:
             return
         try:
             w, h = self._export_size()
-            fps = int(self.w.export_fps.int_value)
+            fps = int(self.w.side.export_fps.int_value)
             if what == "iterations" and not self.w.run.has_iterations or what == "animation" and not self.w.run.has_animation:
                 raise InputError(f"this run has no {what} to export")
             n = len(self.w.run.iterations) if what == "iterations" else self.w.run.n_frames
             # the animation at its own frame rate; iterations at the chosen seconds per image
-            seconds = (float(self.w.export_seconds.double_value) if what == "iterations"
+            seconds = (float(self.w.side.export_seconds.double_value) if what == "iterations"
                        else 1.0 / float(self.w.run.config.get("animate", {}).get("fps", 24.0)))
             counts = frame_counts(n, seconds, fps)
-            counts[-1] += round(float(self.w.export_hold.double_value) * fps)
+            counts[-1] += round(float(self.w.side.export_hold.double_value) * fps)
             path = Path(path) if path else numbered(self.w.run.dir / "renders", f"window_{what}", ".mp4")
             path.parent.mkdir(parents=True, exist_ok=True)
             video = Video(path, w, h, fps)
@@ -167,9 +168,9 @@ class Exports:
             try:
                 for k in range(n):
                     if what == "iterations":
-                        self.w.set_iteration(k)
+                        self.w.iterations.set_iteration(k)
                     else:
-                        self.w.set_frame(k)
+                        self.w.animation.set_frame(k)
                     img = self.panel_image(i, w, h, transparent=False)
                     for _ in range(counts[k]):
                         video.add(img)
@@ -183,8 +184,8 @@ class Exports:
                 self.w.say(f"saved {path}")
             finally:  # the panel and its slider back where they were
                 if what == "iterations":
-                    self.w.set_iteration(keep.iteration)
+                    self.w.iterations.set_iteration(keep.iteration)
                 else:
-                    self.w.set_frame(keep.frame)
+                    self.w.animation.set_frame(keep.frame)
 
         self.w._job = job()
