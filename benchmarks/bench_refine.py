@@ -46,8 +46,7 @@ def run_scene(name: str, iterations: int | None, repeat: int, cores: int | None,
     if iterations is not None:
         over.append(f"refine.iterations={iterations}")
     cfg, cf, fs = scene_with_fields(name, over)
-    warm = copy.deepcopy(cfg)
-    warm["refine"]["iterations"] = 2
+    warm = cfg.model_copy(update={"refine": cfg.refine.model_copy(update={"iterations": 2})})
     t0 = time.perf_counter()
     refine(warm, cf, fs)
     first = time.perf_counter() - t0
