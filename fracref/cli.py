@@ -68,6 +68,8 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY.PATH=VALUE")
 
     sub.add_parser("stages", help="list the pipeline stages")
+    sub.add_parser("presets", help="list the configs that ship with the package (for defaults: [NAME] in a "
+                   "config anywhere)")
 
     e = sub.add_parser("export", help="write a finished run's animated pieces as one USD file")
     e.add_argument("run_dir", type=Path, metavar="RUN_DIR")
@@ -183,6 +185,12 @@ def _main(argv: list[str] | None) -> int:
     try:
         if args.command == "stages":
             print("\n".join(runner.available_stages()))
+            return 0
+        if args.command == "presets":
+            from fracture.pipeline import presets
+
+            width = max(map(len, presets.names()))
+            print("\n".join(f"{name:<{width}}  {presets.summary(name)}" for name in presets.names()))
             return 0
         if args.command == "compile":
             from fracture.pipeline.warmup import compile_kernels

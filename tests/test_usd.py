@@ -36,32 +36,79 @@ def test_prim_names_are_valid_and_unique():
     assert got == ["source_cell_001", "source_cell_001_1", "_1st_piece", "piece", "a_b"]
 
 
-def test_the_file_holds_topology_once_points_per_frame_and_two_material_subsets(tmp_path):
+def _stage_positions(stage, path: str, t: float) -> np.ndarray:
+    """A piece's points at time ``t`` in world space: its mesh's points through its transforms."""
+    from pxr import UsdGeom
+
+    prim = stage.GetPrimAtPath(path)
+    mesh = UsdGeom.Mesh(prim.GetChild(prim.GetName()))
+    P = np.array(mesh.GetPointsAttr().Get(t), np.float64)
+    M = np.array(UsdGeom.XformCache(t).GetLocalToWorldTransform(mesh.GetPrim()))
+    return P @ M[:3, :3] + M[3, :3]
+
+
+def _turn(t: float) -> np.ndarray:
+    c, s = np.cos(0.3 * t), np.sin(0.3 * t)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def test_rigid_pieces_are_written_once_under_moving_transforms_and_deforming_frames_as_points(tmp_path):
+    """One piece turns and falls (rigid at every frame), the other squashes at frames 3 and 4 only: the
+    file gives every piece's positions at every frame through its transform and points, the rigid piece
+    has no point samples, and the squashed one only around its squashed frames."""
     from pxr import Usd, UsdGeom, UsdShade
 
-    faces, frames = _two_tetras_falling(5)
+    (A, FA), (B, FB) = _tetra([0, 0, 0]), _tetra([2, 0, 0])
+    frames = []
+    for t in range(7):
+        squash = np.diag([1.0, 1.0, 0.6]) if t in (3, 4) else np.eye(3)
+        frames.append([A @ _turn(t).T + [0.1 * t, 0, -0.5 * t], B @ squash.T + [0.25 * t, 0, 0]])
     exterior = [np.array([1, 1, 0, 0], bool), np.array([0, 1, 1, 1], bool)]
-    out = write_pieces_usd(tmp_path / "p.usdc", ["cell.000", "cell.001"], faces, exterior, frames, start_frame=3,
-                           fps=30.0)
+    out = write_pieces_usd(tmp_path / "p.usdc", ["cell.000", "cell.001"], (FA, FB), exterior, frames,
+                           rest=[A, B], start_frame=3, fps=30.0)
     stage = Usd.Stage.Open(str(out))
-    assert UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.z
-    assert UsdGeom.GetStageMetersPerUnit(stage) == 1.0
-    assert (stage.GetStartTimeCode(), stage.GetEndTimeCode(), stage.GetFramesPerSecond()) == (3, 7, 30)
-    for k, path in enumerate(["/Fracture/cell_000", "/Fracture/cell_001"]):
-        mesh = UsdGeom.Mesh(stage.GetPrimAtPath(path))
-        assert mesh.GetPrim().GetAttribute("fracref:sourceName").Get() == f"cell.00{k}"
+    assert UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.z and UsdGeom.GetStageMetersPerUnit(stage) == 1.0
+    assert (stage.GetStartTimeCode(), stage.GetEndTimeCode(), stage.GetTimeCodesPerSecond()) == (3, 9, 30)
+    paths = ["/Fracture/cell_000", "/Fracture/cell_001"]
+    size = 4.0
+    for t in range(7):
+        for k, path in enumerate(paths):
+            np.testing.assert_allclose(_stage_positions(stage, path, 3 + t), frames[t][k], atol=1e-6 * size)
+    rigid, soft = (UsdGeom.Mesh(stage.GetPrimAtPath(p).GetChild(p.split("/")[-1])) for p in paths)
+    assert not rigid.GetPointsAttr().GetNumTimeSamples()  # the turning piece: its points once
+    assert rigid.GetPointsAttr().GetTimeSamples() == []
+    assert soft.GetPointsAttr().GetTimeSamples() == [5, 6, 7, 8]  # rest before and after its squashed frames
+    for k, (path, F) in enumerate(zip(paths, (FA, FB))):
+        xform = stage.GetPrimAtPath(path)
+        assert xform.IsA(UsdGeom.Xform) and xform.GetAttribute("fracref:sourceName").Get() == f"cell.00{k}"
+        mesh = UsdGeom.Mesh(xform.GetChild(xform.GetName()))
+        assert UsdGeom.PrimvarsAPI(mesh).GetPrimvar("piecename").Get() == f"cell.00{k}"
+        assert UsdGeom.PrimvarsAPI(mesh).GetPrimvar("piecename").GetInterpolation() == UsdGeom.Tokens.constant
         assert not mesh.GetFaceVertexIndicesAttr().GetNumTimeSamples()  # topology once
-        assert np.array_equal(np.array(mesh.GetFaceVertexIndicesAttr().Get()).reshape(-1, 3), faces[k])
-        assert mesh.GetPointsAttr().GetTimeSamples() == [3, 4, 5, 6, 7]
-        for t in range(5):
-            np.testing.assert_allclose(np.array(mesh.GetPointsAttr().Get(3 + t)), frames[t][k], atol=1e-6)
+        assert np.array_equal(np.array(mesh.GetFaceVertexIndicesAttr().Get()).reshape(-1, 3), F)
         subsets = {s.GetPrim().GetName(): s for s in UsdGeom.Subset.GetGeomSubsets(mesh)}
         assert set(subsets) == {"interior", "exterior"}
+        assert UsdGeom.Subset.GetFamilyType(mesh, UsdShade.Tokens.materialBind) == UsdGeom.Tokens.partition
         assert UsdGeom.Subset.ValidateSubsets(list(subsets.values()), 4, UsdGeom.Tokens.partition)[0]
         for kind, want in (("exterior", exterior[k]), ("interior", ~exterior[k])):
+            assert subsets[kind].GetFamilyNameAttr().Get() == "materialBind"
             assert sorted(subsets[kind].GetIndicesAttr().Get()) == np.flatnonzero(want).tolist()
             bound = UsdShade.MaterialBindingAPI(subsets[kind].GetPrim()).ComputeBoundMaterial()[0]
             assert bound.GetPath() == f"/Fracture/Materials/{kind}"
+
+
+def test_without_rest_points_every_frame_holds_the_points(tmp_path):
+    from pxr import Usd, UsdGeom
+
+    faces, frames = _two_tetras_falling(5)
+    exterior = [np.ones(4, bool), np.ones(4, bool)]
+    out = write_pieces_usd(tmp_path / "p.usda", ["a", "b"], faces, exterior, frames)
+    stage = Usd.Stage.Open(str(out))
+    for k, path in enumerate(["/Fracture/a", "/Fracture/b"]):
+        mesh = UsdGeom.Mesh(stage.GetPrimAtPath(path).GetChild(path.split("/")[-1]))
+        assert mesh.GetPointsAttr().GetTimeSamples() == [1, 2, 3, 4, 5]
+        for t in range(5):
+            np.testing.assert_allclose(_stage_positions(stage, path, 1 + t), frames[t][k], atol=1e-6)
 
 
 def test_a_failed_write_keeps_the_earlier_file_and_leaves_nothing(tmp_path):
@@ -160,8 +207,42 @@ def test_fracref_export_rewrites_the_same_usd_elsewhere(cube8_run, tmp_path):
     for p in pa:
         if a.GetPrimAtPath(p).IsA(UsdGeom.Mesh):
             for t in (1, a.GetEndTimeCode()):
-                assert np.array_equal(np.array(UsdGeom.Mesh(a.GetPrimAtPath(p)).GetPointsAttr().Get(t)),
-                                      np.array(UsdGeom.Mesh(b.GetPrimAtPath(p)).GetPointsAttr().Get(t)))
+                path = str(p.GetParentPath())
+                np.testing.assert_allclose(_stage_positions(a, path, t), _stage_positions(b, path, t), atol=1e-6)
+
+
+@pytest.mark.slow
+def test_the_run_usd_gives_every_frame_of_the_run_and_moves_rigid_pieces_by_transforms(cube8_run):
+    """Blender's rigid-body pieces: each is written once, its transform sampled per frame, its points only
+    at the frames where it deforms (while it separates: its fracture vertices follow their neighbours
+    until their fracture time); the file's positions at every frame are the run's within a millionth of
+    the scene's size."""
+    from pxr import Usd, UsdGeom
+
+    from fracture.io.usd import RIGID, rigid_motion
+    from fracture.pieces.transfer import load_transfer, rest_points
+
+    names = json.loads((cube8_run / "coarse/components.json").read_text())["names"]
+    tr = load_transfer(cube8_run / "animation/transfer.npz")
+    stage = Usd.Stage.Open(str(cube8_run / "animation/pieces.usdc"))
+    size = float(np.linalg.norm(np.ptp(tr.material, axis=0)))
+    taken: set[str] = set()
+    paths = [f"/Fracture/{prim_name(n, taken)}" for n in names]
+    rest = rest_points(tr)
+    deforming = [set() for _ in names]
+    for t in range(tr.n_frames):
+        X = tr.positions(t)
+        for c, path in enumerate(paths):
+            np.testing.assert_allclose(_stage_positions(stage, path, t + 1), tr.piece(X, c), atol=1e-6 * size)
+            if rigid_motion(rest[c], tr.piece(X, c))[2] > RIGID * size:
+                deforming[c].add(t + 1)
+    for c, (path, name) in enumerate(zip(paths, names)):
+        prim = stage.GetPrimAtPath(path)
+        assert prim.GetAttribute("fracref:sourceName").Get() == name
+        samples = set(UsdGeom.Mesh(prim.GetChild(prim.GetName())).GetPointsAttr().GetTimeSamples())
+        near = deforming[c] | {t - 1 for t in deforming[c]} | {t + 1 for t in deforming[c]}
+        assert deforming[c] <= samples <= near, (name, sorted(deforming[c]), sorted(samples))
+        assert len(samples) < tr.n_frames // 2  # the rest of the frames: the transform alone
 
 
 def test_fracref_export_refuses_what_is_not_a_finished_run(tmp_path, capsys):
@@ -246,7 +327,8 @@ def test_a_usd_written_by_blender_runs_end_to_end(tmp_path):
 
     stage = Usd.Stage.Open(str(out / "animation/pieces.usdc"))
     meshes = [p for p in stage.Traverse() if p.IsA(UsdGeom.Mesh)]
-    assert sorted(p.GetAttribute("fracref:sourceName").Get() for p in meshes) == sorted(names)
+    assert sorted(p.GetParent().GetAttribute("fracref:sourceName").Get() for p in meshes) == sorted(names)
+    assert sorted(UsdGeom.PrimvarsAPI(p).GetPrimvar("piecename").Get() for p in meshes) == sorted(names)
     assert stage.GetEndTimeCode() == 24
 
 

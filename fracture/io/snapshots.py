@@ -1,10 +1,11 @@
 """The refinement's iterations as a run stores them, for the viewer (``refined/iterations*``).
 
 Per iteration the surface's positions, triangles, psi and speed per vertex,
-kept compact (float32, int32) and concatenated into four plain ``.npy``
-arrays (no archive time stamps: the bytes depend on the data only), with
-``refined/iterations.json`` giving each iteration's vertex and triangle
-offsets.
+kept compact (float32, int32) and concatenated into four arrays of one
+compressed ``refined/iterations.npz`` (fixed time stamps: the bytes depend on
+the data only), with ``refined/iterations.json`` giving each iteration's
+vertex and triangle offsets. Runs made before it have the four arrays as
+``refined/iterations_{positions,faces,psi,speed}.npy``, which are read too.
 """
 
 from __future__ import annotations
@@ -33,10 +34,9 @@ class Snapshots:
         """Write them through a run's context (``save_array``, ``save_json``)."""
         nv = np.cumsum([0] + [len(v) for v in self.V])
         nf = np.cumsum([0] + [len(f) for f in self.F])
-        ctx.save_array(f"{stem}_positions.npy", np.concatenate(self.V))
-        ctx.save_array(f"{stem}_faces.npy", np.concatenate(self.F))
-        ctx.save_array(f"{stem}_psi.npy", np.concatenate(self.psi))
-        ctx.save_array(f"{stem}_speed.npy", np.concatenate(self.speed))
+        ctx.save_npz(f"{stem}.npz", {"positions": np.concatenate(self.V), "faces": np.concatenate(self.F),
+                                     "psi": np.concatenate(self.psi), "speed": np.concatenate(self.speed)},
+                     compress=True)
         ctx.save_json(f"{stem}.json", {"vertex_offsets": nv.tolist(), "face_offsets": nf.tolist(),
                                        "snapshots": len(self.V)})
 
@@ -45,7 +45,12 @@ def load_snapshots(run_dir, stem: str = layout.ITERATIONS) -> list[dict]:
     """The snapshots of a run: per iteration a dict of positions, faces, psi, speed."""
     base = Path(run_dir) / stem
     meta = json.loads(base.with_suffix(".json").read_text())
-    arrays = {k: np.load(f"{base}_{k}.npy") for k in ("positions", "faces", "psi", "speed")}
+    keys = ("positions", "faces", "psi", "speed")
+    if base.with_suffix(".npz").is_file():
+        with np.load(base.with_suffix(".npz")) as z:
+            arrays = {k: z[k] for k in keys}
+    else:
+        arrays = {k: np.load(f"{base}_{k}.npy") for k in keys}
     nv, nf = meta["vertex_offsets"], meta["face_offsets"]
     return [{"positions": arrays["positions"][nv[i]:nv[i + 1]], "faces": arrays["faces"][nf[i]:nf[i + 1]],
              "psi": arrays["psi"][nv[i]:nv[i + 1]], "speed": arrays["speed"][nv[i]:nv[i + 1]]}

@@ -5,15 +5,24 @@ Layout of the stage::
     /Fracture                      Xform, the default prim
         /Materials/interior        UsdPreviewSurface, the fracture faces
         /Materials/exterior        UsdPreviewSurface, the object's surface B
-        /<piece>                   Mesh per piece, named after the coarse piece
-            interior, exterior     GeomSubsets (family materialBind) bound to the materials
+        /<piece>                   Xform per piece, named after the coarse piece; its transform time-sampled
+            /<piece>               Mesh: the piece in material space (named as its Xform: Blender merges
+                                   the two into one object, named after the mesh)
+                interior, exterior GeomSubsets (family materialBind, a partition) bound to the materials
 
-Each mesh holds its topology once (``faceVertexCounts``, ``faceVertexIndices``)
-and its points time-sampled per frame; ``extent`` is time-sampled with them.
-The piece's name as the input gave it is kept in the string attribute
-``fracref:sourceName`` (USD prim names allow only letters, digits and ``_``).
-The stage records its up axis, ``metersPerUnit``, the frame range (frames
-numbered from ``start_frame``, as the coarse input was) and the frame rate.
+A piece that moves rigidly (every frame's points within :data:`RIGID` of the
+scene's size of a rotation and translation of its material-space points,
+as the pieces of a rigid-body simulation do) is written once: its points
+are the mesh's default value and each frame is a sample of its Xform's
+``xformOp:transform``, a few hundred bytes. At the frames where it deforms
+(soft scenes) the mesh's points carry the frame's positions and the
+transform is the identity; ``extent`` follows the points. Each piece's
+name as the input gave it is the Xform's string attribute
+``fracref:sourceName`` and the mesh's constant primitive variable
+``piecename`` (what Houdini's RBD tools tie a piece to its transforms by);
+USD prim names allow only letters, digits and ``_``. The stage records its
+up axis, ``metersPerUnit``, ``timeCodesPerSecond`` and the frame range
+(frames numbered from ``start_frame``, as the coarse input was).
 
 The file is written next to its destination under a temporary name and moved
 over it, so a failed write never leaves half a file behind.
@@ -28,6 +37,10 @@ from pathlib import Path
 
 import numpy as np
 
+# A piece whose points at a frame are within this of a rotation and translation of its rest points (relative
+# to the scene's size) moves rigidly at that frame: its transform is written, not its points. Rigid-body
+# pieces come out of the transfer exact to rounding (1e-15); the positions are checked to 1e-6.
+RIGID = 1e-7
 # Colours of the two materials (linear RGB): pale stone outside, a darker, warmer break inside.
 _COLOURS = {"exterior": (0.62, 0.62, 0.60), "interior": (0.55, 0.35, 0.25)}
 
@@ -44,8 +57,20 @@ def prim_name(name: str, taken: set[str]) -> str:
     return out
 
 
+def rigid_motion(X: np.ndarray, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """The rotation ``R`` and translation ``T`` taking points ``X`` nearest to ``Y`` (Kabsch), and the
+    largest distance of ``R X + T`` from ``Y``."""
+    cx, cy = X.mean(axis=0), Y.mean(axis=0)
+    U, _, Vt = np.linalg.svd((X - cx).T @ (Y - cy))
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
+    R = Vt.T @ D @ U.T
+    T = cy - R @ cx
+    return R, T, float(np.sqrt(((X @ R.T + T - Y) ** 2).sum(axis=1).max(initial=0.0)))
+
+
 def write_pieces_usd(path: str | Path, names: Sequence[str], faces: Sequence[np.ndarray],
                      exterior: Sequence[np.ndarray], frames: Iterable[Sequence[np.ndarray]], *,
+                     rest: Sequence[np.ndarray] | None = None, size: float | None = None,
                      start_frame: int = 1, fps: float = 24.0, up_axis: str = "Z",
                      meters_per_unit: float = 1.0) -> Path:
     """Write the pieces and their animation to ``path`` (``.usd``, ``.usdc`` or ``.usda``).
@@ -56,6 +81,9 @@ def write_pieces_usd(path: str | Path, names: Sequence[str], faces: Sequence[np.
     faces : per piece, its triangles ``(m, 3)`` into that piece's points.
     exterior : per piece, a bool ``(m,)``: the triangle lies on the object's surface B.
     frames : per frame, a sequence of every piece's points ``(n_c, 3)``.
+    rest : per piece, its material-space points (the mesh's own points, which each frame's rigid
+        motion moves); without it every frame's points are written.
+    size : the scene's size, for the rigid test (default: the first frame's box diagonal).
 
     Returns the path written.
     """
@@ -64,9 +92,18 @@ def write_pieces_usd(path: str | Path, names: Sequence[str], faces: Sequence[np.
     path = Path(path)
     if up_axis not in ("Y", "Z"):
         raise ValueError(f"up_axis must be 'Y' or 'Z', got {up_axis!r}")
-    if not (len(names) == len(faces) == len(exterior)):
-        raise ValueError(f"{len(names)} names, {len(faces)} face arrays and {len(exterior)} exterior flags")
+    if not (len(names) == len(faces) == len(exterior)) or (rest is not None and len(rest) != len(names)):
+        raise ValueError(f"{len(names)} names, {len(faces)} face arrays and {len(exterior)} exterior flags"
+                         + ("" if rest is None else f", {len(rest)} rest point arrays"))
     tmp = path.with_name(f".{path.stem}.partial-{os.getpid()}{path.suffix}")
+
+    def vec3f(P: np.ndarray):
+        return Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(P, np.float32))
+
+    def extent(P: np.ndarray):
+        lo, hi = P.min(axis=0), P.max(axis=0)
+        return Vt.Vec3fArray([Gf.Vec3f(*lo.tolist()), Gf.Vec3f(*hi.tolist())])
+
     try:
         stage = Usd.Stage.CreateNew(str(tmp))
         UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y if up_axis == "Y" else UsdGeom.Tokens.z)
@@ -88,16 +125,23 @@ def write_pieces_usd(path: str | Path, names: Sequence[str], faces: Sequence[np.
             materials[kind] = mat
 
         taken: set[str] = {"Materials"}
-        meshes = []
-        for name, F, ext in zip(names, faces, exterior):
+        meshes, moves = [], []
+        for c, (name, F, ext) in enumerate(zip(names, faces, exterior)):
             F = np.asarray(F, np.int32)
             ext = np.asarray(ext, bool)
-            mesh = UsdGeom.Mesh.Define(stage, f"/Fracture/{prim_name(str(name), taken)}")
+            xform = UsdGeom.Xform.Define(stage, f"/Fracture/{prim_name(str(name), taken)}")
+            xform.GetPrim().CreateAttribute("fracref:sourceName", Sdf.ValueTypeNames.String).Set(str(name))
+            moves.append(xform.AddTransformOp())
+            mesh = UsdGeom.Mesh.Define(stage, xform.GetPath().AppendChild(xform.GetPath().name))
             mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
             mesh.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)
             mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(F), 3, np.int32)))
             mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(np.ascontiguousarray(F.ravel())))
-            mesh.GetPrim().CreateAttribute("fracref:sourceName", Sdf.ValueTypeNames.String).Set(str(name))
+            UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("piecename", Sdf.ValueTypeNames.String,
+                                                    UsdGeom.Tokens.constant).Set(str(name))
+            if rest is not None:
+                mesh.CreatePointsAttr(vec3f(rest[c]))
+                mesh.CreateExtentAttr(extent(np.asarray(rest[c])))
             UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim())
             for kind, which in (("interior", ~ext), ("exterior", ext)):
                 subset = UsdGeom.Subset.CreateGeomSubset(
@@ -108,14 +152,34 @@ def write_pieces_usd(path: str | Path, names: Sequence[str], faces: Sequence[np.
             meshes.append(mesh)
 
         t = start_frame - 1
+        deformed = [False] * len(meshes)  # the piece's points at the frame before are not its rest points
         for t, X in enumerate(frames, start=start_frame):
             if len(X) != len(meshes):
                 raise ValueError(f"frame {t}: {len(X)} point arrays for {len(meshes)} pieces")
-            for mesh, P in zip(meshes, X):
-                P = np.ascontiguousarray(P, np.float32)
-                mesh.GetPointsAttr().Set(Vt.Vec3fArray.FromNumpy(P), t)
-                lo, hi = P.min(axis=0), P.max(axis=0)
-                mesh.GetExtentAttr().Set(Vt.Vec3fArray([Gf.Vec3f(*lo.tolist()), Gf.Vec3f(*hi.tolist())]), t)
+            if size is None:
+                every = np.concatenate([np.asarray(P) for P in X])
+                size = float(np.linalg.norm(every.max(axis=0) - every.min(axis=0))) if len(every) else 1.0
+            for c, (mesh, P) in enumerate(zip(meshes, X)):
+                P = np.asarray(P, np.float64)
+                M = Gf.Matrix4d(1.0)
+                rigid = False
+                if rest is not None and len(P):
+                    R, T, gap = rigid_motion(np.asarray(rest[c], np.float64), P)
+                    rigid = gap <= RIGID * size
+                if rigid:  # row vectors: p' = p M, the translation in the last row
+                    M = Gf.Matrix4d(*np.block([[R.T, np.zeros((3, 1))], [T[None], np.ones((1, 1))]]).ravel().tolist())
+                    if deformed[c]:
+                        mesh.GetPointsAttr().Set(vec3f(rest[c]), t)
+                        mesh.GetExtentAttr().Set(extent(np.asarray(rest[c])), t)
+                else:
+                    if not deformed[c] and rest is not None and t > start_frame:
+                        # the rest points until the frame before (a first sample would be held back to the start)
+                        mesh.GetPointsAttr().Set(vec3f(rest[c]), t - 1)
+                        mesh.GetExtentAttr().Set(extent(np.asarray(rest[c])), t - 1)
+                    mesh.GetPointsAttr().Set(vec3f(P), t)
+                    mesh.GetExtentAttr().Set(extent(P), t)
+                deformed[c] = not rigid
+                moves[c].Set(M, t)
         if t < start_frame:
             raise ValueError("no frames to write")
         stage.SetStartTimeCode(start_frame)

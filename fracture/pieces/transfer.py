@@ -42,6 +42,13 @@ from fracture.coarse.surface import CoarseFracture
 from fracture.pieces.assembly import Pieces
 from fracture.mesh.topology import barycentric_weights
 
+# The maps of a component's slots at a frame that agree within this (their translations relative to the
+# scene's size) are stored once (transfer_arrays): exact for the rigid and affine motions that agree to
+# rounding, far below the 1e-6 of the scene's size that positions are checked to.
+_SAME_MAP = 1e-10
+# A scene smaller than this is measured against it (no division by a zero size).
+_TINY_SIZE = 1e-30
+
 
 @dataclass
 class Transfer:
@@ -66,6 +73,9 @@ class Transfer:
         The shared vertex (``Pieces.V`` id) each row is a copy of.
     material : (rows, 3) float
         Material-space position of every row.
+    slot_component : (s,) int or None
+        The component each slot moves with (what lets a rigid or affine motion be stored once per
+        component and frame: :func:`transfer_arrays`).
     """
 
     own: sp.csr_matrix
@@ -77,6 +87,7 @@ class Transfer:
     time: np.ndarray
     vertex: np.ndarray
     material: np.ndarray
+    slot_component: np.ndarray | None = None
 
     @property
     def n_frames(self) -> int:
@@ -96,6 +107,11 @@ class Transfer:
 
     def piece(self, X: np.ndarray, c: int) -> np.ndarray:
         return X[self.offsets[c]:self.offsets[c + 1]]
+
+
+def rest_points(transfer: Transfer) -> list[np.ndarray]:
+    """Every piece's material-space points (what a frame's motion moves)."""
+    return [transfer.piece(transfer.material, c) for c in range(len(transfer.offsets) - 1)]
 
 
 def frame_points(transfer: Transfer):
@@ -250,15 +266,84 @@ def build_transfer(cf: CoarseFracture, pieces: Pieces, tree: sp.csr_matrix) -> T
             maps[t, m, :, :3] = A
             maps[t, m, :, 3] = b
     return Transfer(own=own, shared=shared, shared_rows=order, shared_time=time[order], maps=maps,
-                    offsets=np.asarray(offsets), time=time, vertex=vertex, material=X)
+                    offsets=np.asarray(offsets), time=time, vertex=vertex, material=X, slot_component=cs)
+
+
+def _common_maps(tr: Transfer, size: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per frame and component, the one map all the component's slots have (rigid and affine motion: a
+    2 x 2 x 2 lattice moved so has the same gradient everywhere), and whether they all have it (within
+    :data:`_SAME_MAP` of the entries, its translations relative to ``size``)."""
+    T, C = tr.n_frames, int(tr.slot_component.max(initial=-1)) + 1
+    common = np.zeros((T, C, 3, 4))
+    same = np.zeros((T, C), bool)
+    scale = np.array([1.0, 1.0, 1.0, max(size, _TINY_SIZE)])
+    for c in range(C):
+        m = np.flatnonzero(tr.slot_component == c)
+        if not len(m):
+            continue
+        first = tr.maps[:, m[0]]
+        common[:, c] = first
+        same[:, c] = (np.abs(tr.maps[:, m] - first[:, None]) / scale).max(axis=(1, 2, 3)) <= _SAME_MAP
+    return common, same
+
+
+def transfer_arrays(tr: Transfer, size: float) -> dict[str, np.ndarray]:
+    """The arrays of ``animation/transfer.npz`` (:func:`load_transfer` reads them back).
+
+    A component's maps at a frame are stored once when all its slots share
+    them (rigid and affine motion), per slot only for the frames where the
+    component deforms (soft scenes); ``size`` is the scene's size, the
+    scale of the translations. Indices are 32-bit integers and the material
+    positions (relative to their box's low corner) 32-bit floats, whose
+    error is below a ten-millionth of the box; the weights and the maps keep
+    64 bits (a position far from the origin is their sum), and so do the
+    fracture times (compared with whole frames).
+    """
+    out = {}
+    for name in ("own", "shared"):
+        A = getattr(tr, name)
+        out.update({f"{name}_data": A.data, f"{name}_indices": A.indices.astype(np.int32),
+                    f"{name}_indptr": A.indptr.astype(np.int64), f"{name}_shape": np.array(A.shape, np.int64)})
+    lo = tr.material.min(axis=0) if len(tr.material) else np.zeros(3)
+    out.update(shared_rows=tr.shared_rows.astype(np.int32), shared_time=tr.shared_time,
+               offsets=tr.offsets.astype(np.int64), time=tr.time,
+               vertex=tr.vertex.astype(np.int32), material_origin=lo,
+               material=(tr.material - lo).astype(np.float32))
+    if tr.slot_component is None:
+        out["maps"] = tr.maps
+        return out
+    common, same = _common_maps(tr, size)
+    t_own, c_own = np.nonzero(~same)  # (frame, component) pairs whose slots have maps of their own
+    out.update(slot_component=tr.slot_component.astype(np.int32), common_maps=common, common_same=same)
+    out["slot_maps"] = (np.concatenate([tr.maps[t, tr.slot_component == c] for t, c in zip(t_own, c_own)])
+                        if len(t_own) else np.zeros((0, 3, 4)))
+    return out
 
 
 def load_transfer(path) -> Transfer:
-    """Read ``animation/transfer.npz`` written by the animate stage."""
+    """Read ``animation/transfer.npz`` written by the animate stage (also the layout before
+    :func:`transfer_arrays`, with every slot's maps)."""
     with np.load(path) as z:
         def csr(name):
             return sp.csr_matrix((z[f"{name}_data"], z[f"{name}_indices"], z[f"{name}_indptr"]),
                                  shape=tuple(z[f"{name}_shape"]))
-        return Transfer(own=csr("own"), shared=csr("shared"), shared_rows=z["shared_rows"],
-                        shared_time=z["shared_time"], maps=z["maps"], offsets=z["offsets"], time=z["time"],
-                        vertex=z["vertex"], material=z["material"])
+        material = z["material"].astype(np.float64) + (z["material_origin"] if "material_origin" in z else 0.0)
+        slot_component = z["slot_component"] if "slot_component" in z else None
+        if "maps" in z:
+            maps = z["maps"]
+        else:
+            common, same, slot_maps = z["common_maps"], z["common_same"], z["slot_maps"]
+            maps = np.empty((len(common), len(slot_component), 3, 4))
+            k = 0
+            for t, c in zip(*np.nonzero(np.ones_like(same))):
+                m = slot_component == c
+                if same[t, c]:
+                    maps[t, m] = common[t, c]
+                else:
+                    n = int(m.sum())
+                    maps[t, m] = slot_maps[k:k + n]
+                    k += n
+        return Transfer(own=csr("own"), shared=csr("shared"), shared_rows=z["shared_rows"].astype(np.int64),
+                        shared_time=z["shared_time"].astype(np.float64), maps=maps,
+                        offsets=z["offsets"].astype(np.int64), time=z["time"].astype(np.float64),
+                        vertex=z["vertex"].astype(np.int64), material=material, slot_component=slot_component)

@@ -1,8 +1,9 @@
 """Experiment configs: YAML files layered on shared defaults, validated as a whole.
 
 A config file is a YAML mapping. It may start with a ``defaults`` list of other
-config files (paths relative to it, ``.yaml`` optional) that are merged first,
-in order; the file's own keys are merged on top, then ``--set`` overrides.
+config files (paths relative to it, ``.yaml`` optional; a name found nowhere
+there is looked up among the package's presets, :mod:`fracture.pipeline.presets`)
+that are merged first, in order; the file's own keys are merged on top, then ``--set`` overrides.
 Every key has a default in the schema (:class:`~fracture.pipeline.schema.Config`),
 so an experiment lists only what it changes. Mappings merge key by key; lists and scalars replace.
 
@@ -22,6 +23,7 @@ from typing import Any, Iterable
 import yaml
 
 from fracture.errors import ConfigError
+from fracture.pipeline import presets
 from fracture.pipeline.schema import Config, defaults, explain, resolve_paths, validate
 
 SET_SOURCE = "--set"
@@ -106,8 +108,12 @@ def _collect(path: Path, merged: _Merged, stack: tuple[Path, ...]) -> None:
         target = path.parent / item
         if target.suffix not in (".yaml", ".yml"):
             target = target.with_name(target.name + ".yaml")
+        if not target.is_file():  # a preset of the package (fracture/pipeline/presets.py)
+            target = presets.find(item) or target
         if not target.is_file():
-            raise ConfigError(str(path), "defaults", f"included config {item!r} not found (looked for {target})")
+            raise ConfigError(str(path), "defaults", f"included config {item!r} not found (looked for {target} and "
+                              f"for a preset of that name); expected a file or one of the presets: "
+                              f"{', '.join(presets.names())}")
         _collect(target, merged, stack + (path,))
     merged.merge(data, str(path))
 

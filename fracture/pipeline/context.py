@@ -99,17 +99,20 @@ class RunContext:
         """A ``.npy`` file (byte-identical for identical arrays)."""
         self._write(_write_npy, self.path(rel), np.array(array, order="C", copy=True))
 
-    def save_npz(self, rel: str, arrays: dict[str, np.ndarray]) -> None:
-        """An uncompressed ``.npz`` with fixed member timestamps (byte-identical for identical arrays)."""
+    def save_npz(self, rel: str, arrays: dict[str, np.ndarray], compress: bool = False) -> None:
+        """An ``.npz`` (deflated with ``compress``) with fixed member timestamps (byte-identical for identical
+        arrays)."""
         import io
         import zipfile
 
         out = io.BytesIO()
-        with zipfile.ZipFile(out, "w", zipfile.ZIP_STORED) as z:
+        with zipfile.ZipFile(out, "w") as z:
             for name, a in arrays.items():
                 buf = io.BytesIO()
                 np.save(buf, np.ascontiguousarray(a), allow_pickle=False)
-                z.writestr(zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0)), buf.getvalue())
+                info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
+                info.compress_type = zipfile.ZIP_DEFLATED if compress else zipfile.ZIP_STORED
+                z.writestr(info, buf.getvalue())
         self._write(Path.write_bytes, self.path(rel), out.getvalue())
 
     def save_json(self, rel: str, data: Any) -> None:

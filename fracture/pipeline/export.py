@@ -35,7 +35,7 @@ def export_run(run: str | Path, fmt: str = "usd", out: str | Path | None = None)
     ``out`` defaults to ``RUN/animation/pieces.usdc``.
     """
     from fracture.io.ply import read_ply
-    from fracture.pieces.transfer import frame_points, load_transfer
+    from fracture.pieces.transfer import frame_points, load_transfer, rest_points
     from fracture.io.usd import write_pieces_usd
 
     run = Path(run)
@@ -66,5 +66,7 @@ def export_run(run: str | Path, fmt: str = "usd", out: str | Path | None = None)
         raise InputError(f"export: {out}: a USD file name ends in .usd, .usdc or .usda")
     if not out.parent.is_dir():
         raise InputError(f"export: {out.parent} is not a directory")
-    return write_pieces_usd(out, names, faces, exterior, frame_points(transfer), fps=fps,
-                            up_axis="Y" if up == "y" else "Z")
+    every = transfer.material
+    size = float(np.linalg.norm(every.max(axis=0) - every.min(axis=0))) if len(every) else 1.0
+    return write_pieces_usd(out, names, faces, exterior, frame_points(transfer), rest=rest_points(transfer),
+                            size=size, fps=fps, up_axis="Y" if up == "y" else "Z")

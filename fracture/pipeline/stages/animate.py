@@ -10,10 +10,13 @@ Outputs:
   import; with ``animate.ply_frames`` also ``frames/frame_NNNN.ply`` (all
   pieces, face property ``piece``);
 * ``animation/pieces.usdc`` (``animate.usd``): every piece as a USD mesh
-  with its points per frame and the interior (fracture) and exterior faces
-  bound to two materials (:mod:`fracture.io.usd`);
-* ``animation/transfer.npz``: the sparse transfer and the per-frame maps,
-  from which a viewer computes any frame with one sparse product.
+  under an Xform whose transform moves it (its points per frame only where
+  it deforms), the interior (fracture) and exterior faces bound to two
+  materials (:mod:`fracture.io.usd`);
+* ``animation/transfer.npz``: the sparse transfer and the per-frame maps
+  (once per component and frame where it moves rigidly, compressed:
+  :func:`~fracture.pieces.transfer.transfer_arrays`), from which a viewer
+  computes any frame with one sparse product.
 
 The manifest gets, per piece, whether it is closed, 2-manifold and
 outward-oriented, its volume and self-intersections (and how many crossing
@@ -38,7 +41,7 @@ from fracture.pieces.assembly import build_pieces
 from fracture.pieces.checks import EarlyGap, hausdorff_to_b, piece_checks, verify_pieces
 from fracture.io.ply import write_ply
 from fracture.pipeline.context import RunContext
-from fracture.pieces.transfer import Transfer, build_transfer, frame_points
+from fracture.pieces.transfer import Transfer, build_transfer, frame_points, rest_points, transfer_arrays
 from fracture.io.usd import write_pieces_usd
 
 
@@ -69,7 +72,7 @@ def animate_stage(ctx: RunContext) -> None:
             write_ply(ctx.path(layout.piece(c)), V, F,
                       vertex_data={"fracture_time": transfer.time[rows].astype(np.float32)},
                       face_data={"exterior": pieces.exterior[c].astype(np.uint8)})
-        _save_transfer(ctx, transfer)
+        _save_transfer(ctx, transfer, BV)
         writer = ObjFrames(cf.names, [F for _, _, F in local], [len(ids) for ids, _, _ in local],
                            exterior=pieces.exterior)
         if opts.obj_frames:
@@ -92,7 +95,8 @@ def animate_stage(ctx: RunContext) -> None:
         checks["early_gap_max"] = gap.worst
         if opts.usd:
             write_pieces_usd(ctx.path(layout.USD), cf.names,
-                             [F for _, _, F in local], pieces.exterior, frame_points(transfer), fps=opts.fps,
+                             [F for _, _, F in local], pieces.exterior, frame_points(transfer),
+                             rest=rest_points(transfer), size=_size(BV), fps=opts.fps,
                              up_axis="Y" if cf.up_axis == "y" else "Z")
 
     ctx.products.pieces = pieces
@@ -102,11 +106,10 @@ def animate_stage(ctx: RunContext) -> None:
     ctx.stats["animate"] = checks
 
 
-def _save_transfer(ctx: RunContext, tr: Transfer) -> None:
-    ctx.save_npz(layout.TRANSFER, {
-        "own_data": tr.own.data, "own_indices": tr.own.indices.astype(np.int64),
-        "own_indptr": tr.own.indptr.astype(np.int64), "own_shape": np.array(tr.own.shape, np.int64),
-        "shared_data": tr.shared.data, "shared_indices": tr.shared.indices.astype(np.int64),
-        "shared_indptr": tr.shared.indptr.astype(np.int64), "shared_shape": np.array(tr.shared.shape, np.int64),
-        "shared_rows": tr.shared_rows, "shared_time": tr.shared_time, "maps": tr.maps,
-        "offsets": tr.offsets, "time": tr.time, "vertex": tr.vertex, "material": tr.material})
+def _size(BV: np.ndarray) -> float:
+    """The scene's size: the diagonal of B's box."""
+    return float(np.linalg.norm(BV.max(axis=0) - BV.min(axis=0)))
+
+
+def _save_transfer(ctx: RunContext, tr: Transfer, BV: np.ndarray) -> None:
+    ctx.save_npz(layout.TRANSFER, transfer_arrays(tr, _size(BV)), compress=True)

@@ -68,7 +68,7 @@ def refine_stage(ctx: RunContext) -> None:
 
     write_ply(ctx.path(layout.REFINED_SURFACE), mesh.V, mesh.F,
               face_data={"side0": mesh.sides[:, 0].astype(np.int32), "side1": mesh.sides[:, 1].astype(np.int32)})
-    ctx.save_npz(layout.TREE, mesh.tree_arrays())
+    ctx.save_npz(layout.TREE, mesh.tree_arrays(), compress=True)
     if snaps is not None:
         snaps.save(ctx)
 
