@@ -55,7 +55,7 @@ def main() -> None:
                        (0, hi[1]), (0, hi[2]), 12, 12)
         grid = Grid.from_bounds(lo, hi, shape)
         X = grid.points()
-        layer = {"kind": kind, "weight": 1.0, **{k: p.default for k, p in KINDS[kind][1].items()}}
+        layer = KINDS[kind][1]()  # the kind's defaults
         t_strength = best(lambda: strength_field(X, (lo, hi), [layer], seed=0), args.repeat)
         t_stress = best(lambda: distance_to_surface(X, SV, SF), args.repeat)
         fs = build_fields(BV, SV, SF, resolution=list(shape), padding=0.0, layers=[layer], seed=0,

@@ -4,7 +4,7 @@ Every refinement iteration allocates and frees the same large arrays again
 (hash grids, pair lists, edge tables: tens of MB at 100K triangles). glibc
 hands blocks above its mmap threshold back to the kernel on ``free`` and
 trims the top of its heap beyond another threshold, so each new array is
-zeroed and faulted in again page by page (``benchmarks/README.md`` has the
+zeroed and faulted in again page by page (``docs/design-measurements.md`` has the
 counts). With both thresholds raised, freed blocks stay in the heap and the
 next arrays reuse pages already mapped.
 

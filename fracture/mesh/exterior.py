@@ -18,7 +18,7 @@ from fracture.mesh.topology import face_frames
 class Exterior:
     """A closed triangle mesh with a winding-number hierarchy and an AABB tree, each built on its
     first query (the refinement asks only for closest points, and a hierarchy it never uses would
-    cost it time: ``benchmarks/README.md``)."""
+    cost it time: ``docs/design-measurements.md``)."""
 
     def __init__(self, V: np.ndarray, F: np.ndarray):
         self.V = np.ascontiguousarray(V, np.float64)

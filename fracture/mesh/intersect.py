@@ -24,7 +24,7 @@ def typical_cell(X, E):
     """Four times the median length of edges ``E`` (of at most 4096 of them, evenly spread). Any size
     gives the same pairs: smaller cells hold fewer elements but put each in more of them. With the
     buckets sorted by x (:mod:`~fracture.mesh.hashgrid`) the size matters little
-    (``benchmarks/README.md``)."""
+    (``docs/design-measurements.md``)."""
     if not len(E):
         return 1.0
     E = E[:: -(-len(E) // 4096)]

@@ -276,7 +276,7 @@ def represented_features(F, n, eid):
     triangle. The vertices then go to triangles that represent an edge,
     first to those that can take all three of theirs, then two, then one
     (fewer representing triangles than first-come, first-served: see
-    ``benchmarks/README.md``).
+    ``docs/design-measurements.md``).
     """
     m = F.shape[0]
     rep = np.zeros(m, np.int64)

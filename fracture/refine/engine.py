@@ -109,7 +109,7 @@ _FEW_SPLITS = 0.005
 # ... and its moves are small, or its step lowered the functional by less than this fraction.
 _LITTLE_GAIN = 1e-4
 # Once the triangle budget is full, a stage has settled when an iteration lowers its functional by less than
-# this fraction: at full size an iteration costs the most and gains the least (benchmarks/README.md).
+# this fraction: at full size an iteration costs the most and gains the least (docs/design-measurements.md).
 _FULL_GAIN = 1e-2
 
 

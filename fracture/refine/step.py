@@ -158,7 +158,7 @@ class ImplicitStep:
     again with a smaller ``tau`` after a rejected one, or any matrix of the
     same sparsity pattern, keeps the order and the symbolic analysis and is
     only factorised numerically again (a quarter of a fresh factorisation's
-    cost on the branch; ``benchmarks/README.md`` compares the solvers).
+    cost on the branch; ``docs/design-measurements.md`` compares the solvers).
     """
 
     def __init__(self):
