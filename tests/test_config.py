@@ -256,3 +256,31 @@ def test_strength_layers_are_typed_by_their_kind_and_give_the_same_field():
     assert LAYER_TYPES["radial"]().inner == 0.2
     with pytest.raises(InputError, match="kind"):
         as_layer({"kind": "granite"})
+
+
+def test_defaults_name_the_package_presets_after_the_config_folder(tmp_path):
+    """``defaults: [strength/bricks]`` in a config anywhere reads the shipped preset; a file of that name
+    next to the config comes first; an unknown name is refused with the presets that exist; a file that
+    names itself is a cycle."""
+    from fracture.pipeline import presets
+
+    cfg = load_config(write(tmp_path / "mine.yaml", "defaults: [strength/bricks, example]\n"))
+    assert cfg.strength.layers[0].kind == "bricks" and cfg.refine.search == "graphcut"
+    assert cfg.input.exterior == str((presets.root() / "meshes" / "wall.obj").resolve())
+    (tmp_path / "strength").mkdir()
+    write(tmp_path / "strength" / "bricks.yaml", "strength: {layers: [{kind: radial}]}\n")
+    assert load_config(tmp_path / "mine.yaml").strength.layers[0].kind == "bricks"  # example's own layers last
+    assert load_config(write(tmp_path / "own.yaml", "defaults: [strength/bricks]\n")).strength.layers[0].kind == \
+        "radial"
+    message, _ = _error(tmp_path, "defaults: [strength/granite]\n")
+    assert "included config 'strength/granite' not found" in message
+    assert "strength/bricks" in message and "strength/marble" in message and "bunny" in message
+    message, _ = _error(tmp_path, "defaults: [../../../etc/passwd]\n")
+    assert "not found" in message
+    write(tmp_path / "self.yaml", "defaults: [self]\n")
+    with pytest.raises(ConfigError, match="cycle of defaults"):
+        load_config(tmp_path / "self.yaml")
+    listed = subprocess.run([sys.executable, "-m", "fracref", "presets"], capture_output=True, text=True)
+    assert listed.returncode == 0
+    names = [line.split()[0] for line in listed.stdout.splitlines()]
+    assert names == presets.names() and {"example", "bunny", "strength/bricks"} <= set(names)
