@@ -37,12 +37,21 @@ def refine(cfg, cf, fs):
 
 
 def in_processes(target, scenes, *args):
-    """Yield ``(scene, result)`` where ``target(scene, *args, queue)`` puts its result on the queue, one process each."""
-    ctx = mp.get_context("fork")
+    """Yield ``(scene, result)`` where ``target(scene, *args, queue)`` puts its result on the queue, one process each
+    (started with ``spawn``: a fresh interpreter, no threads or locks inherited from this one)."""
+    ctx = mp.get_context("spawn")
     for name in scenes:
         q = ctx.Queue()
-        p = ctx.Process(target=target, args=(name, *args, q))
+        p = ctx.Process(target=_prepared, args=(target, name, *args, q))
         p.start()
         result = q.get()
         p.join()
         yield name, result
+
+
+def _prepared(target, *args) -> None:
+    """``target(*args)`` in a process set up as the command line's (fracture.process.prepare_process)."""
+    from fracture.process import prepare_process
+
+    prepare_process()
+    target(*args)

@@ -247,12 +247,91 @@ def _room(out, count, more):
     return bigger
 
 
+def pairs(grid) -> np.ndarray:
+    """Every pair ``(e, g), e < g`` of elements whose boxes overlap, once, as an ``(c, 2)`` array (the
+    same rows in the same order on any number of threads)."""
+    return _pairs(grid, numba.get_num_threads())
+
+
 @numba.njit(cache=True)
-def pairs(grid):
-    """Every pair ``(e, g), e < g`` of elements whose boxes overlap, once, as an ``(c, 2)`` array."""
-    out, count = _pairs_on_one_level(grid)
-    out, count = _pairs_on_two_levels(grid, out, count)
+def _pairs(grid, threads):
+    out, count = _pairs_on_one_level_parallel(grid, threads)
+    if count < 0:  # a chunk ran out of room: the serial search grows its array as it goes
+        out, count = _pairs_on_one_level(grid)
+    out, count = _pairs_on_two_levels(grid, out, count, threads)
     return out[:count]
+
+
+# Pairs of one level are searched in this many chunks of buckets per thread (the buckets differ in size).
+_CHUNKS_PER_THREAD = 4
+# Room for this many pairs per slot in a chunk of the parallel search (the refinement's grids hold 2 to 7);
+# a chunk that needs more sends the search to the serial one.
+_PAIRS_PER_SLOT = 8
+
+
+@numba.njit(cache=True, parallel=True)
+def _pairs_on_one_level_parallel(grid, threads):
+    """:func:`_pairs_on_one_level` on ``threads`` threads: the buckets in contiguous chunks of about equal
+    numbers of slots, each chunk's pairs into rows of its own, then the chunks' rows one after the
+    other (the serial order). Returns ``count = -1`` if a chunk had not the room."""
+    scale, level, toff, tmask, start, items, key, box = grid
+    n_buckets = toff[-1]
+    bucket_level = np.empty(n_buckets, np.int64)
+    for L in range(tmask.shape[0]):
+        bucket_level[toff[L]:toff[L + 1]] = L
+    k = max(1, min(n_buckets, _CHUNKS_PER_THREAD * threads))
+    # chunk c holds buckets first[c]:first[c + 1], of about start[-1] / k slots each
+    first = np.searchsorted(start[:n_buckets], np.arange(k + 1) * (start[n_buckets] / k))
+    first[0], first[k] = 0, n_buckets
+    room = np.empty(k + 1, np.int64)
+    room[0] = 0
+    for c in range(k):
+        room[c + 1] = room[c] + 1024 + _PAIRS_PER_SLOT * (start[first[c + 1]] - start[first[c]])
+    rows = np.empty((room[k], 2), np.int64)
+    counts = np.zeros(k, np.int64)
+    for c in numba.prange(k):
+        count, cap, full = room[c], room[c + 1], False
+        for b in range(first[c], first[c + 1]):
+            s, end = scale[bucket_level[b]], start[b + 1]
+            for p in range(start[b], end):
+                if count + (end - p) > cap:
+                    full = True
+                    break
+                count = _pairs_of_slot(p, end, s, items, key, box, rows, count)
+            if full:
+                break
+        counts[c] = -1 if full else count - room[c]
+    if (counts < 0).any():
+        return rows, -1
+    out = np.empty((max(1024, _PAIRS_PER_SLOT * items.shape[0], counts.sum()), 2), np.int64)
+    n = 0
+    for c in range(k):
+        out[n:n + counts[c]] = rows[room[c]:room[c] + counts[c]]
+        n += counts[c]
+    return out, n
+
+
+@numba.njit(cache=True, inline="always")
+def _pairs_of_slot(p, end, s, items, key, box, out, count):
+    """The candidates of slot ``p`` among the later slots of its bucket (up to ``end``) written from row
+    ``count`` of ``out``; returns the rows' count with the pairs among them (module notes)."""
+    e, kp = items[p], key[p]
+    # p's box in locals, and its corner cells with q's written out: writes to
+    # out might alias box for the compiler, which then reloads it (20 % slower)
+    x0, y0, z0, x1, y1, z1 = box[p, 0], box[p, 1], box[p, 2], box[p, 3], box[p, 4], box[p, 5]
+    for q in range(p + 1, end):
+        if box[q, 0] > x1:
+            break
+        g = items[q]
+        out[count, 0] = min(e, g)
+        out[count, 1] = max(e, g)
+        # same cell (not a hash collision), overlapping, and reported from
+        # the cell of the lower corner of the boxes' intersection
+        count += ((key[q] == kp) & (y0 <= box[q, 4]) & (box[q, 1] <= y1) & (z0 <= box[q, 5])
+                  & (box[q, 2] <= z1)
+                  & (_key(_cell(max(x0, box[q, 0]), s), _cell(max(y0, box[q, 1]), s),
+                          _cell(max(z0, box[q, 2]), s)) == kp))
+    return count
 
 
 @numba.njit(cache=True)
@@ -264,7 +343,7 @@ def _pairs_on_one_level(grid):
     """
     scale, level, toff, tmask, start, items, key, box = grid
     # room for 8 pairs per slot (the refinement's grids hold 2 to 7): growing would copy them all
-    out = np.empty((max(1024, 8 * items.shape[0]), 2), np.int64)
+    out = np.empty((max(1024, _PAIRS_PER_SLOT * items.shape[0]), 2), np.int64)
     count = 0
     for L in range(tmask.shape[0]):
         s = scale[L]
@@ -272,35 +351,34 @@ def _pairs_on_one_level(grid):
             end = start[b + 1]
             for p in range(start[b], end):
                 out = _room(out, count, end - p)
-                e, kp = items[p], key[p]
-                # p's box in locals, and its corner cells with q's written out: writes to
-                # out might alias box for the compiler, which then reloads it (20 % slower)
-                x0, y0, z0, x1, y1, z1 = box[p, 0], box[p, 1], box[p, 2], box[p, 3], box[p, 4], box[p, 5]
-                for q in range(p + 1, end):
-                    if box[q, 0] > x1:
-                        break
-                    g = items[q]
-                    out[count, 0] = min(e, g)
-                    out[count, 1] = max(e, g)
-                    # same cell (not a hash collision), overlapping, and reported from
-                    # the cell of the lower corner of the boxes' intersection
-                    count += ((key[q] == kp) & (y0 <= box[q, 4]) & (box[q, 1] <= y1) & (z0 <= box[q, 5])
-                              & (box[q, 2] <= z1)
-                              & (_key(_cell(max(x0, box[q, 0]), s), _cell(max(y0, box[q, 1]), s),
-                                      _cell(max(z0, box[q, 2]), s)) == kp))
+                count = _pairs_of_slot(p, end, s, items, key, box, out, count)
     return out, count
 
 
-@numba.njit(cache=True)
-def _pairs_on_two_levels(grid, out, count):
+@numba.njit(cache=True, parallel=True)
+def _pairs_on_two_levels(grid, out, count, threads):
     """Add to ``out`` (``count`` rows used) the pairs of elements on two levels: the elements of
     one level look up the cells their boxes cover on the other, from whichever side covers fewer
     cells (the many small elements of level 0 looking up every coarse level would mostly find
-    empty buckets; the few coarse ones cover many fine cells)."""
+    empty buckets; the few coarse ones cover many fine cells).
+
+    The lookups (a source slot and the level it looks up) are listed in the serial order and
+    made on ``threads`` threads in contiguous chunks, each chunk's pairs into rows of its own
+    (:data:`_PAIRS_PER_SLOT` per lookup); a chunk that has not the room is made again on its own
+    array, which grows. The chunks' rows are then appended in order: the rows and their order do
+    not depend on the number of threads."""
     items, box = grid.items, grid.box
     top = grid.tmask.shape[0] - 1
     corners = _corner_slots(grid)
-    buf = np.empty(256, np.int64)
+    n_work = 0
+    for coarse in range(1, top + 1):
+        for fine in range(coarse):
+            if corners[fine].shape[0] and corners[coarse].shape[0]:
+                n_work += corners[coarse if look_down(corners[fine].shape[0], corners[coarse].shape[0],
+                                                      coarse - fine) else fine].shape[0]
+    source_slot = np.empty(n_work, np.int64)
+    target_level = np.empty(n_work, np.int64)
+    n_work = 0
     for coarse in range(1, top + 1):
         for fine in range(coarse):
             n_fine, n_coarse = corners[fine].shape[0], corners[coarse].shape[0]
@@ -308,14 +386,47 @@ def _pairs_on_two_levels(grid, out, count):
                 continue
             source, target = (coarse, fine) if look_down(n_fine, n_coarse, coarse - fine) else (fine, coarse)
             for p in corners[source]:
-                e = items[p]
-                buf, k = _slots(grid, box[p, :3], box[p, 3:], target, target + 1, buf)
-                out = _room(out, count, k)
-                for i in range(k):
-                    g = items[buf[i]]
-                    out[count, 0] = min(e, g)
-                    out[count, 1] = max(e, g)
-                    count += 1
+                source_slot[n_work], target_level[n_work] = p, target
+                n_work += 1
+    k = max(1, min(n_work, _CHUNKS_PER_THREAD * threads))
+    first = (np.arange(k + 1) * n_work) // k
+    room = 1024 + _PAIRS_PER_SLOT * (first[1:] - first[:-1])
+    offset = np.zeros(k + 1, np.int64)
+    for c in range(k):
+        offset[c + 1] = offset[c] + room[c]
+    rows = np.empty((offset[k], 2), np.int64)
+    counts = np.zeros(k, np.int64)
+    for c in numba.prange(k):
+        buf = np.empty(256, np.int64)
+        n, cap = 0, room[c]
+        for w in range(first[c], first[c + 1]):
+            p = source_slot[w]
+            buf, m = _slots(grid, box[p, :3], box[p, 3:], target_level[w], target_level[w] + 1, buf)
+            if n + m > cap:
+                n = -1
+                break
+            for i in range(m):
+                g = items[buf[i]]
+                rows[offset[c] + n, 0] = min(items[p], g)
+                rows[offset[c] + n, 1] = max(items[p], g)
+                n += 1
+        counts[c] = n
+    buf = np.empty(256, np.int64)
+    for c in range(k):
+        if counts[c] >= 0:
+            out = _room(out, count, counts[c])
+            out[count:count + counts[c]] = rows[offset[c]:offset[c] + counts[c]]
+            count += counts[c]
+            continue
+        for w in range(first[c], first[c + 1]):  # the chunk that had not the room, on the growing array
+            p = source_slot[w]
+            buf, m = _slots(grid, box[p, :3], box[p, 3:], target_level[w], target_level[w] + 1, buf)
+            out = _room(out, count, m)
+            for i in range(m):
+                g = items[buf[i]]
+                out[count, 0] = min(items[p], g)
+                out[count, 1] = max(items[p], g)
+                count += 1
     return out, count
 
 

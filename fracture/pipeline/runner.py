@@ -123,6 +123,17 @@ def _run_stage(ctx: RunContext, stage: Stage, keep_products: bool, out: Path, wr
     return {"cache": writer.submit(cache.store, *args)}
 
 
+def _threads() -> dict:
+    """The parallel kernels' threads and threading layer (``none``: no parallel kernel ran in this process)."""
+    import numba
+
+    try:
+        layer = numba.threading_layer()
+    except ValueError:  # numba starts its threading layer with the first parallel kernel
+        layer = "none"
+    return {"threads": numba.get_num_threads(), "layer": layer}
+
+
 def _stored(entry: Path | None) -> str:
     return "stored" if entry is not None else "not stored (the cache cannot be written)"
 
@@ -191,6 +202,7 @@ def run(cfg: Config, out: str | Path, until: str | None = None, force: bool = Fa
             cache.trim()  # once per run: it walks every entry
         manifest["stats"] = ctx.stats
         manifest["counts"] = ctx.counts
+        manifest["threads"] = _threads()
         manifest["notes"] = ctx.notes
         manifest["finished"] = datetime.now(timezone.utc).isoformat(timespec="seconds")
         manifest["files"] = {rel: {"sha256": _sha256(staging / rel), "bytes": (staging / rel).stat().st_size}

@@ -164,7 +164,10 @@ def _local(tasks: list[tuple[Point, tuple]], jobs: int) -> Iterator[tuple[Point,
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
-    with ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context("spawn")) as pool:
+    from fracture.process import prepare_process
+
+    # fresh interpreters (spawn: nothing of this process's threads), each set up as the command line is
+    with ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context("spawn"), initializer=prepare_process) as pool:
         futures = {pool.submit(run_point, *args): p for p, args in tasks}
         for f in as_completed(futures):
             yield futures[f], f.result()
