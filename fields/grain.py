@@ -15,17 +15,72 @@ becomes ``1/2 m x e`` (:mod:`fracture.refine.flow`), and the search charges
 an edge of the grid graph the weights that measure ``g`` (``fracture.refine.cut_weights``, which
 reads the directions and the ratio from here).
 
-Fibres run ``along`` an axis (a branch's wood) or ``around`` it (circles about
-the line through ``center`` along the axis).
+Fibres run ``along`` an axis (a branch's wood), ``around`` it (circles about
+the line through ``center`` along the axis), or as a ``volume`` of directions
+gives them (:class:`DirectionField`: a direction per grid node; a fibre has no
+sign, so the field is interpolated as the tensor ``d d^T`` and read as its
+principal direction, where ``d`` and ``-d`` on two neighbouring nodes would
+cancel as vectors).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
+from fields.errors import InputError
+from fields.grid import Grid
+from fields.interpolate import trilinear
 from fields.tolerances import tol
+
+# The six entries of a symmetric 3 x 3 tensor (upper triangle), as the direction field stores them.
+_UPPER = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
+
+
+class DirectionField:
+    """Fibre directions given per node of a grid (module notes): ``directions`` ``(nx, ny, nz, 3)``,
+    each finite and of nonzero length (its sign and length do not matter)."""
+
+    def __init__(self, grid: Grid, directions: np.ndarray):
+        d = np.asarray(directions, np.float64)
+        d = d / np.linalg.norm(d, axis=-1, keepdims=True)
+        self.grid = grid
+        self.tensor = np.stack([d[..., a] * d[..., b] for a, b in _UPPER], axis=-1)
+
+    def __call__(self, P: np.ndarray) -> np.ndarray:
+        """Unit fibre directions at points ``(k, 3)``: the principal direction of the interpolated tensor."""
+        t = trilinear(self.grid, self.tensor, np.asarray(P, np.float64).reshape(-1, 3))
+        T = np.empty((len(t), 3, 3))
+        for k, (a, b) in enumerate(_UPPER):
+            T[:, a, b] = T[:, b, a] = t[:, k]
+        return np.linalg.eigh(T)[1][:, :, -1]
+
+
+def load_directions(path: str | Path, key: str) -> np.ndarray:
+    """A ``.npy`` array of fibre directions ``(nx, ny, nz, 3)`` (at least two nodes per axis), each finite and
+    of nonzero length; refused naming ``key``, the file and the first bad node."""
+    path = Path(path)
+    where = f"{key} ({path})"
+    try:
+        d = np.load(path, allow_pickle=False)
+    except Exception as exc:  # numpy raises several kinds for a damaged file
+        raise InputError(f"{where}: cannot read as a .npy array ({exc})") from None
+    if d.ndim != 4 or d.shape[3] != 3 or min(d.shape[:3]) < 2:
+        raise InputError(f"{where}: fibre directions of shape {d.shape}; expected (nx, ny, nz, 3) with at least two "
+                         "nodes per axis")
+    if not np.issubdtype(d.dtype, np.number) or np.issubdtype(d.dtype, np.complexfloating):
+        raise InputError(f"{where}: fibre directions of dtype {d.dtype}; expected real numbers")
+    d = d.astype(np.float64)
+    finite = np.all(np.isfinite(d), axis=-1)
+    bad = ~finite | (np.linalg.norm(np.where(finite[..., None], d, 0.0), axis=-1) <= tol.zero)
+    if bad.any():
+        node = tuple(int(i) for i in np.argwhere(bad)[0])
+        what = "NaN or infinite" if not finite[node] else "of zero length"
+        raise InputError(f"{where}: the direction at node {node} is {what} ({int(bad.sum())} such nodes); expected "
+                         "a direction of nonzero length at every node")
+    return d
 
 
 @dataclass(frozen=True)
@@ -37,7 +92,7 @@ class Grain:
     ratio : float
         ``r >= 1``.
     fibres : str
-        ``along`` the axis or ``around`` it.
+        ``along`` the axis, ``around`` it, or ``volume`` (``field`` gives them).
     axis : (3,) float
         Unit vector.
     center : (3,) float
@@ -48,12 +103,16 @@ class Grain:
     fibres: str
     axis: np.ndarray
     center: np.ndarray
+    field: DirectionField | None = None
 
     def __post_init__(self):
         if not np.isfinite(self.ratio) or self.ratio < 1.0:
             raise ValueError(f"a grain's ratio must be a number >= 1, got {self.ratio!r}")
-        if self.fibres not in ("along", "around"):
-            raise ValueError(f"a grain's fibres run 'along' or 'around' its axis, got {self.fibres!r}")
+        if self.fibres not in ("along", "around", "volume"):
+            raise ValueError(f"a grain's fibres run 'along' or 'around' its axis or as a volume gives them, got "
+                             f"{self.fibres!r}")
+        if (self.fibres == "volume") != (self.field is not None):
+            raise ValueError("a grain's fibres come from a direction field exactly when they are a 'volume'")
         a = np.asarray(self.axis, np.float64)
         length = float(np.linalg.norm(a)) if np.all(np.isfinite(a)) else 0.0
         if length <= tol.zero:
@@ -65,6 +124,8 @@ class Grain:
         """Unit fibre directions at points ``(k, 3)``. Around the axis, on the axis itself (no circle), the
         axis."""
         P = np.asarray(P, np.float64).reshape(-1, 3)
+        if self.field is not None:
+            return self.field(P)
         if self.fibres == "along":
             return np.broadcast_to(self.axis, P.shape).copy()
         r = P - self.center

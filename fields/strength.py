@@ -193,7 +193,7 @@ def radial(U, frame, rng, *, axis, center, radius, inner, outer, exponent):
     return inner + (outer - inner) * np.minimum(r, 1.0) ** exponent
 
 
-def grain(U, frame, rng, *, fibres, axis, center, ratio):
+def grain(U, frame, rng, *, fibres, axis, center, ratio, path, bounds):
     """Grain (:mod:`fields.grain`): fibres along or around an axis that make a crack across them ``ratio``
     times dearer than one along them. It adds nothing to zeta (its weight does not matter): the fields
     take it out of the layers with :func:`grain_of`."""
@@ -397,10 +397,13 @@ class GrainLayer(Layer):
     """The direction of a material's fibres, which makes cracks across them dear (:func:`grain`)."""
 
     kind: Literal["grain"] = choice("grain", "the kind of this layer")
-    fibres: Literal["along", "around"] = choice("along", "the fibres run along the axis or around it")
+    fibres: Literal["along", "around", "volume"] = choice(
+        "along", "the fibres run along the axis, around it, or as the direction volume (path) gives them")
     axis: Axis = choice("z")
     center: Vec3 | None = vec3(None, "around: a point on the axis (unit coordinates); null: box centre")
     ratio: float = number(3.0, 1.0, 20.0, "cost of a crack across the fibres over one along them")
+    path: str | None = file(None, "volume: .npy file with a fibre direction per node, (nx, ny, nz, 3)")
+    bounds: Bounds | None = bounds(None, "volume: material-space box of the directions; null: the object's box")
 
 
 class VolumeLayer(Layer):
@@ -483,10 +486,20 @@ def grain_of(layers: list, bounds):
     if len(found) > 1:
         raise InputError(f"strength.layers[{found[1][0]}]: a second grain layer; expected at most one (the fibres "
                          f"of layer {found[0][0]})")
-    _, layer = found[0]
+    i, layer = found[0]
     frame = UnitFrame(*(np.asarray(b, np.float64) for b in bounds))
     c = 0.5 * frame.extent if layer.center is None else np.asarray(layer.center, np.float64)
-    return Grain(float(layer.ratio), layer.fibres, np.eye(3)[_axis(layer.axis)], frame.to_material(c))
+    field = None
+    if layer.fibres == "volume":
+        from fields.grain import DirectionField, load_directions
+
+        key = f"strength.layers[{i}].path"
+        if layer.path is None:
+            raise InputError(f"{key}: fibres: volume needs the .npy file of fibre directions; expected a path")
+        d = load_directions(layer.path, key)
+        lo, hi = (frame.lo, frame.hi) if layer.bounds is None else (np.asarray(b, np.float64) for b in layer.bounds)
+        field = DirectionField(Grid.from_bounds(lo, hi, d.shape[:3]), d)
+    return Grain(float(layer.ratio), layer.fibres, np.eye(3)[_axis(layer.axis)], frame.to_material(c), field)
 
 
 def normalize01(values: np.ndarray) -> np.ndarray:

@@ -120,3 +120,58 @@ def test_a_cut_across_wood_splinters_along_its_bundles():
     assert area[walls].sum() > 0.2 * area.sum()
     C = S.V[S.F].mean(axis=1)
     assert np.average(pyramid.value(C), weights=area) < 0.85 * pyramid.value(V[F].mean(axis=1)).mean()
+
+
+def _write_directions(tmp_path, d):
+    path = tmp_path / "fibres.npy"
+    np.save(path, d)
+    return path
+
+
+def test_a_volume_of_directions_gives_the_fibres_it_holds_whatever_their_sign(tmp_path):
+    """Fibres along z on every node (half of them written as -z, some longer) read as z everywhere, as
+    fibres along the axis do; a field that turns from x to y between two nodes turns in between."""
+    from fields.grain import Grain
+    from fields.strength import grain_of
+
+    d = np.zeros((3, 4, 5, 3))
+    d[..., 2] = np.where(np.indices((3, 4, 5))[0] % 2, -2.0, 1.0)
+    layers = [{"kind": "grain", "fibres": "volume", "path": str(_write_directions(tmp_path, d)), "ratio": 4.0}]
+    g = grain_of(layers, ([0.0, 0.0, 0.0], [1.0, 2.0, 3.0]))
+    P = np.random.default_rng(0).random((200, 3)) * [1.0, 2.0, 3.0]
+    np.testing.assert_allclose(np.abs(g.directions(P)[:, 2]), 1.0, atol=1e-12)
+    along = Grain(4.0, "along", np.array([0.0, 0.0, 1.0]), np.zeros(3))
+    N = np.random.default_rng(1).normal(size=(200, 3))
+    N /= np.linalg.norm(N, axis=1)[:, None]
+    np.testing.assert_allclose(g.metric(N, P)[0], along.metric(N, P)[0], atol=1e-12)
+
+    turn = np.zeros((2, 2, 2, 3))
+    turn[0, ..., 0], turn[1, ..., 1] = 1.0, 1.0  # x on the low nodes, y on the high ones
+    g = grain_of([{**layers[0], "path": str(_write_directions(tmp_path, turn))}], ([0, 0, 0], [1, 1, 1]))
+    d = g.directions(np.array([[0.1, 0.5, 0.5], [0.9, 0.5, 0.5]]))
+    assert abs(d[0, 0]) > 0.99 and abs(d[1, 1]) > 0.99
+
+
+@pytest.mark.parametrize("bad, words", [
+    (np.zeros((3, 3, 3)), "expected (nx, ny, nz, 3)"),
+    (np.ones((1, 3, 3, 3)), "at least two nodes per axis"),
+    ("nan", "node (1, 0, 2) is NaN or infinite"),
+    ("zero", "node (0, 2, 1) is of zero length"),
+])
+def test_a_bad_volume_of_directions_is_refused_naming_the_key_and_the_node(tmp_path, bad, words):
+    from fields.errors import InputError
+    from fields.strength import grain_of
+
+    if isinstance(bad, str):
+        d = np.ones((3, 3, 3, 3))
+        if bad == "nan":
+            d[1, 0, 2, 1] = np.nan
+        else:
+            d[0, 2, 1] = 0.0
+        bad = d
+    layers = [{"kind": "radial"}, {"kind": "grain", "fibres": "volume", "path": str(_write_directions(tmp_path, bad))}]
+    with pytest.raises(InputError) as err:
+        grain_of(layers, ([0, 0, 0], [1, 1, 1]))
+    assert str(err.value).startswith("strength.layers[1].path (") and words in str(err.value), str(err.value)
+    with pytest.raises(InputError, match=r"strength.layers\[0\].path: fibres: volume needs"):
+        grain_of([{"kind": "grain", "fibres": "volume"}], ([0, 0, 0], [1, 1, 1]))
