@@ -22,7 +22,15 @@ BUDGETS = {"blender_cube8": 15000}
 
 
 def pytest_configure(config):
-    """Stale compiled kernels are cleared once, by the main process (not by each xdist worker)."""
+    """Stale compiled kernels are cleared once, by the main process (not by each xdist worker); every
+    process runs the parallel kernels on the threading layer the command line chooses (numba's own
+    choice here, GNU OpenMP, keeps its threads spinning between kernels, and with a worker per core they
+    take the other worker's time)."""
+    import numba
+
+    from fracture.process import THREADING_LAYER
+
+    numba.config.THREADING_LAYER = THREADING_LAYER
     if not hasattr(config, "workerinput"):
         from fracture.refine import clear_stale_numba_cache
 

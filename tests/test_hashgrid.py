@@ -88,3 +88,27 @@ def test_crowded_buckets_are_sorted_by_lower_x_and_miss_no_pair():
     found = {tuple(p) for p in hashgrid.pairs(grid).tolist()}
     expected = {(a, b) for a in range(600) for b in range(a + 1, 600) if _overlapping(lo, hi, a, b)}
     assert found == expected
+
+
+def test_the_pairs_are_the_same_rows_in_the_same_order_on_any_number_of_threads():
+    """The parallel search writes each chunk's pairs into rows of its own and appends them in order:
+    one thread and two give the same array (the collision handling that reads it, the same result)."""
+    import numba
+
+    from fracture.mesh.intersect import triangle_grid
+    from fracture.mesh.primitives import sheet
+
+    V, F = sheet(lambda u, v: np.stack([u, v, 0.05 * np.sin(8 * u) * np.cos(6 * v)], 1), (0, 1), (0, 1), 60, 60)
+    rng = np.random.default_rng(0)
+    V = np.concatenate([V, rng.random((40, 3))])  # a few large triangles across it: pairs on two levels
+    F = np.concatenate([F, rng.integers(len(V) - 40, len(V), (20, 3))])
+    grid = triangle_grid(V, F)
+    before = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        one = hashgrid.pairs(grid)
+        numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
+        two = hashgrid.pairs(grid)
+    finally:
+        numba.set_num_threads(before)
+    assert len(one) > 1000 and np.array_equal(one, two)
