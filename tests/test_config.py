@@ -181,7 +181,8 @@ def test_explain_says_what_a_key_means_from_the_same_declarations_the_code_uses(
     assert RefineSection().params() == RefineParams()
     assert [line.split(" = ")[0] for line in explain("strength.layers.grain").splitlines()] == [
         "strength.layers.grain.weight", "strength.layers.grain.fibres", "strength.layers.grain.axis",
-        "strength.layers.grain.center", "strength.layers.grain.ratio"]
+        "strength.layers.grain.center", "strength.layers.grain.ratio", "strength.layers.grain.path",
+        "strength.layers.grain.bounds"]
     with pytest.raises(ConfigError, match="unknown key 'stpe' after refine; expected one of iterations"):
         explain("refine.stpe")
     with pytest.raises(ConfigError, match="unknown key 'granite' after strength.layers; expected one of marble"):
