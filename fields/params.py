@@ -53,8 +53,7 @@ class Section(BaseModel):
     """A group of parameters: strict, closed to unknown keys, frozen; each field's range and kind checked
     (:func:`expected` says what it accepts)."""
 
-    model_config = ConfigDict(strict=True, extra="forbid", frozen=True, allow_inf_nan=False,
-                              validate_default=False)
+    model_config = ConfigDict(strict=True, extra="forbid", frozen=True, allow_inf_nan=False)
 
     @field_validator("*", mode="after")
     @classmethod

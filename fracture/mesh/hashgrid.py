@@ -390,27 +390,22 @@ def _pairs_on_two_levels(grid, out, count, threads):
                 n_work += 1
     k = max(1, min(n_work, _CHUNKS_PER_THREAD * threads))
     first = (np.arange(k + 1) * n_work) // k
-    room = 1024 + _PAIRS_PER_SLOT * (first[1:] - first[:-1])
-    offset = np.zeros(k + 1, np.int64)
+    offset = np.zeros(k + 1, np.int64)  # chunk c's rows: offset[c]:offset[c + 1]
     for c in range(k):
-        offset[c + 1] = offset[c] + room[c]
+        offset[c + 1] = offset[c] + 1024 + _PAIRS_PER_SLOT * (first[c + 1] - first[c])
     rows = np.empty((offset[k], 2), np.int64)
     counts = np.zeros(k, np.int64)
     for c in numba.prange(k):
         buf = np.empty(256, np.int64)
-        n, cap = 0, room[c]
+        n = offset[c]
         for w in range(first[c], first[c + 1]):
-            p = source_slot[w]
-            buf, m = _slots(grid, box[p, :3], box[p, 3:], target_level[w], target_level[w] + 1, buf)
-            if n + m > cap:
+            buf, m = _slots(grid, box[source_slot[w], :3], box[source_slot[w], 3:], target_level[w],
+                            target_level[w] + 1, buf)
+            if n + m > offset[c + 1]:
                 n = -1
                 break
-            for i in range(m):
-                g = items[buf[i]]
-                rows[offset[c] + n, 0] = min(items[p], g)
-                rows[offset[c] + n, 1] = max(items[p], g)
-                n += 1
-        counts[c] = n
+            n = _write_pairs(items, source_slot[w], buf, m, rows, n)
+        counts[c] = n - offset[c] if n >= 0 else -1
     buf = np.empty(256, np.int64)
     for c in range(k):
         if counts[c] >= 0:
@@ -419,15 +414,24 @@ def _pairs_on_two_levels(grid, out, count, threads):
             count += counts[c]
             continue
         for w in range(first[c], first[c + 1]):  # the chunk that had not the room, on the growing array
-            p = source_slot[w]
-            buf, m = _slots(grid, box[p, :3], box[p, 3:], target_level[w], target_level[w] + 1, buf)
+            buf, m = _slots(grid, box[source_slot[w], :3], box[source_slot[w], 3:], target_level[w],
+                            target_level[w] + 1, buf)
             out = _room(out, count, m)
-            for i in range(m):
-                g = items[buf[i]]
-                out[count, 0] = min(items[p], g)
-                out[count, 1] = max(items[p], g)
-                count += 1
+            count = _write_pairs(items, source_slot[w], buf, m, out, count)
     return out, count
+
+
+@numba.njit(cache=True, inline="always")
+def _write_pairs(items, p, found, m, out, count):
+    """The pairs of slot ``p``'s element with the elements of the first ``m`` slots of ``found``, from row
+    ``count`` of ``out``; returns the rows' count."""
+    e = items[p]
+    for i in range(m):
+        g = items[found[i]]
+        out[count, 0] = min(e, g)
+        out[count, 1] = max(e, g)
+        count += 1
+    return count
 
 
 @numba.njit(cache=True)

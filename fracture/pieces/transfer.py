@@ -93,6 +93,12 @@ class Transfer:
     def n_frames(self) -> int:
         return self.maps.shape[0]
 
+    @property
+    def size(self) -> float:
+        """The scene's size: the diagonal of the box of the pieces' material positions (B's box)."""
+        X = self.material
+        return float(np.linalg.norm(X.max(axis=0) - X.min(axis=0))) if len(X) else 1.0
+
     def positions(self, t: int) -> np.ndarray:
         """Positions ``(rows, 3)`` of every piece vertex at frame ``t`` (0-based)."""
         M = self.maps[t]
@@ -269,6 +275,13 @@ def build_transfer(cf: CoarseFracture, pieces: Pieces, tree: sp.csr_matrix) -> T
                     offsets=np.asarray(offsets), time=time, vertex=vertex, material=X, slot_component=cs)
 
 
+def _slots_of(slot_component: np.ndarray, n_components: int) -> list[np.ndarray]:
+    """Per component, its slots (ascending)."""
+    order = np.argsort(slot_component, kind="stable")
+    bounds = np.searchsorted(slot_component[order], np.arange(n_components + 1))
+    return [order[bounds[c]:bounds[c + 1]] for c in range(n_components)]
+
+
 def _common_maps(tr: Transfer, size: float) -> tuple[np.ndarray, np.ndarray]:
     """Per frame and component, the one map all the component's slots have (rigid and affine motion: a
     2 x 2 x 2 lattice moved so has the same gradient everywhere), and whether they all have it (within
@@ -277,8 +290,7 @@ def _common_maps(tr: Transfer, size: float) -> tuple[np.ndarray, np.ndarray]:
     common = np.zeros((T, C, 3, 4))
     same = np.zeros((T, C), bool)
     scale = np.array([1.0, 1.0, 1.0, max(size, _TINY_SIZE)])
-    for c in range(C):
-        m = np.flatnonzero(tr.slot_component == c)
+    for c, m in enumerate(_slots_of(tr.slot_component, C)):
         if not len(m):
             continue
         first = tr.maps[:, m[0]]
@@ -315,7 +327,8 @@ def transfer_arrays(tr: Transfer, size: float) -> dict[str, np.ndarray]:
     common, same = _common_maps(tr, size)
     t_own, c_own = np.nonzero(~same)  # (frame, component) pairs whose slots have maps of their own
     out.update(slot_component=tr.slot_component.astype(np.int32), common_maps=common, common_same=same)
-    out["slot_maps"] = (np.concatenate([tr.maps[t, tr.slot_component == c] for t, c in zip(t_own, c_own)])
+    slots = _slots_of(tr.slot_component, same.shape[1])
+    out["slot_maps"] = (np.concatenate([tr.maps[t, slots[c]] for t, c in zip(t_own, c_own)])
                         if len(t_own) else np.zeros((0, 3, 4)))
     return out
 
@@ -334,15 +347,14 @@ def load_transfer(path) -> Transfer:
         else:
             common, same, slot_maps = z["common_maps"], z["common_same"], z["slot_maps"]
             maps = np.empty((len(common), len(slot_component), 3, 4))
+            slots = _slots_of(slot_component, same.shape[1])
             k = 0
-            for t, c in zip(*np.nonzero(np.ones_like(same))):
-                m = slot_component == c
+            for t, c in zip(*np.nonzero(np.ones_like(same))):  # in the order transfer_arrays wrote them
                 if same[t, c]:
-                    maps[t, m] = common[t, c]
+                    maps[t, slots[c]] = common[t, c]
                 else:
-                    n = int(m.sum())
-                    maps[t, m] = slot_maps[k:k + n]
-                    k += n
+                    maps[t, slots[c]] = slot_maps[k:k + len(slots[c])]
+                    k += len(slots[c])
         return Transfer(own=csr("own"), shared=csr("shared"), shared_rows=z["shared_rows"].astype(np.int64),
                         shared_time=z["shared_time"].astype(np.float64), maps=maps,
                         offsets=z["offsets"].astype(np.int64), time=z["time"].astype(np.float64),

@@ -66,7 +66,5 @@ def export_run(run: str | Path, fmt: str = "usd", out: str | Path | None = None)
         raise InputError(f"export: {out}: a USD file name ends in .usd, .usdc or .usda")
     if not out.parent.is_dir():
         raise InputError(f"export: {out.parent} is not a directory")
-    every = transfer.material
-    size = float(np.linalg.norm(every.max(axis=0) - every.min(axis=0))) if len(every) else 1.0
     return write_pieces_usd(out, names, faces, exterior, frame_points(transfer), rest=rest_points(transfer),
-                            size=size, fps=fps, up_axis="Y" if up == "y" else "Z")
+                            size=transfer.size, fps=fps, up_axis="Y" if up == "y" else "Z")

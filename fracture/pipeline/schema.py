@@ -18,8 +18,8 @@ from typing import Any, Callable, Literal, Mapping
 from pydantic import BaseModel, Field, ValidationError
 
 from fields.colormap import NAMES as COLORMAPS
-from fields.params import (Int3, KeyGrid, Section, Vec3, choice, describe, expected, file, flag, folder, int3, integer,
-                           key_grid, number, text, vec3)
+from fields.params import (Int3, KeyGrid, Section, Vec3, choice, describe, expected, field_meta, file, flag, folder,
+                           int3, integer, key_grid, number, text, vec3)
 from fields.strength import LAYER_TYPES, Layer, MarbleLayer, StrengthLayer
 from fracture.errors import ConfigError
 from fracture.refine.params import RefineParams
@@ -277,8 +277,6 @@ def validate(tree: Any, origin: Callable[[str], str], model: type[Section] = Con
 
 def resolve_paths(section: Section, resolve: Callable[[str, str, str], str], prefix: str = "") -> Section:
     """``section`` with every file and directory path made absolute by ``resolve(key, value, kind)``."""
-    from fields.params import field_meta
-
     update = {}
     for name, f in type(section).model_fields.items():
         value = getattr(section, name)

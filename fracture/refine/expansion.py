@@ -41,6 +41,11 @@ class PottsGraph:
     def energy(self, labels: np.ndarray) -> float:
         return float(self.w[labels[self.p] != labels[self.q]].sum())
 
+    def among(self, nodes: np.ndarray) -> PottsGraph:
+        """The edges with an end among ``nodes`` (a mask ``(n,)``): all that a move of those nodes reads."""
+        keep = nodes[self.p] | nodes[self.q]
+        return PottsGraph(self.n, self.p[keep], self.q[keep], self.w[keep])
+
     @cached_property
     def _by_node(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The edges by their first node, then by their second: the order and the two row pointers."""

@@ -443,8 +443,7 @@ def _cut(sub: _BoxGrid, near, keep, labels, shifted, node_weights, reach: dict
     unsure = ndimage.binary_dilation(unsure.reshape(sub.shape), np.ones((3, 3, 3), bool), _FINE_BAND).ravel()
     moving = free & unsure[near]
     start_labels = np.where(free & (agreed >= 0), agreed, labels)
-    fine_graph = _graph(sub, near, moving, shifted, node_weights)
-    out, log = expand(fine_graph, start_labels, moving, reach, cycles=_CYCLES)
+    out, log = expand(graph.among(moving), start_labels, moving, reach, cycles=_CYCLES)
     log.energy = [start, graph.energy(out)]
     return out, graph, log
 

@@ -72,7 +72,7 @@ def animate_stage(ctx: RunContext) -> None:
             write_ply(ctx.path(layout.piece(c)), V, F,
                       vertex_data={"fracture_time": transfer.time[rows].astype(np.float32)},
                       face_data={"exterior": pieces.exterior[c].astype(np.uint8)})
-        _save_transfer(ctx, transfer, BV)
+        _save_transfer(ctx, transfer)
         writer = ObjFrames(cf.names, [F for _, _, F in local], [len(ids) for ids, _, _ in local],
                            exterior=pieces.exterior)
         if opts.obj_frames:
@@ -96,7 +96,7 @@ def animate_stage(ctx: RunContext) -> None:
         if opts.usd:
             write_pieces_usd(ctx.path(layout.USD), cf.names,
                              [F for _, _, F in local], pieces.exterior, frame_points(transfer),
-                             rest=rest_points(transfer), size=_size(BV), fps=opts.fps,
+                             rest=rest_points(transfer), size=transfer.size, fps=opts.fps,
                              up_axis="Y" if cf.up_axis == "y" else "Z")
 
     ctx.products.pieces = pieces
@@ -106,10 +106,5 @@ def animate_stage(ctx: RunContext) -> None:
     ctx.stats["animate"] = checks
 
 
-def _size(BV: np.ndarray) -> float:
-    """The scene's size: the diagonal of B's box."""
-    return float(np.linalg.norm(BV.max(axis=0) - BV.min(axis=0)))
-
-
-def _save_transfer(ctx: RunContext, tr: Transfer, BV: np.ndarray) -> None:
-    ctx.save_npz(layout.TRANSFER, transfer_arrays(tr, _size(BV)), compress=True)
+def _save_transfer(ctx: RunContext, tr: Transfer) -> None:
+    ctx.save_npz(layout.TRANSFER, transfer_arrays(tr, tr.size), compress=True)
