@@ -39,3 +39,31 @@ def test_a_segment_meets_the_box_where_it_leaves_it():
     t = B.crossing(inner, outer)
     np.testing.assert_allclose(t[:2], [0.5, 0.4], atol=1e-12)
     assert np.isnan(t[2])
+
+
+def _hollow_box(resolution):
+    """A box with a box-shaped cavity (the inner box's triangles turned inward), and a second box apart."""
+    Vo, Fo = box([0, 0, 0], [2, 2, 2], resolution)
+    Vi, Fi = box([0.6, 0.6, 0.6], [1.4, 1.4, 1.4], resolution)
+    Va, Fa = box([2.7, 0.3, 0.3], [3.3, 0.9, 3.1], resolution)
+    V = np.concatenate([Vo, Vi, Va])
+    F = np.concatenate([Fo, Fi[:, ::-1] + len(Vo), Fa + len(Vo) + len(Vi)])
+    return V, F
+
+
+def test_grid_nodes_answer_as_asking_every_node():
+    # B's triangles finer and coarser than the cells; nodes on B, in the cavity, in the box apart, outside
+    for resolution in ((1, 1, 1), (12, 12, 12)):
+        B = Exterior(*_hollow_box(resolution))
+        origin, spacing, shape = np.array([-0.4, -0.4, -0.4]), np.array([0.1, 0.1, 0.2]), (42, 20, 18)
+        idx = np.stack(np.unravel_index(np.arange(int(np.prod(shape))), shape), 1)
+        P = origin + idx * spacing
+        within = 0.02
+        inside, on_b = B.grid_nodes(origin, spacing, shape, within)
+        assert inside.ravel().tolist() == B.inside(P).tolist()
+        assert on_b.ravel().tolist() == (B.closest(P)[0] < within * within).tolist()
+        assert on_b.any() and inside.any() and not inside.all()
+        # only the asked nodes are answered
+        asked = np.random.default_rng(1).random(shape) < 0.3
+        inside_a, on_b_a = B.grid_nodes(origin, spacing, shape, within, asked=asked)
+        assert (inside_a == (inside & asked)).all() and (on_b_a == (on_b & asked)).all()

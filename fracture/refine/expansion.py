@@ -1,5 +1,5 @@
 """Alpha-expansion (Boykov, Veksler and Zabih, "Fast approximate energy minimization via graph cuts",
-PAMI 2001) of a Potts energy with a weight per edge, on SciPy's maximum flow.
+PAMI 2001) of a Potts energy with a weight per edge, on PyMaxflow's minimum cuts.
 
 The energy of labels ``l`` on a graph with edges ``(p, q)`` of weight
 ``w_pq >= 0`` is ``E(l) = sum w_pq [l_p != l_q]``: the weighted area of the

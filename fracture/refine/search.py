@@ -93,6 +93,8 @@ _SAMPLES_PER_CELL = 16.0
 _SAMPLES_MIN, _SAMPLES_MAX = 20000, 1000000
 # Taubin smoothing of the contour: passes and the two factors.
 _SMOOTH_PASSES = 30
+# ... putting the rims back on B after every this many passes.
+_RIM_EVERY = 5
 _LAMBDA, _MU = 0.5, -0.53
 # Crossings keep this fraction of their edge from its nodes.
 _NODE_GAP = 0.15
@@ -100,9 +102,10 @@ _NODE_GAP = 0.15
 _APART = 1e-3
 # Nodes closer than this to B (cells) count as outside.
 _ON_B = 0.05
-# Cycles of expansion moves over the pieces (the first does most: on the collapsing wall the next two lower
-# the cut by 0.02 % and take half as long again)
+# Cycles of expansion moves over the pieces on the coarse level and on the fine one (the first does most:
+# on the collapsing wall the fine level's second cycle lowers the cut by 0.13 % and takes 0.3 s of 1.4)
 _CYCLES = 2
+_FINE_CYCLES = 1
 # The cut is made coarse to fine (_cut) from this many free nodes on ...
 _COARSE_MIN = 4000
 # ... and the full grid cut again within this many cells of the coarse cut's boundaries.
@@ -170,12 +173,10 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
         d = distance[box].ravel()
     else:
         d = np.sqrt(np.maximum(igl.point_mesh_squared_distance(P, V0, F0)[0], 0.0))
-    near = np.flatnonzero(d <= reach)
-    near = near[B.inside(P[near])]
     # a node on B is outside: a sheet's crossing of B then lies inside an edge (its winding number is
     # anything from 0 to 1 there)
-    on_b = near[B.closest(P[near])[0] < (_ON_B * h) ** 2]
-    near = np.setdiff1d(near, on_b)
+    inside, on_b = B.grid_nodes(sub.origin, sub.spacing, sub.shape, _ON_B * h, asked=d <= reach)
+    near = np.flatnonzero(inside.ravel() & ~on_b.ravel())
     if not len(near):
         return SearchResult(None, notes=[f"search: the band of {band:g} cells holds no grid node inside the object; "
                                          "the coarse surface is kept (refine.band)"], seconds=seconds)
@@ -290,7 +291,7 @@ class _BoxGrid:
 
     def __init__(self, grid, box):
         self.grid, self.box = grid, box
-        self.shape = tuple(s.stop - s.start for s in box)
+        self.shape = tuple(max(s.stop - s.start, 0) for s in box)
         self.origin = grid.origin + grid.spacing * np.array([s.start for s in box])
         self.spacing = grid.spacing
 
@@ -443,7 +444,7 @@ def _cut(sub: _BoxGrid, near, keep, labels, shifted, node_weights, reach: dict
     unsure = ndimage.binary_dilation(unsure.reshape(sub.shape), np.ones((3, 3, 3), bool), _FINE_BAND).ravel()
     moving = free & unsure[near]
     start_labels = np.where(free & (agreed >= 0), agreed, labels)
-    out, log = expand(graph.among(moving), start_labels, moving, reach, cycles=_CYCLES)
+    out, log = expand(graph.among(moving), start_labels, moving, reach, cycles=_FINE_CYCLES)
     log.energy = [start, graph.energy(out)]
     return out, graph, log
 
@@ -639,17 +640,19 @@ def _smooth(V: np.ndarray, F: np.ndarray, B: Exterior) -> np.ndarray:
     # a vertex on the curves with other than two neighbours along them is where curves meet (or end)
     held = on_feature & (np.bincount(e[feature].ravel(), minlength=len(V)) != 2)
     deg = np.asarray(A.sum(axis=1)).ravel()
-    move = (~held) & (deg > 0)
+    move = np.flatnonzero((~held) & (deg > 0))
+    mean_of = sp.diags(1.0 / np.maximum(deg[move], 1)) @ A[move]  # a moving vertex's mean of its neighbours
     rim = np.zeros(len(V), bool)
     rim[e[count == 1].ravel()] = True
-    rim &= move
+    rim = np.flatnonzero(rim[move])  # among the moving ones
     X = V.copy()
-    for _ in range(_SMOOTH_PASSES):
+    for k in range(_SMOOTH_PASSES):
         for f in (_LAMBDA, _MU):
-            lap = (A @ X) / np.maximum(deg, 1)[:, None] - X
-            X[move] += f * lap[move]
-        if rim.any():
-            X[rim] = B.closest(X[rim])[2]
+            X[move] += f * (mean_of @ X - X[move])
+        # the rims back on B every few passes and after the last (a pass moves them along their curve by a
+        # fraction of an edge, off B by less)
+        if len(rim) and (k % _RIM_EVERY == _RIM_EVERY - 1 or k == _SMOOTH_PASSES - 1):
+            X[move[rim]] = B.closest(X[move[rim]])[2]
     return X
 
 
