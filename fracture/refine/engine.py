@@ -85,7 +85,7 @@ from fracture.refine.boundary import BoundaryOnB
 from fracture.refine.collide import stop_collisions
 from fracture.refine.fans import closed_vertices
 from fracture.refine.flips import flip_edges
-from fracture.refine.flow import PsiFlow, energy, energy_gradient
+from fracture.refine.flow import PsiFlow, energy, energy_gradient, sampled_energy
 from fracture.mesh.edges import edge_table, EdgeTable, row_edges
 from fracture.refine.order import spatial_order
 from fracture.mesh.fracture_surface import FractureSurface
@@ -133,6 +133,9 @@ class IterationLog:
     seconds: dict = field(default_factory=dict)  # time per phase, summed over iterations
     stop: str = ""  # why the iterations ended
     search: SearchResult | None = None  # what the search found (None: no search)
+    # the functional of level 0 (shifted as the last stage's) over the coarse and the final surface, on dense
+    # samples (flow.sampled_energy): comparable between surfaces meshed differently
+    sampled: tuple[float, float] = (0.0, 0.0)
 
     def tick(self, phase: str, since: float) -> float:
         now = time.perf_counter()
@@ -478,6 +481,7 @@ class Refiner:
         (:meth:`~fracture.refine.boundary.BoundaryOnB.settle`). The mesh ends numbered in creation order.
         """
         p, log = self.params, self.log
+        coarse = self.mesh.V.copy(), self.mesh.F.copy()
         # iteration 0: the coarse surface
         E = self.functional()
         self._record_step(E, E, 0.0)
@@ -531,6 +535,10 @@ class Refiner:
             which = "1 boundary vertex stays" if off == 1 else f"{off} boundary vertices stay"
             log.stop += f"; {which} off B (up to {off_b / self.h:.3g} grid cells): collisions block the way"
         self._renumber(self.mesh.creation_order())  # the tree's order, coarse vertices first
+        lowest, span = self.pyramid.window_range(0, 1)
+        offset = self.params.tension * span - lowest  # the last stage's shift (begin_stage)
+        log.sampled = tuple(sampled_energy(V, F, self.pyramid.value, self.h, offset, self.grain)
+                            for V, F in (coarse, (self.mesh.V, self.mesh.F)))
         return self.log
 
 

@@ -40,6 +40,7 @@ class RefineParams(Section):
         "alone (its effect per scene: benchmarks/README.md); none: the flow alone, coarse to fine")
     band: float = number(10.0, 1.0, 200.0, "the search moves the surface at most this far from the coarse one (grid "
                          "cells)")
-    core: float = number(0.25, 0.0, 1.0, "the search leaves each piece the grid nodes farther from the coarse surface "
+    core: float = number(0.4, 0.0, 1.0, "the search leaves each piece the grid nodes farther from the coarse surface "
                          "than this fraction of the piece's depth (a minimum cut favours small pieces: without a core a "
-                         "small piece could be cut down to a sliver)")
+                         "small piece could be cut down to a sliver; higher lets the cut reach weak material deeper "
+                         "in the pieces and shrink the network more)")

@@ -80,6 +80,8 @@ def refine_stage(ctx: RunContext) -> None:
         "stage": [int(s) for s in log.stage],
         "functional": [float(e) for e in log.functional],
         "functional_before_step": [float(e) for e in log.functional_before],
+        # level 0's, on dense samples of the coarse and the refined surface (comparable across meshes)
+        "functional_sampled_coarse_and_refined": [float(e) for e in log.sampled],
         "energy": [float(e) for e in log.energy],
         "area": [float(a) for a in log.area],
         "triangles": [int(t) for t in log.triangles],
