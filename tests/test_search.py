@@ -166,3 +166,22 @@ def test_the_coarse_to_fine_cut_costs_within_a_percent_of_the_full_grids(monkeyp
     assert banded.cut_energy[0] == pytest.approx(full.cut_energy[0])
     assert full.cut_energy[1] <= banded.cut_energy[1] + 1e-9 <= 1.01 * full.cut_energy[1] + 1e-9
     assert banded.cut_energy[1] < 0.3 * banded.cut_energy[0]
+
+
+def test_a_region_dilated_in_its_box_is_the_grid_dilation():
+    from scipy import ndimage
+
+    from fracture.refine.search import _dilated
+
+    rng = np.random.default_rng(3)
+    sub = _BoxGrid(Grid.from_bounds((0, 0, 0), (13, 10, 8), (14, 11, 9)), (slice(0, 14), slice(0, 11), slice(0, 9)))
+    near = np.flatnonzero(rng.random(sub.size) < 0.7)  # the band: some of the box's nodes
+    ijk = np.stack(np.unravel_index(near, sub.shape), 1)
+    mask = np.zeros(len(near), bool)
+    mask[rng.choice(len(near), 4, replace=False)] = True
+    vol = np.zeros(sub.shape, bool)
+    vol[tuple(ijk[mask].T)] = True
+    for cells in (1, 3):
+        expected = ndimage.binary_dilation(vol, np.ones((3, 3, 3), bool), cells)[tuple(ijk.T)]
+        assert (_dilated(sub, ijk, mask, cells) == expected).all()
+    assert not _dilated(sub, ijk, np.zeros(len(near), bool), 2).any()
