@@ -214,7 +214,7 @@ def clearance(F: np.ndarray, X: np.ndarray, at: np.ndarray, d2: np.ndarray, ids:
     mark = np.zeros(len(X), np.bool_)
     mark[ids] = True
     bound = np.full(len(X), -np.inf)
-    _clearance(F, X, at, d2, mark, bound)
+    _clearance(F, X, at, d2, mark, bound, numba.get_num_threads())
     return bound[ids]
 
 
@@ -225,16 +225,26 @@ def _ball(X, at, d2, i, j, bound):
         bound[i] = max(bound[i], np.sqrt(d2[j]) - vec.norm(vec.sub(vec.point(X, i), vec.point(at, j))))
 
 
-@numba.njit(cache=True)
-def _clearance(F, X, at, d2, mark, bound):
-    # one pass over the vertices and one over the triangles (a running maximum, which NumPy's
-    # maximum.at makes ten times slower on the wall's 200K triangles)
-    for i in range(X.shape[0]):
+@numba.njit(cache=True, parallel=True)
+def _clearance(F, X, at, d2, mark, bound, threads):
+    # the triangles in a chunk per thread, each chunk's running maxima in a row of its own, then the
+    # rows' maximum (a running maximum, which NumPy's maximum.at makes ten times slower on the wall's
+    # 200K triangles)
+    for i in numba.prange(X.shape[0]):
         if mark[i]:
             _ball(X, at, d2, i, i, bound)
-    for f in range(F.shape[0]):
-        for k in range(3):
-            i = F[f, k]
-            if mark[i]:
-                _ball(X, at, d2, i, F[f, (k + 1) % 3], bound)
-                _ball(X, at, d2, i, F[f, (k + 2) % 3], bound)
+    k = threads
+    rows = np.full((k, X.shape[0]), -np.inf)
+    m = F.shape[0]
+    for c in numba.prange(k):
+        row = rows[c]
+        for f in range(c * m // k, (c + 1) * m // k):
+            for j in range(3):
+                i = F[f, j]
+                if mark[i]:
+                    _ball(X, at, d2, i, F[f, (j + 1) % 3], row)
+                    _ball(X, at, d2, i, F[f, (j + 2) % 3], row)
+    for i in numba.prange(X.shape[0]):
+        if mark[i]:
+            for c in range(k):
+                bound[i] = max(bound[i], rows[c, i])

@@ -189,6 +189,10 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
     dn = d[near]
     depth = _depths(B, V0, F0, side_of, n_pieces)
     keep = (dn > band * h) | (dn > core * depth[coarse])
+    # a piece a cell or two thick may have no node beyond its core: it keeps its deepest
+    deepest = np.zeros(n_pieces)
+    np.maximum.at(deepest, coarse, dn)
+    keep |= dn >= deepest[coarse]
     if keep.all():
         return SearchResult(None, notes=[f"search: the band of {band:g} cells holds no free grid node inside the "
                                          "object; the coarse surface is kept (refine.band)"], seconds=seconds)
