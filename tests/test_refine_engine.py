@@ -286,3 +286,34 @@ def test_a_split_vertex_inside_its_parents_clear_balls_is_not_asked_about():
     assert clearance(mesh.F, X1, r.state.near_at, r.state.near_d2, np.array([new]))[0] > 0.1
     X1[new, 0] = 1.1  # out through the face x = 1, beyond every neighbour's ball
     assert r.onb.leaving(X1, np.array([new])).tolist() == [new] and asked == [1]
+
+
+def test_the_clearance_bound_is_the_same_on_one_thread_and_two():
+    import numba
+
+    V, F = box([0, 0, 0], [1, 1, 1], (6, 6, 6))
+    rng = np.random.default_rng(0)
+    at = V + rng.normal(0, 0.01, V.shape)
+    d2 = rng.random(len(V)) * 0.04
+    d2[::7] = np.nan  # unknown
+    at[::11] = np.nan  # forgotten
+    X = V + rng.normal(0, 0.02, V.shape)
+    ids = np.arange(0, len(V), 2)
+    # what the bound is by its definition: over the vertex and its neighbours in F
+    nbrs = [set() for _ in range(len(V))]
+    for f in F:
+        for i in f:
+            nbrs[i].update(f.tolist())
+    expect = np.array([max([np.sqrt(d2[j]) - np.linalg.norm(X[i] - at[j]) for j in nbrs[i]
+                            if np.isfinite(d2[j]) and not np.isnan(at[j, 0])] or [-np.inf]) for i in ids])
+    before = numba.get_num_threads()
+    try:
+        out = []
+        for threads in (1, min(2, numba.config.NUMBA_NUM_THREADS)):
+            numba.set_num_threads(threads)
+            out.append(clearance(F, X, at, d2, ids))
+    finally:
+        numba.set_num_threads(before)
+    assert np.isfinite(expect).sum() > len(ids) // 2
+    for bound in out:
+        np.testing.assert_allclose(bound, expect, rtol=0, atol=1e-12)

@@ -319,10 +319,6 @@ def path_boxes(X0: np.ndarray, X1: np.ndarray) -> np.ndarray:
     return np.hstack([np.minimum(X0, X1), np.maximum(X0, X1)])
 
 
-# The feature tests run in this many chunks of pairs per thread (the pairs differ in work).
-_CHUNKS_PER_THREAD = 8
-
-
 @numba.njit(cache=True, inline="always")
 def _near(B, v, lo, hi, t, F):
     """Vertex v, not a corner of triangle t, has its path box overlap t's box ``lo[t], hi[t]``
@@ -337,6 +333,7 @@ def _any_on(on, F, f):
     return on[F[f, 0]] or on[F[f, 1]] or on[F[f, 2]]
 
 
+@numba.njit(cache=True)
 def feature_tests(X0, X1, F, B, lo, hi, rep, pairs, eta, every, on, sure, stop):
     """Test the features that the triangles of each overlapping pair represent against each other:
     the vertices of each against the other triangle, and the edges of one against the edges of the
@@ -350,73 +347,54 @@ def feature_tests(X0, X1, F, B, lo, hi, rep, pairs, eta, every, on, sure, stop):
     the pair of the vertex's representative and the triangle (their boxes
     overlap too); every edge pair once, from its representatives' pair.
     """
-    return _feature_tests(X0, X1, F, B, lo, hi, rep, pairs, eta, every, on, sure, stop, numba.get_num_threads())
-
-
-@numba.njit(cache=True, parallel=True)
-def _feature_tests(X0, X1, F, B, lo, hi, rep, pairs, eta, every, on, sure, stop, threads):
-    n = pairs.shape[0]
-    k = max(1, min(n, _CHUNKS_PER_THREAD * threads))
-    hits = np.zeros(k, np.int64)
-    for c in numba.prange(k):
-        times = np.empty(4)
-        box = np.empty((6, 6))  # the edges' path boxes of both triangles, the first three grown by eta
-        found = 0
-        for i in range(c * n // k, (c + 1) * n // k):
-            found += _pair_features(X0, X1, F, B, lo, hi, rep, pairs[i, 0], pairs[i, 1], eta, every, on, sure,
-                                    stop, times, box)
-        hits[c] = found
-    return hits.sum()
-
-
-@numba.njit(cache=True)
-def _pair_features(X0, X1, F, B, lo, hi, rep, a, b, eta, every, on, sure, stop, times, box):
-    """The tests of :func:`feature_tests` for the pair of triangles ``a, b``; returns the colliding
-    features' count. ``times`` and ``box`` are scratch (4 and 6 x 6)."""
+    times = np.empty(4)
     eta2 = eta * eta
+    box = np.empty((6, 6))  # the edges' path boxes of both triangles, the first three grown by eta
     hits = 0
-    if share_certified(F, a, b, sure):
-        return 0  # every feature of one fan: they cannot meet
-    for (s, t) in ((a, b), (b, a)):  # the vertices s represents against triangle t
-        r = rep[s]
-        if not r & _ALL_VERTICES:
-            continue
-        near = ((((r & _VERTEX_0) != 0) & _near(B, F[s, 0], lo, hi, t, F))
-                | ((((r & (_VERTEX_0 << 1)) != 0) & _near(B, F[s, 1], lo, hi, t, F)) << 1)
-                | ((((r & (_VERTEX_0 << 2)) != 0) & _near(B, F[s, 2], lo, hi, t, F)) << 2))
-        for k in range(3):
-            if near & (1 << k) and (every or on[F[s, k]] or _any_on(on, F, t)):
-                hits += _vertex_triangle_pair(X0, X1, F, F[s, k], t, eta2, times, stop)
-    if not rep[a] & _ALL_EDGES or not rep[b] & _ALL_EDGES:
-        return hits
-    for k in range(3):  # the edges a represents against those b does
-        for (f, row, pad) in ((a, k, eta), (b, 3 + k, 0.0)):
-            p, q = F[f, k], F[f, (k + 1) % 3]
-            for c in range(3):
-                box[row, c] = min(B[p, c], B[q, c]) - pad
-                box[row, 3 + c] = max(B[p, 3 + c], B[q, 3 + c]) + pad
-    near = 0  # bit 3 k + j: edge k of a and edge j of b share no vertex and their boxes overlap
-    for k in range(3):
-        p, q = F[a, k], F[a, (k + 1) % 3]
-        for j in range(3):
-            r, s = F[b, j], F[b, (j + 1) % 3]
-            near |= ((((rep[a] >> (_EDGE_SHIFT + k)) & (rep[b] >> (_EDGE_SHIFT + j)) & 1) != 0)
-                     & (p != r) & (p != s) & (q != r) & (q != s)
-                     & (box[k, 3] >= box[3 + j, 0]) & (box[3 + j, 3] >= box[k, 0]) & (box[k, 4] >= box[3 + j, 1])
-                     & (box[3 + j, 4] >= box[k, 1]) & (box[k, 5] >= box[3 + j, 2])
-                     & (box[3 + j, 5] >= box[k, 2])) << (3 * k + j)
-    if not near:
-        return hits
-    for k in range(3):
-        p, q = F[a, k], F[a, (k + 1) % 3]
-        for j in range(3):
-            r, s = F[b, j], F[b, (j + 1) % 3]
-            if not near & (1 << (3 * k + j)) or not (every or on[p] or on[q] or on[r] or on[s]):
+    for i in range(pairs.shape[0]):
+        a, b = pairs[i, 0], pairs[i, 1]
+        if share_certified(F, a, b, sure):
+            continue  # every feature of one fan: they cannot meet
+        for (s, t) in ((a, b), (b, a)):  # the vertices s represents against triangle t
+            r = rep[s]
+            if not r & _ALL_VERTICES:
                 continue
-            if edge_edge_hit(vec.point(X0, p), vec.point(X1, p), vec.point(X0, q), vec.point(X1, q),
-                              vec.point(X0, r), vec.point(X1, r), vec.point(X0, s), vec.point(X1, s), eta2, times):
-                hits += 1
-                stop[p] = stop[q] = stop[r] = stop[s] = True
+            near = ((((r & _VERTEX_0) != 0) & _near(B, F[s, 0], lo, hi, t, F))
+                    | ((((r & (_VERTEX_0 << 1)) != 0) & _near(B, F[s, 1], lo, hi, t, F)) << 1)
+                    | ((((r & (_VERTEX_0 << 2)) != 0) & _near(B, F[s, 2], lo, hi, t, F)) << 2))
+            for k in range(3):
+                if near & (1 << k) and (every or on[F[s, k]] or _any_on(on, F, t)):
+                    hits += _vertex_triangle_pair(X0, X1, F, F[s, k], t, eta2, times, stop)
+        if not rep[a] & _ALL_EDGES or not rep[b] & _ALL_EDGES:
+            continue
+        for k in range(3):  # the edges a represents against those b does
+            for (f, row, pad) in ((a, k, eta), (b, 3 + k, 0.0)):
+                p, q = F[f, k], F[f, (k + 1) % 3]
+                for c in range(3):
+                    box[row, c] = min(B[p, c], B[q, c]) - pad
+                    box[row, 3 + c] = max(B[p, 3 + c], B[q, 3 + c]) + pad
+        near = 0  # bit 3 k + j: edge k of a and edge j of b share no vertex and their boxes overlap
+        for k in range(3):
+            p, q = F[a, k], F[a, (k + 1) % 3]
+            for j in range(3):
+                r, s = F[b, j], F[b, (j + 1) % 3]
+                near |= ((((rep[a] >> (_EDGE_SHIFT + k)) & (rep[b] >> (_EDGE_SHIFT + j)) & 1) != 0)
+                         & (p != r) & (p != s) & (q != r) & (q != s)
+                         & (box[k, 3] >= box[3 + j, 0]) & (box[3 + j, 3] >= box[k, 0]) & (box[k, 4] >= box[3 + j, 1])
+                         & (box[3 + j, 4] >= box[k, 1]) & (box[k, 5] >= box[3 + j, 2])
+                         & (box[3 + j, 5] >= box[k, 2])) << (3 * k + j)
+        if not near:
+            continue
+        for k in range(3):
+            p, q = F[a, k], F[a, (k + 1) % 3]
+            for j in range(3):
+                r, s = F[b, j], F[b, (j + 1) % 3]
+                if not near & (1 << (3 * k + j)) or not (every or on[p] or on[q] or on[r] or on[s]):
+                    continue
+                if edge_edge_hit(vec.point(X0, p), vec.point(X1, p), vec.point(X0, q), vec.point(X1, q),
+                                  vec.point(X0, r), vec.point(X1, r), vec.point(X0, s), vec.point(X1, s), eta2, times):
+                    hits += 1
+                    stop[p] = stop[q] = stop[r] = stop[s] = True
     return hits
 
 
