@@ -111,6 +111,17 @@ def test_self_intersection_count_finds_every_crossing_pair():
     from fracture.mesh.primitives import box
     BV, BF = box([0, 0, 0], [1, 2, 3], (4, 5, 6))
     assert self_intersections(BV, BF) == 0
+    # the pairs are tested on every thread: the same count and the same first pairs on one
+    import numba
+
+    before = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        one = self_intersections(V, F, report=7)
+    finally:
+        numba.set_num_threads(before)
+    two = self_intersections(V, F, report=7)
+    assert one[0] == two[0] == count and len(one[1]) == 7 and np.array_equal(one[1], two[1])
 
 
 def _two_sheets_with_a_fin(seed):

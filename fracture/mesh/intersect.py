@@ -135,16 +135,18 @@ def triangles_intersect(X, F, f, g, eps):
     return False
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, parallel=True)
 def _pair_tests(X, F, pairs, eps, first):
-    """How many of the triangle ``pairs`` intersect; the first ``len(first)`` of them are written to ``first``."""
-    count = 0
-    for i in range(pairs.shape[0]):
-        if triangles_intersect(X, F, pairs[i, 0], pairs[i, 1], eps):
-            if count < first.shape[0]:
-                first[count, 0], first[count, 1] = pairs[i, 0], pairs[i, 1]
-            count += 1
-    return count
+    """How many of the triangle ``pairs`` intersect; the first ``len(first)`` of them (in the pairs'
+    order) are written to ``first``. Tested on every thread, each pair's answer in its own place: the
+    same on any number of threads."""
+    hit = np.zeros(pairs.shape[0], np.bool_)
+    for i in numba.prange(pairs.shape[0]):
+        hit[i] = triangles_intersect(X, F, pairs[i, 0], pairs[i, 1], eps)
+    rows = np.flatnonzero(hit)
+    m = min(rows.shape[0], first.shape[0])
+    first[:m] = pairs[rows[:m]]
+    return rows.shape[0]
 
 
 def box_grid(lo: np.ndarray, hi: np.ndarray, X: np.ndarray, F: np.ndarray) -> tuple:
