@@ -19,13 +19,13 @@ def unit_normal_into(u, v, N, f):
     return t
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, parallel=True)
 def face_geometry(V, F):
-    """Areas ``(m,)`` and unit normals ``(m, 3)`` (zero for degenerate triangles)."""
+    """Areas ``(m,)`` and unit normals ``(m, 3)`` (zero for degenerate triangles), on every thread."""
     m = F.shape[0]
     A = np.empty(m)
     N = np.zeros((m, 3))
-    for f in range(m):
+    for f in numba.prange(m):
         a = vec.point(V, F[f, 0])
         A[f] = 0.5 * unit_normal_into(vec.sub(vec.point(V, F[f, 1]), a), vec.sub(vec.point(V, F[f, 2]), a), N, f)
     return A, N
