@@ -40,7 +40,10 @@ def run_scene(name: str, iterations: int | None, repeat: int, cores: int | None,
     import os
 
     if cores is not None:  # before any library starts its threads
+        import numba
+
         os.sched_setaffinity(0, sorted(os.sched_getaffinity(0))[:cores])
+        numba.set_num_threads(cores)  # the kernels' threads too (set for every core before the pinning)
 
     from fracture.mesh.intersect import self_intersections
 

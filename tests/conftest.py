@@ -22,15 +22,18 @@ BUDGETS = {"blender_cube8": 15000}
 
 
 def pytest_configure(config):
-    """Stale compiled kernels are cleared once, by the main process (not by each xdist worker); every
-    process runs the parallel kernels on the threading layer the command line chooses (numba's own
-    choice here, GNU OpenMP, keeps its threads spinning between kernels, and with a worker per core they
-    take the other worker's time)."""
+    """Stale compiled kernels are cleared once, by the main process (not by each xdist worker); the tests
+    run the parallel kernels on numba's work queue, whose threads sleep between kernels (the command
+    line's GNU OpenMP keeps them spinning, and with an xdist worker per core they would take the other
+    worker's time). Set in the environment, the choice reaches the xdist workers and the processes the
+    tests start, and fracture.process.prepare_process keeps it; commands the tests run in processes of
+    their own (fracref run, sweeps) choose it too."""
+    import os
+
     import numba
 
-    from fracture.process import THREADING_LAYER
-
-    numba.config.THREADING_LAYER = THREADING_LAYER
+    os.environ["NUMBA_THREADING_LAYER"] = "workqueue"
+    numba.config.THREADING_LAYER = "workqueue"
     if not hasattr(config, "workerinput"):
         from fracture.refine import clear_stale_numba_cache
 

@@ -142,3 +142,29 @@ def test_compile_fills_the_kernel_cache_of_a_fresh_install(tmp_path):
     assert "kernels compiled and cached in" in done.stdout
     assert subprocess.run(check, cwd=tmp_path, env=env, capture_output=True, text=True).stdout.strip() == "True"
     assert not list(Path(tempfile.gettempdir()).glob("fracref-compile-*"))  # its run directory is gone
+
+
+def test_the_command_line_runs_the_kernels_on_gnu_openmp_with_a_thread_per_core(tmp_path, small_config):
+    """``fracref run`` chooses the threading layer (GNU OpenMP: a kernel starts in microseconds, where the
+    work queue takes a tenth of a millisecond) and a thread per core it may run on, pinned to fewer too;
+    a layer named in the environment is kept."""
+    from fracture.process import THREADING_LAYER, cores
+
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_THREADING_LAYER"}
+    one = sorted(os.sched_getaffinity(0))[:1]
+
+    def run(name, pinned=False, **extra):
+        cmd = [sys.executable, "-m", "fracref", "run", str(small_config), "--out", str(tmp_path / name), "--quiet",
+               "--until", "refine", "--set", "refine.iterations=2"]
+        if pinned:
+            cmd = ["taskset", "-c", ",".join(map(str, one)), *cmd]
+        out = subprocess.run(cmd, capture_output=True, text=True, env={**env, **extra})
+        assert out.returncode == 0, out.stderr[-2000:]
+        import json
+
+        return json.loads((tmp_path / name / "manifest.json").read_text())["threads"]
+
+    assert THREADING_LAYER == "omp"
+    assert run("all") == {"threads": cores(), "layer": "omp"}
+    assert run("one", pinned=True) == {"threads": 1, "layer": "omp"}
+    assert run("kept", NUMBA_THREADING_LAYER="workqueue")["layer"] == "workqueue"

@@ -24,6 +24,7 @@ the inputs a config names must be readable at the same paths on every node.
 from __future__ import annotations
 
 import csv
+import functools
 import io
 import itertools
 import json
@@ -164,10 +165,12 @@ def _local(tasks: list[tuple[Point, tuple]], jobs: int) -> Iterator[tuple[Point,
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
-    from fracture.process import prepare_process
+    from fracture.process import cores, prepare_process
 
-    # fresh interpreters (spawn: nothing of this process's threads), each set up as the command line is
-    with ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context("spawn"), initializer=prepare_process) as pool:
+    # fresh interpreters (spawn: nothing of this process's threads), each set up as the command line is,
+    # its kernels on its share of the cores
+    setup = functools.partial(prepare_process, threads=max(1, cores() // jobs))
+    with ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context("spawn"), initializer=setup) as pool:
         futures = {pool.submit(run_point, *args): p for p, args in tasks}
         for f in as_completed(futures):
             yield futures[f], f.result()
