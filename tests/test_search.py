@@ -185,3 +185,12 @@ def test_a_region_dilated_in_its_box_is_the_grid_dilation():
         expected = ndimage.binary_dilation(vol, np.ones((3, 3, 3), bool), cells)[tuple(ijk.T)]
         assert (_dilated(sub, ijk, mask, cells) == expected).all()
     assert not _dilated(sub, ijk, np.zeros(len(near), bool), 2).any()
+
+
+def test_the_polish_runs_on_the_stages_asked_for_after_the_search():
+    case = weak_sheet_case("curved", 4.0)
+    for stages, expect in ((0, [0]), (1, [1, 0]), (2, [2, 1, 0])):
+        r, log = _refine(case, polish_stages=stages)
+        assert log.stage[1] == SEARCH_STAGE and log.search.surface is not None
+        after = list(dict.fromkeys(log.stage[2:]))  # the stages the flow ran after the search, in order
+        assert after == expect, (stages, log.stage)

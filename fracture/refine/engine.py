@@ -5,7 +5,8 @@ The refiner composes the parts, each in its own module:
 * the global search before the flow (:mod:`fracture.refine.search`, the
   ``search`` seam): a minimum cut of the functional over a band around the
   coarse surface, which makes the large moves and the turns the flow cannot
-  walk; the flow then polishes its surface on the finest level alone;
+  walk; the flow then polishes its surface on the finest level alone (or first on
+  ``polish_stages`` coarser stages of the schedule);
 * the flow of Eq. 3 (:mod:`fracture.refine.flow`);
 * the split plan of Sec. 4.4 (:mod:`fracture.refine.remesh`);
 * the step control: implicit area term, move limits, step size
@@ -218,10 +219,10 @@ class Refiner:
     def stages(self) -> list[tuple[int, int]]:
         """``(first, count)`` of each stage's field, coarse to fine: the mean of pyramid levels
         ``first .. first+count-1`` (module notes)."""
-        if self.searched:  # the search made the large moves: the flow polishes on psi itself
-            return [(0, 1)]
         n = self.pyramid.n_levels
         c = min(max(self.params.coarse_levels, 1), n)
+        if self.searched:  # the search made the large moves: the flow polishes, on psi itself at the end
+            return [(first, c) for first in range(min(self.params.polish_stages, n - c), 0, -1)] + [(0, 1)]
         if c == n:  # the paper's field: one stage on every level
             return [(0, n)]
         return [(first, c) for first in range(n - c, 0, -1)] + [(0, 1)]

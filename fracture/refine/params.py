@@ -36,11 +36,15 @@ class RefineParams(Section):
     hold: int = integer(3, 0, 100, "iterations a vertex stopped by a collision stays stopped")
     search: Literal["graphcut", "none"] = choice(
         "none", "graphcut: before the flow, the band around the coarse surface is searched for the surface of least "
-        "integral of psi by a minimum cut (fracture/refine/search.py), and the flow polishes it on the finest level "
-        "alone (its effect per scene: benchmarks/README.md); none: the flow alone, coarse to fine")
+        "integral of psi by a minimum cut (fracture/refine/search.py), and the flow polishes it (polish_stages; its "
+        "effect per scene: benchmarks/README.md); none: the flow alone, coarse to fine")
     band: float = number(10.0, 1.0, 200.0, "the search moves the surface at most this far from the coarse one (grid "
                          "cells)")
     core: float = number(0.4, 0.0, 1.0, "the search leaves each piece the grid nodes farther from the coarse surface "
                          "than this fraction of the piece's depth (a minimum cut favours small pieces: without a core a "
                          "small piece could be cut down to a sliver; higher lets the cut reach weak material deeper "
                          "in the pieces and shrink the network more)")
+    polish_stages: int = integer(0, 0, 8, "after the search, the flow polishes its surface on this many stages of the "
+                                 "coarse-to-fine schedule before the last one, on level 0 (0: level 0 alone, which "
+                                 "keeps the thin weak layers the cut found, a brick wall's; 1: the surface also settles "
+                                 "into broad valleys of psi, on the Jell-O and the clay a lower functional)")
