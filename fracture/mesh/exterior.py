@@ -81,11 +81,15 @@ class Exterior:
         touched = np.zeros(shape, bool)
         if count.sum() > 16 * touched.size:  # B's boxes cover the grid many times over: ask every node
             touched[:] = True
-        else:  # every node of every box: the k-th of triangle t's box, z fastest
-            t = np.repeat(np.arange(len(T)), count)
-            k = np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)
-            nz, ny = dims[t, 2], dims[t, 1]
-            touched[lo[t, 0] + k // (nz * ny), lo[t, 1] + (k // nz) % ny, lo[t, 2] + k % nz] = True
+        else:  # every node of every box, in batches of triangles of about the grid's size
+            ends = np.cumsum(count)
+            cuts = np.searchsorted(ends, np.arange(1, -(-int(count.sum()) // touched.size)) * touched.size)
+            for batch in np.split(np.arange(len(T)), cuts):
+                c = count[batch]
+                t = np.repeat(batch, c)  # the k-th node of triangle t's box, z fastest
+                k = np.arange(int(c.sum())) - np.repeat(np.cumsum(c) - c, c)
+                nz, ny = dims[t, 2], dims[t, 1]
+                touched[lo[t, 0] + k // (nz * ny), lo[t, 1] + (k // nz) % ny, lo[t, 2] + k % nz] = True
         asked = np.ones(shape, bool) if asked is None else np.asarray(asked, bool).reshape(shape)
         idx = np.flatnonzero(touched & asked)
         P = origin + np.stack(np.unravel_index(idx, shape), 1) * spacing

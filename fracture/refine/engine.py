@@ -237,14 +237,19 @@ class Refiner:
         """Follow the mean of levels ``first .. first+count-1`` from now on."""
         self.first, self.count = first, count
         self.near = self._near_for(first)
-        # A negative integrand would reward area: the flow would wrinkle without
-        # bound and the implicit matrix would lose its definiteness. Shifting
-        # psibar adds a constant surface tension and leaves its gradient
-        # unchanged; its minimum over the grid becomes ``tension`` of its range.
-        lowest, span = self.pyramid.window_range(first, self.count)
-        self.offset = self.params.tension * span - lowest
+        self.offset = self.shift(first, count)
         self.state.forget_field()
         self.step.begin(self.pyramid.gradient_scale(first, self.count))
+
+    def shift(self, first: int, count: int) -> float:
+        """What the stage of levels ``first .. first+count-1`` adds to psibar.
+
+        A negative integrand would reward area: the flow would wrinkle without
+        bound and the implicit matrix would lose its definiteness. Shifting
+        psibar adds a constant surface tension and leaves its gradient
+        unchanged; its minimum over the grid becomes ``tension`` of its range."""
+        lowest, span = self.pyramid.window_range(first, count)
+        return self.params.tension * span - lowest
 
     # -- fields ---------------------------------------------------------------------------
     def field(self, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -536,8 +541,7 @@ class Refiner:
             which = "1 boundary vertex stays" if off == 1 else f"{off} boundary vertices stay"
             log.stop += f"; {which} off B (up to {off_b / self.h:.3g} grid cells): collisions block the way"
         self._renumber(self.mesh.creation_order())  # the tree's order, coarse vertices first
-        lowest, span = self.pyramid.window_range(0, 1)
-        offset = self.params.tension * span - lowest  # the last stage's shift (begin_stage)
+        offset = self.shift(0, 1)  # the last stage's
         log.sampled = tuple(sampled_energy(V, F, self.pyramid.value, self.h, offset, self.grain)
                             for V, F in (coarse, (self.mesh.V, self.mesh.F)))
         return self.log
