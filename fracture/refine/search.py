@@ -510,11 +510,15 @@ def _islands(sub: _BoxGrid, near, labels, keep) -> np.ndarray:
     kept = np.zeros(sub.size, bool)
     kept[near[keep]] = True
     kept = kept.reshape(sub.shape)
+    ijk = np.stack(np.unravel_index(near, sub.shape), 1)
     lost = np.zeros(len(near), bool)
     for c in np.unique(labels):
-        parts, count = ndimage.label(vol == c)
-        anchored = np.unique(parts[kept & (vol == c)])
-        lost |= ~np.isin(parts.ravel()[near], anchored) & (labels == c)
+        mine = np.flatnonzero(labels == c)
+        lo, hi = ijk[mine].min(axis=0), ijk[mine].max(axis=0) + 1  # the box of the piece's nodes only
+        box = tuple(slice(a, b) for a, b in zip(lo, hi))
+        parts, _ = ndimage.label(vol[box] == c)
+        anchored = np.unique(parts[kept[box] & (vol[box] == c)])
+        lost[mine] = ~np.isin(parts[tuple((ijk[mine] - lo).T)], anchored)
     return lost
 
 
@@ -674,18 +678,21 @@ def _smooth(V: np.ndarray, F: np.ndarray, B: Exterior) -> np.ndarray:
     held = on_feature & (np.bincount(e[feature].ravel(), minlength=len(V)) != 2)
     deg = np.asarray(A.sum(axis=1)).ravel()
     move = np.flatnonzero((~held) & (deg > 0))
-    mean_of = sp.diags(1.0 / np.maximum(deg[move], 1)) @ A[move]  # a moving vertex's mean of its neighbours
+    # a moving vertex's mean of its neighbours less itself; a held one's rows are empty
+    scale = np.zeros(len(V))
+    scale[move] = 1.0 / np.maximum(deg[move], 1)
+    umbrella = (sp.diags(scale) @ A - sp.diags((scale > 0).astype(np.float64))).tocsr()
     rim = np.zeros(len(V), bool)
     rim[e[count == 1].ravel()] = True
-    rim = np.flatnonzero(rim[move])  # among the moving ones
+    rim = move[rim[move]]
     X = V.copy()
     for k in range(_SMOOTH_PASSES):
         for f in (_LAMBDA, _MU):
-            X[move] += f * (mean_of @ X - X[move])
+            X += f * (umbrella @ X)
         # the rims back on B every few passes and after the last (a pass moves them along their curve by a
         # fraction of an edge, off B by less)
         if len(rim) and (k % _RIM_EVERY == _RIM_EVERY - 1 or k == _SMOOTH_PASSES - 1):
-            X[move[rim]] = B.closest(X[move[rim]])[2]
+            X[rim] = B.closest(X[rim])[2]
     return X
 
 
