@@ -172,3 +172,18 @@ def self_intersections(V: np.ndarray, F: np.ndarray, report: int = 0) -> int | t
     if len(F) >= 2:
         count = _pair_tests(V, F, hashgrid.pairs(triangle_grid(V, F)), _EPS, first)
     return (int(count), first[:min(count, report)]) if report else int(count)
+
+
+def meeting_pairs(V: np.ndarray, F: np.ndarray, touching: np.ndarray | None = None) -> np.ndarray:
+    """Every pair ``(k, 2)`` of triangles that meet other than at a shared vertex or edge; with
+    ``touching`` (a mask of triangles) only the pairs with one of those in them (after a change of a few
+    triangles, the pairs of the others are what they were: the tests are a fraction of the full count's)."""
+    V = np.ascontiguousarray(V, np.float64)
+    F = np.ascontiguousarray(F, np.int64)
+    if len(F) < 2:
+        return np.zeros((0, 2), np.int64)
+    pairs = hashgrid.pairs(triangle_grid(V, F))
+    if touching is not None:
+        pairs = np.ascontiguousarray(pairs[touching[pairs[:, 0]] | touching[pairs[:, 1]]])
+    found = np.zeros((len(pairs), 2), np.int64)
+    return found[:_pair_tests(V, F, pairs, _EPS, found)]

@@ -72,7 +72,7 @@ from scipy.spatial import cKDTree
 
 from fracture.mesh.exterior import Exterior
 from fracture.mesh.fracture_surface import FractureSurface
-from fracture.mesh.intersect import self_intersections
+from fracture.mesh.intersect import meeting_pairs, self_intersections
 from fracture.mesh.multilabel import contour_labels
 from fracture.mesh.sampling import uniform_barycentric
 from fracture.mesh.sheets import coarsen_sheets
@@ -649,18 +649,20 @@ def _uncrossed(V: np.ndarray, X: np.ndarray, F: np.ndarray, crossings: int, roun
                ) -> tuple[np.ndarray, int]:
     """``X`` (moved vertices of ``V``) with the vertices of triangles that cross where they did not cross in
     ``V`` (which had ``crossings`` pairs) back where they were, with their neighbours, until no more pairs
-    cross than before (at worst ``V`` itself); and how many pairs cross in the result."""
+    cross than before (at worst ``V`` itself); and how many pairs cross in the result. After each round
+    only the pairs of the triangles it moved are tested again."""
     X = X.copy()
+    pairs = meeting_pairs(X, F)
     for _ in range(rounds):
-        count, pairs = self_intersections(X, F, report=100000)
-        if count <= crossings:
-            return X, count
+        if len(pairs) <= crossings:
+            return X, len(pairs)
         back = np.unique(F[pairs.ravel()].ravel())
         ring = np.isin(F, back).any(axis=1)
         back = np.unique(F[ring].ravel())
         X[back] = V[back]
-    count = self_intersections(X, F)
-    return (X, count) if count <= crossings else (V, crossings)
+        moved = np.isin(F, back).any(axis=1)
+        pairs = np.concatenate([pairs[~(moved[pairs[:, 0]] | moved[pairs[:, 1]])], meeting_pairs(X, F, moved)])
+    return (X, len(pairs)) if len(pairs) <= crossings else (V, crossings)
 
 
 def _smooth(V: np.ndarray, F: np.ndarray, B: Exterior) -> np.ndarray:
