@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 from conftest import colliding_vertices, grid_sheet
-from fracture.mesh.intersect import self_intersections
+from fracture.mesh.intersect import meeting_pairs, self_intersections
 from fracture.refine.collide import stop_collisions
 
 
@@ -122,6 +122,14 @@ def test_self_intersection_count_finds_every_crossing_pair():
         numba.set_num_threads(before)
     two = self_intersections(V, F, report=7)
     assert one[0] == two[0] == count and len(one[1]) == 7 and np.array_equal(one[1], two[1])
+
+    # every meeting pair listed, or those of some triangles only: the full list filtered
+    every = {tuple(sorted(p)) for p in meeting_pairs(V, F).tolist()}
+    assert every == _brute_force_pairs(V, F)
+    some = np.zeros(len(F), bool)
+    some[::5] = True
+    assert {tuple(sorted(p)) for p in meeting_pairs(V, F, some).tolist()} == {
+        p for p in every if some[p[0]] or some[p[1]]}
 
 
 def _two_sheets_with_a_fin(seed):
