@@ -596,19 +596,24 @@ def _contour(sub: _BoxGrid, near, labels, B: Exterior, psi_at):
 
 
 def _least_along(P0: np.ndarray, P1: np.ndarray, psi_at, samples: int = 9) -> np.ndarray:
-    """Where along each segment ``P0 -> P1`` psi is least (0 at ``P0``): the least of ``samples`` evenly
-    spaced values, moved to the vertex of the parabola through it and its two neighbours."""
+    """Where along each segment ``P0 -> P1`` psi is least (0 at ``P0``; :func:`_least_on_lines`)."""
     if not len(P0):
         return np.zeros(0)
-    u = np.linspace(0.0, 1.0, samples)
-    X = P0[:, None, :] + u[None, :, None] * (P1 - P0)[:, None, :]
-    f = psi_at(X.reshape(-1, 3)).reshape(len(P0), samples)
-    k = np.clip(np.argmin(f, axis=1), 1, samples - 2)
-    rows = np.arange(len(P0))
+    return np.clip(_least_on_lines(P0, P1 - P0, np.linspace(0.0, 1.0, samples), psi_at)[0], 0.0, 1.0)
+
+
+def _least_on_lines(X0: np.ndarray, D: np.ndarray, u: np.ndarray, psi_at) -> tuple[np.ndarray, np.ndarray]:
+    """Where psi is least on each line ``X0 + t D`` sampled at the even parameters ``u``: the least sample,
+    moved to the vertex of the parabola through it and its two neighbours (within a sample of it); and
+    the samples ``(len(X0), len(u))``."""
+    X = X0[:, None, :] + u[None, :, None] * D[:, None, :]
+    f = psi_at(X.reshape(-1, 3)).reshape(len(X0), len(u))
+    k = np.clip(np.argmin(f, axis=1), 1, len(u) - 2)
+    rows = np.arange(len(X0))
     a, b, c = f[rows, k - 1], f[rows, k], f[rows, k + 1]
     curve = a - 2 * b + c
     shift = np.where(curve > 0, 0.5 * (a - c) / np.where(curve > 0, curve, 1.0), 0.0)
-    return np.clip(u[k] + np.clip(shift, -1.0, 1.0) * (u[1] - u[0]), 0.0, 1.0)
+    return u[k] + np.clip(shift, -1.0, 1.0) * (u[1] - u[0]), f
 
 
 def _rim_to_least(V: np.ndarray, F: np.ndarray, B: Exterior, psi_at, h: float, samples: int = 9) -> np.ndarray:
@@ -657,17 +662,8 @@ def _to_valley(V: np.ndarray, F: np.ndarray, psi_at, h: float, span: float, samp
     length = np.linalg.norm(normal, axis=1)
     ids = np.flatnonzero(~held & (length > tol.tiny))
     normal = normal[ids] / length[ids, None]
-    u = np.linspace(-_VALLEY_REACH * h, _VALLEY_REACH * h, samples)
-    X = V[ids][:, None, :] + u[None, :, None] * normal[:, None, :]
-    f = psi_at(X.reshape(-1, 3)).reshape(len(ids), samples)
-    k = np.clip(np.argmin(f, axis=1), 1, samples - 2)
-    rows = np.arange(len(ids))
-    a, b, c = f[rows, k - 1], f[rows, k], f[rows, k + 1]
-    curve = a - 2 * b + c
-    shift = np.where(curve > 0, 0.5 * (a - c) / np.where(curve > 0, curve, 1.0), 0.0)
-    t = u[k] + np.clip(shift, -1.0, 1.0) * (u[1] - u[0])
-    drop = f[:, samples // 2] - np.minimum(b, f.min(axis=1))
-    go = drop > _VALLEY_DROP * span
+    t, f = _least_on_lines(V[ids], normal, np.linspace(-_VALLEY_REACH * h, _VALLEY_REACH * h, samples), psi_at)
+    go = f[:, samples // 2] - f.min(axis=1) > _VALLEY_DROP * span
     out = V.copy()
     out[ids[go]] += t[go, None] * normal[go]
     return out
