@@ -205,3 +205,32 @@ def test_the_polish_runs_on_the_stages_asked_for_after_the_search():
         assert log.stage[1] == SEARCH_STAGE and log.search.surface is not None
         after = list(dict.fromkeys(log.stage[2:]))  # the stages the flow ran after the search, in order
         assert after == expect, (stages, log.stage)
+
+
+def test_sheets_move_into_a_thin_valley_of_psi_only_where_their_integral_falls():
+    from conftest import grid_sheet
+
+    from fracture.refine.search import _to_valley, _where_lower
+
+    h, width = 0.05, 0.5  # a weak layer half a cell wide on the plane z = 0.5
+    def psi(X):
+        return 1.0 - 0.9 * np.exp(-0.5 * ((X[:, 2] - 0.5) / (width * h)) ** 2)
+
+    V1, F1 = grid_sheet(9, 0.5 + 0.2 * h)  # a sheet a fifth of a cell off the layer
+    V2, F2 = grid_sheet(9, 0.5 - 0.15 * h)
+    V2[:, 0] += 2.0  # a second sheet beside it, between two other pieces
+    V, F = np.vstack([V1, V2]), np.vstack([F1, F2 + len(V1)])
+    sides = np.vstack([np.tile([0, 1], (len(F1), 1)), np.tile([1, 2], (len(F2), 1))])
+    X = _to_valley(V, F, psi, h, span=0.9)
+    rim = np.zeros(len(V), bool)
+    for start in (0, len(V1)):  # each sheet's boundary stays where it is
+        ij = np.stack(np.unravel_index(np.arange(81), (9, 9)), 1)
+        rim[start + np.flatnonzero((ij == 0).any(axis=1) | (ij == 8).any(axis=1))] = True
+    np.testing.assert_array_equal(X[rim], V[rim])
+    assert np.abs(X[~rim, 2] - 0.5).max() < 0.02 * h
+    # the move is kept on a sheet whose integral of psi it lowers, not on one it raises
+    away = X.copy()
+    away[len(V1):][~rim[len(V1):], 2] = 0.5 - 0.6 * h  # the second sheet pushed farther off instead
+    out = _where_lower(V, away, F, sides, psi, h, offset=0.0)
+    np.testing.assert_array_equal(out[:len(V1)], X[:len(V1)])
+    np.testing.assert_array_equal(out[len(V1):], V[len(V1):])

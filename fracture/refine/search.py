@@ -661,6 +661,8 @@ def _to_valley(V: np.ndarray, F: np.ndarray, psi_at, h: float, span: float, samp
     np.add.at(normal, F.ravel(), np.repeat(n, 3, axis=0))
     length = np.linalg.norm(normal, axis=1)
     ids = np.flatnonzero(~held & (length > tol.tiny))
+    if not len(ids):
+        return V
     normal = normal[ids] / length[ids, None]
     t, f = _least_on_lines(V[ids], normal, np.linspace(-_VALLEY_REACH * h, _VALLEY_REACH * h, samples), psi_at)
     go = f[:, samples // 2] - f.min(axis=1) > _VALLEY_DROP * span
@@ -675,6 +677,8 @@ def _where_lower(V, X, F, sides, psi_at, h, offset, grain=None) -> np.ndarray:
     area), spread by area over ``V``'s triangles and weighted on ``X``'s by the change of their areas (the
     difference of the two then has little noise)."""
     AV, GV, _ = face_terms(V, F, grain)
+    if not AV.sum() > 0.0:
+        return V
     _, GX, _ = face_terms(X, F, grain)
     count = int(np.clip(_VALLEY_SAMPLES * AV.sum() / (h * h), 20000, 1000000))
     rng = np.random.default_rng(0)
