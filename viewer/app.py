@@ -212,6 +212,7 @@ class Viewer:
             self._follow(self._sync_from)
             self._sync_from = None
             redraw = True
+        redraw |= self.animation.ground_from_camera()
         now = time.monotonic()
         players = [p for p in (self.iterations, self.animation) if p.playing]
         if players and now - self._last_step >= 1.0 / max(self.side.play_fps.int_value, 1):

@@ -290,8 +290,14 @@ def ground_quad(lo, hi, up: int, scale: float = 30.0) -> o3d.geometry.TriangleMe
     V = np.zeros((4, 3))
     V[:, a] = mid[a] + half * np.array([-1, 1, 1, -1])
     V[:, b] = mid[b] + half * np.array([-1, -1, 1, 1])
-    V[:, up] = lo[up] - view_tol.floor_gap * np.linalg.norm(hi - lo)
+    V[:, up] = ground_height(lo, hi, up)
     return triangle_mesh(V, np.array([[0, 1, 2], [0, 2, 3]]), flat=True)
+
+
+def ground_height(lo, hi, up: int) -> float:
+    """Where the ground under the box ``lo, hi`` lies along axis ``up``: just below the box."""
+    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+    return float(lo[up] - view_tol.floor_gap * np.linalg.norm(hi - lo))
 
 
 def interior_color(c: int) -> tuple[float, float, float]:

@@ -26,9 +26,9 @@ from open3d.visualization import gui, rendering
 from fields.colormap import colorbar
 from viewer.data import FIELDS, RunData, Surface
 from viewer.looks import (
-    COLOR_BY, FIELD_CMAPS, SURFACE_CMAPS, CameraPose, animation_box, animation_pose, frame_box, iteration_box,
-    iteration_caption, iteration_pose, scene_box, set_cutaway, set_frame, set_slice, set_surface, show_context,
-    show_material, show_stage, slice_pose,
+    COLOR_BY, FIELD_CMAPS, SURFACE_CMAPS, CameraPose, animation_box, animation_pose, frame_box, ground_height,
+    iteration_box, iteration_caption, iteration_pose, scene_box, set_cutaway, set_frame, set_slice, set_surface,
+    show_context, show_material, show_stage, slice_pose,
 )
 from viewer.tolerances import view_tol
 
@@ -384,6 +384,20 @@ class AnimationPanel(_Player):
 
     def show(self, run: RunData) -> None:
         show_stage(self.scene, run)
+        self.ground_shown = True
+
+    def ground_from_camera(self) -> bool:
+        """The ground shown only while the camera is above it (seen from below it would hide the
+        pieces: an orbit that passes under them would show a grey panel); True when that changed."""
+        run = self.w.run
+        up = "xyz".index(run.up_axis)
+        eye = float(np.asarray(self.scene.camera.get_model_matrix())[up, 3])
+        above = eye >= ground_height(*animation_box(run), up)
+        if above == getattr(self, "ground_shown", True):
+            return False
+        self.scene.show_geometry("ground", above)
+        self.ground_shown = above
+        return True
 
     def sync(self) -> None:
         self.slider.set_limits(1, max(self.w.run.n_frames, 1))

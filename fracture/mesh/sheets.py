@@ -102,11 +102,18 @@ def _simplify_sheets(X: np.ndarray, FF: np.ndarray, sides: np.ndarray, cell: flo
     return np.concatenate(out_X), np.concatenate(out_F), np.concatenate(out_S)
 
 
+def _same_corners(F: np.ndarray) -> np.ndarray:
+    """The triangles that share their three vertices with another."""
+    _, inverse, count = np.unique(np.sort(F, axis=1), axis=0, return_inverse=True, return_counts=True)
+    return np.flatnonzero(count[inverse.ravel()] > 1)
+
+
 def coarsen_sheets(X: np.ndarray, FF: np.ndarray, sides: np.ndarray, cell: float | None = None,
                    crossings: int = 0):
     """Coarsened sheets (module notes), except for sheets whose coarsened triangles would cross another
-    sheet (or themselves): those keep their triangles. Without ``cell``, a few triangles per rim vertex
-    (flat sheets); with it, triangles of about two cells' area (curved ones). ``crossings``: the crossing
+    sheet (or themselves) or fold two triangles onto the same three vertices: those keep their
+    triangles. Without ``cell``, a few triangles per rim vertex (flat sheets); with it, triangles of
+    about two cells' area (curved ones). ``crossings``: the crossing
     pairs of triangles the sheets have already (none, for a contour), which the result may keep. Returns
     the points (``X`` followed by the new inner vertices), triangles and sides."""
     keep = np.zeros(len(FF), bool)
@@ -119,8 +126,12 @@ def coarsen_sheets(X: np.ndarray, FF: np.ndarray, sides: np.ndarray, cell: float
         F_all = np.concatenate([FS, FF[keep]])
         S_all = np.concatenate([SS, sides[keep]])
         count, pairs = self_intersections(XS_all, F_all, report=100000)
-        if count <= crossings:
+        # two triangles on the same three vertices (a fold the collapse can leave) cross nowhere but
+        # enclose no volume: the pieces on either side would be one
+        folded = _same_corners(F_all)
+        if count <= crossings and not len(folded):
             return XS_all, F_all, S_all
-        hit = np.unique(S_all[pairs.ravel()][:, 0] * base + S_all[pairs.ravel()][:, 1])
+        bad = np.concatenate([pairs.ravel() if count > crossings else np.zeros(0, np.int64), folded])
+        hit = np.unique(S_all[bad][:, 0] * base + S_all[bad][:, 1])
         keep |= np.isin(pair, hit)
     return X, FF, sides
