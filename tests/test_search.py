@@ -234,3 +234,16 @@ def test_sheets_move_into_a_thin_valley_of_psi_only_where_their_integral_falls()
     out = _where_lower(V, away, F, sides, psi, h, offset=0.0)
     np.testing.assert_array_equal(out[:len(V1)], X[:len(V1)])
     np.testing.assert_array_equal(out[len(V1):], V[len(V1):])
+
+
+def test_a_coarsened_sheet_that_folds_two_triangles_together_keeps_its_triangles(monkeypatch):
+    import fracture.mesh.sheets as sheets
+    from conftest import grid_sheet
+
+    assert list(sheets._same_corners(np.array([[0, 1, 2], [1, 3, 2], [2, 1, 0], [3, 4, 5]]))) == [0, 2]
+    V, F = grid_sheet(6, 0.0)
+    sides = np.tile([0, 1], (len(F), 1))
+    # a collapse that leaves a fold: its last triangle twice, once each way
+    monkeypatch.setattr(sheets, "_collapse_curved", lambda X, T, target: (X, np.vstack([T[:-2], T[-1:], T[-1:, ::-1]])))
+    X, out, out_sides = sheets.coarsen_sheets(V, F, sides, cell=0.5)
+    assert len(sheets._same_corners(out)) == 0 and len(out) == len(F)
