@@ -216,6 +216,7 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
     shifted = (psi[box] + offset).ravel()
     node_weights = None if grain is None else GrainWeights(grain)(sub.spacing, P[near])
     free = ~keep
+
     def reach_of(ids):
         return _reach(sub, near[ids], P[near[ids]], V0, F0, S0, band * h + h)
 
@@ -423,7 +424,7 @@ def _cut(sub: _BoxGrid, near, keep, labels, shifted, node_weights, reach_of
     where they disagree are cut again at full resolution. ``reach_of(ids)`` says per piece which of the
     band's nodes ``ids`` (positions in ``near``) it may take (:func:`_reach`, in positions of ``ids``);
     coarse to fine it is asked of the coarse nodes and of the full grid's moving nodes only (on the
-    clay 0.1 s against 0.2 s for every node; a full-grid node given the pieces its coarse cell's corners
+    clay 0.16 s against 0.2 s for every node; a full-grid node given the pieces its coarse cell's corners
     may take would reach up to two cells farther, and on a concave Cell Fracture export, Suzanne, one
     of the pieces assembled from the result was not closed). Returns the labels, the
     full-resolution graph (every edge with a free end: the cut's energy) and the expansion's log (its
