@@ -382,18 +382,23 @@ class AnimationPanel(_Player):
         v.add_child(self.label)
         return v
 
+    # the ground's axis and height (show_stage's), and whether it is shown
+    ground: tuple[int, float] | None = None
+    ground_shown = True
+
     def show(self, run: RunData) -> None:
         show_stage(self.scene, run)
-        self.ground_shown = True
+        up = "xyz".index(run.up_axis)
+        self.ground, self.ground_shown = (up, ground_height(*animation_box(run), up)), True
 
     def ground_from_camera(self) -> bool:
         """The ground shown only while the camera is above it (seen from below it would hide the
         pieces: an orbit that passes under them would show a grey panel); True when that changed."""
-        run = self.w.run
-        up = "xyz".index(run.up_axis)
-        eye = float(np.asarray(self.scene.camera.get_model_matrix())[up, 3])
-        above = eye >= ground_height(*animation_box(run), up)
-        if above == getattr(self, "ground_shown", True):
+        if self.ground is None:
+            return False
+        up, height = self.ground
+        above = float(np.asarray(self.scene.camera.get_model_matrix())[up, 3]) >= height
+        if above == self.ground_shown:
             return False
         self.scene.show_geometry("ground", above)
         self.ground_shown = above

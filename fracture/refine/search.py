@@ -74,7 +74,7 @@ from fracture.mesh.exterior import Exterior
 from fracture.mesh.fracture_surface import FractureSurface
 from fracture.mesh.intersect import meeting_pairs, self_intersections
 from fracture.mesh.multilabel import contour_labels
-from fracture.mesh.sampling import uniform_barycentric
+from fracture.mesh.sampling import area_barycentric, uniform_barycentric
 from fracture.mesh.sheets import coarsen_sheets
 from fracture.mesh.topology import barycentric_weights, face_frames, unique_edges
 from fracture.refine.cut_weights import OFFSETS, GrainWeights, area_weights
@@ -489,6 +489,11 @@ def _dilated(sub: _BoxGrid, ijk: np.ndarray, mask: np.ndarray, cells: int) -> np
     return out
 
 
+def _sheet_key(sides: np.ndarray) -> np.ndarray:
+    """One integer per triangle naming its sheet (its unordered pair of pieces)."""
+    return np.sort(sides, axis=1) @ np.array([1 << 20, 1])
+
+
 def _cube_dilation(mask: np.ndarray, cells: int) -> np.ndarray:
     """``mask`` grown by ``cells`` nodes in every axis (a cube): a separable maximum filter, three times
     as fast as the binary dilation it equals."""
@@ -504,7 +509,7 @@ def _reach(sub: _BoxGrid, near, P: np.ndarray, V0, F0, S0, radius: float) -> dic
     where[near] = np.arange(len(near))
     where = where.reshape(sub.shape)
     pair = np.sort(S0, axis=1)
-    key = pair[:, 0] * (int(S0.max()) + 1) + pair[:, 1]
+    key = _sheet_key(S0)
     for k in np.unique(key):
         faces = np.flatnonzero(key == k)
         T = V0[F0[faces]].reshape(-1, 3)
@@ -626,9 +631,7 @@ def _rim_to_least(V: np.ndarray, F: np.ndarray, B: Exterior, psi_at, h: float, s
     rim = np.unique(e[count == 1])
     if not len(rim):
         return V
-    _, n = face_frames(V, F)
-    normal = np.zeros_like(V)
-    np.add.at(normal, F.ravel(), np.repeat(n, 3, axis=0))
+    normal = _vertex_normals(V, F)
     _, tri, _ = B.closest(V[rim])
     nb = B.normals[tri]
     t = normal[rim] - np.einsum("ij,ij->i", normal[rim], nb)[:, None] * nb
@@ -645,6 +648,12 @@ def _rim_to_least(V: np.ndarray, F: np.ndarray, B: Exterior, psi_at, h: float, s
     return out
 
 
+def _vertex_normals(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Per vertex the sum of its triangles' unit normals (not normalised; zero where they cancel)."""
+    _, n = face_frames(V, F)
+    return np.stack([np.bincount(F.ravel(), np.repeat(n[:, c], 3), len(V)) for c in range(3)], 1)
+
+
 def _to_valley(V: np.ndarray, F: np.ndarray, psi_at, h: float, span: float, samples: int = 7) -> np.ndarray:
     """The vertices off the sheets' feature curves (rims and junctions) moved along their normals, within
     :data:`_VALLEY_REACH` of a cell, to where psi is least (the least of ``samples`` values, moved to the
@@ -658,9 +667,7 @@ def _to_valley(V: np.ndarray, F: np.ndarray, psi_at, h: float, span: float, samp
     e, count = unique_edges(F)
     held = np.zeros(len(V), bool)
     held[e[count != 2].ravel()] = True
-    _, n = face_frames(V, F)
-    normal = np.zeros_like(V)
-    np.add.at(normal, F.ravel(), np.repeat(n, 3, axis=0))
+    normal = _vertex_normals(V, F)
     length = np.linalg.norm(normal, axis=1)
     ids = np.flatnonzero(~held & (length > tol.tiny))
     if not len(ids):
@@ -683,14 +690,11 @@ def _where_lower(V, X, F, sides, psi_at, h, offset, grain=None) -> np.ndarray:
         return V
     _, GX, _ = face_terms(X, F, grain)
     count = int(np.clip(_VALLEY_SAMPLES * AV.sum() / (h * h), 20000, 1000000))
-    rng = np.random.default_rng(0)
-    f = rng.choice(len(F), size=count, p=AV / AV.sum())
-    bary = uniform_barycentric(rng.random(count), rng.random(count))
+    f, bary = area_barycentric(AV, count, np.random.default_rng(0))
     per = np.maximum(AV[f], tol.tiny)
     on_v = (psi_at(np.einsum("nk,nkc->nc", bary, V[F[f]])) + offset) * GV[f] / per
     on_x = (psi_at(np.einsum("nk,nkc->nc", bary, X[F[f]])) + offset) * GX[f] / per
-    _, sheet = np.unique(np.sort(sides, axis=1), axis=0, return_inverse=True)
-    sheet = sheet.ravel()
+    _, sheet = np.unique(_sheet_key(sides), return_inverse=True)
     lower = np.bincount(sheet[f], on_x - on_v, sheet.max() + 1) < 0
     out = V.copy()
     moved = lower[sheet]
@@ -779,8 +783,7 @@ def _tree_base(V, F, sides, V0, F0, S0) -> tuple[sp.csr_matrix, np.ndarray]:
     """Each new vertex as barycentric weights of its closest point on the nearest coarse triangle between
     the same two pieces (on any triangle where those two never met), ``(len(V), len(V0))``, and its
     distance to that point."""
-    key0 = np.sort(S0, axis=1) @ np.array([1 << 20, 1])
-    key = np.sort(sides, axis=1) @ np.array([1 << 20, 1])
+    key0, key = _sheet_key(S0), _sheet_key(sides)
     tri = np.full(len(V), -1, np.int64)
     C = np.zeros_like(V)
     d2 = np.zeros(len(V))
