@@ -31,8 +31,9 @@ def refine(cfg, cf, fs):
     from fracture.mesh.fracture_surface import FractureSurface
     mesh = FractureSurface.from_coarse(cf.V, cf.F, cf.sides)
     params = cfg.refine.params()
-    log = Refiner(mesh, fs.pyramid, cf.exterior_V, cf.exterior_F, params, np.random.default_rng(cfg.seed),
-                  search=default_search(params, distance=fs.field("distance"))).run()
+    grain = getattr(fs, "grain", None)  # as the refine stage passes it (fracture/pipeline/stages/refine.py)
+    log = Refiner(mesh, fs.pyramid, cf.exterior_V, cf.exterior_F, params, np.random.default_rng(cfg.seed), grain=grain,
+                  search=default_search(params, distance=fs.field("distance"), names=cf.names, grain=grain)).run()
     return mesh, log
 
 
