@@ -101,7 +101,7 @@ def main(argv=None) -> None:
         print("| weak sheet | cut offset (voxels) | search | coarse mean distance | refined mean distance "
               "| area within 1 voxel | functional | triangles | iterations | seconds |")
         print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
-        cases = [(kind, offset, 0.0, 10.0) for kind in SHEETS for offset in (2.0, 4.0, 8.0)]
+        cases = [(kind, offset, 0.0, RefineParams().band) for kind in SHEETS for offset in (2.0, 4.0, 8.0)]
         cases += [(TURNED, 4.0, float(angle), float(band)) for angle, band in TURNED_SHEETS]
         for kind, offset, angle, band in cases:
             for mode in args.search:

@@ -38,8 +38,8 @@ class RefineParams(Section):
         "none", "graphcut: before the flow, the band around the coarse surface is searched for the surface of least "
         "integral of psi by a minimum cut (fracture/refine/search.py), and the flow polishes it (polish_stages; its "
         "effect per scene: benchmarks/README.md); none: the flow alone, coarse to fine")
-    band: float = number(10.0, 1.0, 200.0, "the search moves the surface at most this far from the coarse one (grid "
-                         "cells)")
+    band: float = number(14.0, 1.0, 200.0, "the search moves the surface at most this far from the coarse one (grid "
+                         "cells; docs/design-measurements.md measures 10 to 16)")
     core: float = number(0.4, 0.0, 1.0, "the search leaves each piece the grid nodes farther from the coarse surface "
                          "than this fraction of the piece's depth (a minimum cut favours small pieces: without a core a "
                          "small piece could be cut down to a sliver; higher lets the cut reach weak material deeper "
