@@ -111,11 +111,13 @@ class StrengthPyramid:
                 raise ValueError("pyramids of different grids or levels cannot be combined")
         out = cls.__new__(cls)
         out.grid, out.sigmas = first.grid, first.sigmas
-        out.levels = w0 * first.levels
-        out._table = w0 * first._table
+        out.levels = np.multiply(first.levels, w0)
+        out._table = np.multiply(first._table, w0)
+        scratch = np.empty(max(out.levels.size, out._table.size))  # w * a term: no new array per term and part
         for w, p in rest:
-            out.levels += w * p.levels
-            out._table += w * p._table
+            for mine, theirs in ((out.levels, p.levels), (out._table, p._table)):
+                part = scratch[: theirs.size].reshape(theirs.shape)
+                np.add(mine, np.multiply(theirs, w, out=part), out=mine)
         out._coarse = ((-1, -1), None)
         return out
 

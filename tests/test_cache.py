@@ -20,8 +20,12 @@ def run(cfg, out, cache):
 
 
 def untimed(stats):
-    """A run's statistics without the refinement's seconds per phase (a clock's, not the run's, figures)."""
-    return {**stats, "refine": {k: v for k, v in stats["refine"].items() if k != "phase_seconds"}}
+    """A run's statistics without the refinement's and the search's seconds (a clock's, not the run's,
+    figures)."""
+    refine = {k: v for k, v in stats["refine"].items() if k != "phase_seconds"}
+    if refine.get("search") is not None:
+        refine["search"] = {k: v for k, v in refine["search"].items() if k != "seconds"}
+    return {**stats, "refine": refine}
 
 
 def reuse(manifest):
@@ -57,6 +61,29 @@ def test_a_psi_change_reuses_the_coarse_stage_and_the_strength(tmp_path, small_c
     # only the refinement's settings changed: the fields are reused too
     refine_only = run(load_config(small_config, ["refine.iterations=3"]), tmp_path / "d", cache)
     assert reuse(refine_only) == {"coarse": "reused", "fields": "reused", "refine": "stored", "animate": "stored"}
+
+
+def test_a_psi_change_reuses_the_search_band_and_gives_the_run_without_the_cache(tmp_path, small_config,
+                                                                                 monkeypatch):
+    import fracture.refine.engine as engine
+
+    cache = StageCache(tmp_path / "cache")
+    searched = ["refine.search=graphcut", "refine.iterations=3"]
+    first = run(load_config(small_config, searched), tmp_path / "a", cache)
+    assert first["stats"]["refine"]["search"] is not None
+    assert len(list((tmp_path / "cache" / "search band").iterdir())) == 1
+
+    def not_again(*args, **kwargs):
+        raise AssertionError("the band was made again")
+
+    with monkeypatch.context() as m:  # the band does not read psi: a psi change finds it in the cache
+        m.setattr(engine, "search_band", not_again)
+        changed = run(load_config(small_config, [*searched, "psi.stress_weight=1.5"]), tmp_path / "b", cache)
+    plain = run(load_config(small_config, [*searched, "psi.stress_weight=1.5"]), tmp_path / "c", None)
+    assert plain["files"] == changed["files"] and untimed(plain["stats"]) == untimed(changed["stats"])
+    # another band is another entry
+    run(load_config(small_config, [*searched, "refine.band=6"]), tmp_path / "d", cache)
+    assert len(list((tmp_path / "cache" / "search band").iterdir())) == 2
 
 
 def test_a_changed_input_file_invalidates_the_stages_after_it(tmp_path, small_config):

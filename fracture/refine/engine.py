@@ -92,7 +92,7 @@ from fracture.refine.order import spatial_order
 from fracture.mesh.fracture_surface import FractureSurface
 from fracture.refine.params import RefineParams
 from fracture.refine.remesh import PsiSplits
-from fracture.refine.search import SearchResult, graph_cut_search
+from fracture.refine.search import SearchResult, graph_cut_search, search_band
 from fracture.refine.state import VertexState
 from fracture.refine.step import (BOUNDARY_MOVE, ImplicitStep, StepSize, cotangent_weights, limit_by_shortest_edge,
                                   limit_moves)
@@ -552,16 +552,24 @@ class Refiner:
 
 
 def default_search(params: RefineParams, distance: np.ndarray | None = None, names: list[str] | None = None,
-                   grain=None):
+                   grain=None, bands=None):
     """The search the parameters ask for, as the refiner's ``search`` seam (None for ``search: none``);
     ``distance`` (optional) are the grid nodes' distances to the coarse surface, known to the fields,
-    ``names`` the pieces' names for its notes, ``grain`` the fibres of an anisotropic strength."""
+    ``names`` the pieces' names for its notes, ``grain`` the fibres of an anisotropic strength.
+    ``bands`` (optional) keeps the search's band (:func:`~fracture.refine.search.search_band`, which does
+    not read psi) for a later run on the same coarse surface and grid: ``bands.get()`` gives it or None,
+    ``bands.put(band)`` keeps it."""
     if params.search == "none":
         return None
 
     def search(mesh, pyramid, B):
+        prepared = None if bands is None else bands.get()
+        if prepared is None:
+            prepared = search_band(mesh, pyramid.grid, B, params.band, params.core, distance, names)
+            if bands is not None:
+                bands.put(prepared)
         return graph_cut_search(mesh, pyramid, B, params.band, params.tension, distance=distance, core=params.core,
-                                names=names, grain=grain)
+                                names=names, grain=grain, prepared=prepared)
 
     return search
 

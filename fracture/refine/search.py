@@ -86,8 +86,9 @@ from fracture.tolerances import tol
 _SIDE_DENSITY = 4.0
 # ... this far off the face (cells).
 _SIDE_OFFSET = 0.1
-# ... asked at most this far from the surface (cells; _sides).
-_SIDE_ASK = 0.5
+# ... asked at most this far from the surface (cells; _sides: at half a cell, within a spacing of the samples
+# of a sheet's rim, the nearest sample beyond the rim could be another piece's)
+_SIDE_ASK = 2.0
 # A node whose offset from its closest point on the coarse surface makes a cosine with the triangle's normal
 # above sqrt of this lies on the triangle's side of it (_sides).
 _NORMAL_COS2 = 0.999 ** 2
@@ -147,9 +148,73 @@ class SearchResult:
     notes: list = field(default_factory=list)
 
 
+@dataclass
+class SearchBand:
+    """The band of a search (module notes, 1): its nodes and the pieces they start in and keep.
+
+    It reads the coarse surface, B and the grid, not psi: a run whose coarse
+    input and grid are those of an earlier one (a re-run with the material or
+    the stress changed) reuses it (the refine stage keeps it in the stage
+    cache). ``empty`` says why there is nothing to search ("" when there is)."""
+
+    box: tuple  # the slices of the grid's nodes around the coarse surface
+    near: np.ndarray  # the band's nodes: flat indices into the box's nodes
+    coarse: np.ndarray  # their pieces
+    keep: np.ndarray  # which of them keep their piece
+    empty: str = ""
+
+
+def search_band(mesh: FractureSurface, grid, B: Exterior, band: float, core: float = 0.4,
+                distance: np.ndarray | None = None, names: list[str] | None = None) -> SearchBand:
+    """The band of ``band`` grid cells around ``mesh`` (the coarse surface) and what its nodes keep (module
+    notes, 1); ``distance`` (optional) is the distance of every grid node to the coarse surface, ``names``
+    the pieces' names for a note."""
+    h = float(np.min(grid.spacing))
+    V0, F0, S0 = mesh.V, mesh.F, mesh.sides
+    n_pieces = int(S0.max()) + 1
+    reach = (band + 2.0) * h
+    box = _node_box(grid, V0.min(axis=0) - reach, V0.max(axis=0) + reach)
+    sub = _BoxGrid(grid, box)
+    P = sub.points()
+    if distance is not None:
+        d = distance[box].ravel()
+    else:
+        d = np.sqrt(np.maximum(igl.point_mesh_squared_distance(P, V0, F0)[0], 0.0))
+    # a node on B is outside: a sheet's crossing of B then lies inside an edge (its winding number is
+    # anything from 0 to 1 there)
+    inside, on_b = B.grid_nodes(sub.origin, sub.spacing, sub.shape, _ON_B * h, asked=d <= reach)
+    near = np.flatnonzero(inside.ravel() & ~on_b.ravel())
+    none = np.zeros(0, np.int64)
+    if not len(near):
+        return SearchBand(box, none, none, np.zeros(0, bool), empty=(
+            f"search: the band of {band:g} cells holds no grid node inside the object; the coarse surface is "
+            "kept (refine.band)"))
+    side_of = _SideOf(V0, F0, S0, h)
+    coarse = _sides(P[near], V0, F0, S0, side_of)
+    # every piece keeps the nodes beyond the band and its core (what a node may become: see _reach)
+    dn = d[near]
+    depth = _depths(B, V0, F0, S0, side_of, n_pieces)
+    keep = (dn > band * h) | (dn > core * depth[coarse])
+    # a piece a cell or two thick may have no node beyond its core: it keeps its deepest
+    deepest = np.zeros(n_pieces)
+    np.maximum.at(deepest, coarse, dn)
+    keep |= dn >= deepest[coarse]
+    if keep.all():
+        return SearchBand(box, near, coarse, keep, empty=(
+            f"search: the band of {band:g} cells holds no free grid node inside the object; the coarse surface "
+            "is kept (refine.band)"))
+    coarse, _ = _mend(sub, near, coarse, keep)
+    missing = [c for c in range(n_pieces) if c in set(S0.ravel().tolist()) and not (coarse == c).any()]
+    if missing:
+        return SearchBand(box, near, coarse, keep, empty=(
+            f"search: piece{'s' if len(missing) > 1 else ''} {_named(missing, names)} hold no grid node "
+            "(thinner than a cell): the coarse surface is kept"))
+    return SearchBand(box, near, coarse, keep)
+
+
 def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, tension: float,
                      distance: np.ndarray | None = None, grain=None, core: float = 0.4,
-                     names: list[str] | None = None) -> SearchResult:
+                     names: list[str] | None = None, prepared: SearchBand | None = None) -> SearchResult:
     """Search the band of ``band`` grid cells around ``mesh`` (the coarse surface) for the labelling of
     least weighted area (module notes).
 
@@ -158,7 +223,8 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
     names, for the notes;
     ``distance`` (optional) is the distance of every grid node to the coarse surface; ``grain``
     (optional, a :class:`fields.grain.Grain`) makes the cost of a surface element depend on its normal
-    (per node the edge weights of :class:`~fracture.refine.cut_weights.GrainWeights`).
+    (per node the edge weights of :class:`~fracture.refine.cut_weights.GrainWeights`); ``prepared``
+    (optional) the band :func:`search_band` made of the same surface, grid, B, ``band`` and ``core``.
     """
     clock = time.perf_counter()
     seconds: dict[str, float] = {}
@@ -177,45 +243,16 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
     n_pieces = int(S0.max()) + 1
 
     # 1. the band: nodes near the coarse surface, their side of it, free or kept
-    reach = (band + 2.0) * h
-    box = _node_box(grid, V0.min(axis=0) - reach, V0.max(axis=0) + reach)
-    sub = _BoxGrid(grid, box)
-    P = sub.points()
-    if distance is not None:
-        d = distance[box].ravel()
-    else:
-        d = np.sqrt(np.maximum(igl.point_mesh_squared_distance(P, V0, F0)[0], 0.0))
-    # a node on B is outside: a sheet's crossing of B then lies inside an edge (its winding number is
-    # anything from 0 to 1 there)
-    inside, on_b = B.grid_nodes(sub.origin, sub.spacing, sub.shape, _ON_B * h, asked=d <= reach)
-    near = np.flatnonzero(inside.ravel() & ~on_b.ravel())
-    if not len(near):
-        return SearchResult(None, notes=[f"search: the band of {band:g} cells holds no grid node inside the object; "
-                                         "the coarse surface is kept (refine.band)"], seconds=seconds)
-    side_of = _SideOf(V0, F0, S0, h)
-    coarse = _sides(P[near], V0, F0, S0, side_of)
+    sb = search_band(mesh, grid, B, band, core, distance, names) if prepared is None else prepared
     tick("band")
-
-    # every piece keeps the nodes beyond the band and its core (what a node may become: see _reach)
-    dn = d[near]
-    depth = _depths(B, V0, F0, S0, side_of, n_pieces)
-    keep = (dn > band * h) | (dn > core * depth[coarse])
-    # a piece a cell or two thick may have no node beyond its core: it keeps its deepest
-    deepest = np.zeros(n_pieces)
-    np.maximum.at(deepest, coarse, dn)
-    keep |= dn >= deepest[coarse]
-    if keep.all():
-        return SearchResult(None, notes=[f"search: the band of {band:g} cells holds no free grid node inside the "
-                                         "object; the coarse surface is kept (refine.band)"], seconds=seconds)
-    coarse, _ = _mend(sub, near, coarse, keep)
-    missing = [c for c in range(n_pieces) if c in set(S0.ravel().tolist()) and not (coarse == c).any()]
-    if missing:
-        return SearchResult(None, seconds=seconds, notes=[
-            f"search: piece{'s' if len(missing) > 1 else ''} {_named(missing, names)} hold no grid node "
-            "(thinner than a cell): the coarse surface is kept"])
+    if sb.empty:
+        return SearchResult(None, notes=[sb.empty], seconds=seconds)
+    sub = _BoxGrid(grid, sb.box)
+    near, coarse, keep = sb.near, sb.coarse, sb.keep
+    P = sub.points()
 
     # 2. the cut
-    shifted = (psi[box] + offset).ravel()
+    shifted = (psi[sb.box] + offset).ravel()
     node_weights = None if grain is None else GrainWeights(grain)(sub.spacing, P[near])
     free = ~keep
 

@@ -39,8 +39,10 @@ def refine_stage(ctx: RunContext) -> None:
     mesh = FractureSurface.from_coarse(cf.V, cf.F, cf.sides)
     BV, BF = ctx.products.exterior
     grain = getattr(fs, "grain", None)
+    bands = _CachedBand(ctx) if ctx.cache is not None else None
     refiner = Refiner(mesh, fs.pyramid, BV, BF, params, np.random.default_rng(config.seed), grain=grain,
-                      search=default_search(params, distance=fs.field("distance"), names=cf.names, grain=grain))
+                      search=default_search(params, distance=fs.field("distance"), names=cf.names, grain=grain,
+                                            bands=bands))
     snaps = Snapshots() if config.refine.snapshots else None
     if snaps is not None:
         snaps.add(mesh.V, mesh.F, refiner.psi, np.linalg.norm(refiner.velocity, axis=1))
@@ -102,6 +104,26 @@ def refine_stage(ctx: RunContext) -> None:
         ctx.notes.extend(log.search.notes)
     if crossed:
         ctx.notes.append(f"refine: {crossed} pairs of refined triangles crossed each other; relaxed apart")
+
+
+class _CachedBand:
+    """The search's band (:func:`fracture.refine.search.search_band`) in the stage cache, under the coarse
+    stage's key, the grid and the band's parameters: it does not read psi, so a re-run with the material
+    or the stress changed (the viewer's, a sweep's) reuses it."""
+
+    def __init__(self, ctx: RunContext):
+        from fracture.pipeline.cache import code_version, digest
+
+        cfg = ctx.config.tree()
+        self.cache = ctx.cache
+        self.key = digest("search band", ctx.keys["coarse"], (cfg["grid"]["resolution"], cfg["grid"]["padding"]),
+                          (cfg["refine"]["band"], cfg["refine"]["core"]), code_version())
+
+    def get(self):
+        return self.cache.value("search band", self.key)
+
+    def put(self, band) -> None:
+        self.cache.keep("search band", self.key, band)
 
 
 def _search_stats(result) -> dict | None:
