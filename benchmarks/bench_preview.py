@@ -1,7 +1,7 @@
 """Preview speed: a re-run of the example with only psi changed, at a preview budget, with the stage cache.
 
 The first run fills the cache (not timed); each timed run changes ``psi.stress_weight`` only, so
-the coarse stage, the strength field and the distances are reused, and refines at
+the coarse stage, the strength field, the distances and the search's band are reused, and refines at
 ``refine.max_triangles`` (the preview budget). Prints the seconds per stage of the fastest of
 ``--repeat`` runs, in this process (the kernels compiled and loaded once before).
 
