@@ -371,7 +371,7 @@ class _SideOf:
         self.piece = np.concatenate([sides[f, 0], sides[f, 1]]).astype(np.int64)
 
     def __call__(self, P: np.ndarray) -> np.ndarray:
-        return self.piece[self.tree.query(P, workers=1)[1]]
+        return self.piece[self.tree.query(P, workers=-1)[1]]
 
 
 def _sides(near_points: np.ndarray, V0, F0, S0, side_of: _SideOf) -> np.ndarray:
