@@ -247,3 +247,38 @@ def test_a_coarsened_sheet_that_folds_two_triangles_together_keeps_its_triangles
     monkeypatch.setattr(sheets, "_collapse_curved", lambda X, T, target: (X, np.vstack([T[:-2], T[-1:], T[-1:, ::-1]])))
     X, out, out_sides = sheets.coarsen_sheets(V, F, sides, cell=0.5)
     assert len(sheets._same_corners(out)) == 0 and len(out) == len(F)
+
+
+def test_moves_that_make_triangles_cross_are_taken_back_and_the_others_kept():
+    """Two parallel sheets a tenth apart, the upper one over half of the lower: a vertex of the lower one
+    lifted through the upper one goes back (with its neighbours); one lifted where nothing is above it
+    stays. A crossing the surface had before is neither counted as new nor undone."""
+    from fracture.mesh.intersect import self_intersections
+    from fracture.mesh.primitives import sheet
+    from fracture.refine.search import _uncrossed
+
+    lower = sheet(lambda u, v: np.stack([u, v, 0 * u], -1), (0, 1), (0, 1), 11, 11)
+    upper = sheet(lambda u, v: np.stack([u, v, 0 * u + 0.1], -1), (0, 0.5), (0, 1), 6, 11)
+    V = np.concatenate([lower[0], upper[0]])
+    F = np.concatenate([lower[1], upper[1] + len(lower[0])])
+    below = int(np.flatnonzero(np.all(np.isclose(lower[0], [0.2, 0.5, 0]), axis=1))[0])
+    free = int(np.flatnonzero(np.all(np.isclose(lower[0], [0.8, 0.5, 0]), axis=1))[0])
+    X = V.copy()
+    X[[below, free], 2] = 0.3
+    assert self_intersections(X, F) > 0
+    out, count = _uncrossed(V, X, F, 0)
+    assert count == 0 and self_intersections(out, F) == 0
+    np.testing.assert_array_equal(out[below], V[below])
+    np.testing.assert_array_equal(out[free], X[free])
+
+    # a triangle through the upper sheet before the move: its crossing stays, counted, and the free move too
+    spike = np.array([[0.25, 0.05, -0.05], [0.3, 0.05, 0.3], [0.25, 0.1, 0.3]])
+    V2 = np.concatenate([V, spike])
+    F2 = np.concatenate([F, [[len(V), len(V) + 1, len(V) + 2]]])
+    before = self_intersections(V2, F2)
+    assert before > 0
+    X2 = V2.copy()
+    X2[free, 2] = 0.3
+    out, count = _uncrossed(V2, X2, F2, before)
+    assert count == before == self_intersections(out, F2)
+    np.testing.assert_array_equal(out[free], X2[free])
