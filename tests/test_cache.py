@@ -66,11 +66,12 @@ def test_a_psi_change_reuses_the_coarse_stage_and_the_strength(tmp_path, small_c
 def test_a_psi_change_reuses_the_search_band_and_gives_the_run_without_the_cache(tmp_path, small_config,
                                                                                  monkeypatch):
     import fracture.refine.engine as engine
+    import fracture.refine.search as search
 
     cache = StageCache(tmp_path / "cache")
     searched = ["refine.search=graphcut", "refine.iterations=3"]
     first = run(load_config(small_config, searched), tmp_path / "a", cache)
-    assert first["stats"]["refine"]["search"] is not None
+    assert first["stats"]["refine"]["search"]["free_nodes"] > 0
     assert len(list((tmp_path / "cache" / "search band").iterdir())) == 1
 
     def not_again(*args, **kwargs):
@@ -78,12 +79,15 @@ def test_a_psi_change_reuses_the_search_band_and_gives_the_run_without_the_cache
 
     with monkeypatch.context() as m:  # the band does not read psi: a psi change finds it in the cache
         m.setattr(engine, "search_band", not_again)
+        m.setattr(search, "search_band", not_again)
         changed = run(load_config(small_config, [*searched, "psi.stress_weight=1.5"]), tmp_path / "b", cache)
+    assert changed["stats"]["refine"]["search"]["free_nodes"] == first["stats"]["refine"]["search"]["free_nodes"]
     plain = run(load_config(small_config, [*searched, "psi.stress_weight=1.5"]), tmp_path / "c", None)
     assert plain["files"] == changed["files"] and untimed(plain["stats"]) == untimed(changed["stats"])
-    # another band is another entry
-    run(load_config(small_config, [*searched, "refine.band=6"]), tmp_path / "d", cache)
-    assert len(list((tmp_path / "cache" / "search band").iterdir())) == 2
+    # another band, core or grid is another entry
+    for k, other in enumerate(["refine.band=6", "refine.core=0.3", "grid.resolution=18"]):
+        run(load_config(small_config, [*searched, other]), tmp_path / f"d{k}", cache)
+        assert len(list((tmp_path / "cache" / "search band").iterdir())) == 2 + k
 
 
 def test_a_changed_input_file_invalidates_the_stages_after_it(tmp_path, small_config):

@@ -50,6 +50,21 @@ def test_two_labels_reach_the_global_minimum_and_three_within_twice_it(seed):
             assert g.energy(out) <= 2 * best + 1e-12
 
 
+def test_a_label_the_reach_does_not_name_is_taken_by_no_node():
+    """Three fixed nodes of labels 0, 1, 2 and three free ones (label 0) tied five times as strongly to the
+    label-2 node as to the label-0 one: free to, they take label 2; with a reach that names only labels
+    0 and 1 they keep theirs, and with one that lets label 2 reach node 3 only, node 3 alone takes it."""
+    p = np.array([3, 4, 5, 3, 4, 5])
+    q = np.array([2, 2, 2, 0, 0, 0])
+    g = PottsGraph(6, p, q, np.array([5.0, 5.0, 5.0, 1.0, 1.0, 1.0]))
+    labels = np.array([0, 1, 2, 0, 0, 0])
+    free = np.array([False, False, False, True, True, True])
+    assert expand(g, labels, free)[0].tolist() == [0, 1, 2, 2, 2, 2]
+    some = {0: np.array([3, 4, 5]), 1: np.array([3, 4, 5])}
+    assert expand(g, labels, free, some)[0].tolist() == [0, 1, 2, 0, 0, 0]
+    assert expand(g, labels, free, {**some, 2: np.array([3])})[0].tolist() == [0, 1, 2, 2, 0, 0]
+
+
 @pytest.mark.parametrize("seed", range(3))
 def test_the_edges_incident_to_nodes_are_found_each_once(seed):
     rng = np.random.default_rng(20 + seed)

@@ -252,7 +252,7 @@ def test_a_coarsened_sheet_that_folds_two_triangles_together_keeps_its_triangles
 def test_moves_that_make_triangles_cross_are_taken_back_and_the_others_kept():
     """Two parallel sheets a tenth apart, the upper one over half of the lower: a vertex of the lower one
     lifted through the upper one goes back (with its neighbours); one lifted where nothing is above it
-    stays. A crossing the surface had before is neither counted as new nor undone."""
+    stays. A crossing the surface had before stays and counts as one it had; a new one beside it goes."""
     from fracture.mesh.intersect import self_intersections
     from fracture.mesh.primitives import sheet
     from fracture.refine.search import _uncrossed
@@ -278,7 +278,8 @@ def test_moves_that_make_triangles_cross_are_taken_back_and_the_others_kept():
     before = self_intersections(V2, F2)
     assert before > 0
     X2 = V2.copy()
-    X2[free, 2] = 0.3
+    X2[[below, free], 2] = 0.3
     out, count = _uncrossed(V2, X2, F2, before)
     assert count == before == self_intersections(out, F2)
+    np.testing.assert_array_equal(out[below], V2[below])
     np.testing.assert_array_equal(out[free], X2[free])

@@ -11,8 +11,9 @@ its counts, statistics and notes) is stored under a key: the SHA-256 of
   the versions of the numerical libraries.
 
 A run whose coarse input is unchanged therefore reuses the coarse stage; one
-with only ``psi`` changed reuses the coarse stage, and inside the fields stage
-the strength field and the distances (:meth:`StageCache.value`). A reused
+with only ``psi`` changed reuses the coarse stage, inside the fields stage
+the strength field and the distances, and inside the refine stage the global
+search's band (:meth:`StageCache.value`). A reused
 result is byte-identical to a recomputed one: its files are copies and its
 products the pickled objects the stage made.
 

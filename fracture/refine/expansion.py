@@ -75,9 +75,9 @@ def expand(graph: PottsGraph, labels: np.ndarray, free: np.ndarray, reach: dict 
            cycles: int = 4) -> tuple[np.ndarray, ExpansionLog]:
     """Labels that lower ``graph``'s Potts energy by expansion moves from ``labels`` (free nodes only).
 
-    ``reach[a]`` (optional) are the nodes that may take label ``a`` (default: every free node): a
-    region with no energy of its own never grows an island of ``a`` away from ``a``'s nodes, so the
-    caller may limit each move to the nodes near them. Cycles over the labels until one changes nothing
+    ``reach[a]`` (optional) are the nodes that may take label ``a`` (without ``reach``: every free node;
+    a label ``reach`` does not name takes none): a region with no energy of its own never grows an
+    island of ``a`` away from ``a``'s nodes, so the caller may limit each move to the nodes near them. Cycles over the labels until one changes nothing
     or ``cycles`` are done. With two labels one cut gives the global minimum: every free node starts
     with the first, and the move of the second reaches every labelling of them.
     """
@@ -100,7 +100,7 @@ def expand(graph: PottsGraph, labels: np.ndarray, free: np.ndarray, reach: dict 
     for _ in range(cycles):
         changed = False
         for a in np.unique(labels):
-            region = every if reach is None else np.asarray(reach.get(int(a), every))
+            region = every if reach is None else np.asarray(reach.get(int(a), every[:0]))
             if int(a) in tried_at and (not len(region) or changed_at[region].max() < tried_at[int(a)]):
                 continue
             nodes = region[free[region] & (labels[region] != a)]

@@ -17,7 +17,9 @@ pieces is a labelling of space by piece. On the field grid:
    area (the flow alone: 100 %); with 0.4 on 100 % and 99 %, and the
    collapsing wall's polished functional fell from 0.599 to 0.567; with a
    half the marble bunny's network lost half its area to shortcuts through
-   the strong marble (`docs/design-measurements.md`).
+   the strong marble (`docs/design-measurements.md`). The band reads no psi
+   (:func:`search_band`): the refine stage keeps it in the stage cache, and a
+   re-run with another material or stress weight takes it from there.
 2. **Cut.** Neighbouring nodes of two pieces cost the least ``psi`` along
    the edge where the contour can put the surface, a sixth of the edge from
    either node (it crosses the edge where psi is least: a thin weak layer on
@@ -152,7 +154,8 @@ class SearchResult:
 class SearchBand:
     """The band of a search (module notes, 1): its nodes and the pieces they start in and keep.
 
-    It reads the coarse surface, B and the grid, not psi: a run whose coarse
+    It reads the coarse surface, B, the grid, the distances, ``band`` and
+    ``core``, not psi: a run whose coarse
     input and grid are those of an earlier one (a re-run with the material or
     the stress changed) reuses it (the refine stage keeps it in the stage
     cache). ``empty`` says why there is nothing to search ("" when there is)."""
@@ -382,8 +385,8 @@ def _sides(near_points: np.ndarray, V0, F0, S0, side_of: _SideOf) -> np.ndarray:
     part of the surface crosses the segment to a closest point); only the
     nodes whose closest point lies on an edge or corner (near rims and
     junctions: on the collapsing wall's band a fifth of the nodes) ask
-    :class:`_SideOf`, at the point of the segment to their closest point
-    :data:`_SIDE_ASK` cells from the surface: the segment meets the surface
+    :class:`_SideOf`, at the point of the segment to their closest point at
+    most :data:`_SIDE_ASK` cells from the surface: the segment meets the surface
     only at its end, so that point lies in the node's piece, and the nearest
     of the samples to a point near them is found at once (to a point far from
     the surface, as most of B's are for :func:`_depths`, it took three to four
@@ -408,8 +411,8 @@ def _depths(B: Exterior, V0, F0, S0, side_of, n_pieces) -> np.ndarray:
         X = X[:: -(-len(X) // _DEPTH_SAMPLES)]
     d = np.sqrt(np.maximum(igl.point_mesh_squared_distance(X, V0, F0)[0], 0.0))
     depth = np.zeros(n_pieces)
-    # the side by the closest triangle where it is clear (the nearest-neighbour query of points far from
-    # every face, as most of B's are, is slow: on the collapsing wall 0.12 s against 0.035 s)
+    # the side by the closest triangle where it is clear, else asked near the surface (_sides: most of B's
+    # points are far from every face, where a nearest-neighbour query is slow)
     np.maximum.at(depth, _sides(X, V0, F0, S0, side_of), d)
     return depth
 
@@ -470,10 +473,11 @@ def _cut(sub: _BoxGrid, near, keep, labels, shifted, node_weights, reach_of
     then takes the label its coarse nodes agree on, and only nodes within :data:`_FINE_BAND` cells of
     where they disagree are cut again at full resolution. ``reach_of(ids)`` says per piece which of the
     band's nodes ``ids`` (positions in ``near``) it may take (:func:`_reach`, in positions of ``ids``);
-    coarse to fine it is asked of the coarse nodes and of the full grid's moving nodes only (on the
-    clay 0.16 s against 0.2 s for every node; a full-grid node given the pieces its coarse cell's corners
-    may take would reach up to two cells farther, and on a concave Cell Fracture export, Suzanne, one
-    of the pieces assembled from the result was not closed). Returns the labels, the
+    coarse to fine it is asked of the coarse level's free nodes and of the full grid's moving nodes only
+    (a piece it names no node for takes none; on the clay 0.16 s against 0.2 s for every node; a
+    full-grid node given the pieces its coarse cell's corners may take would reach up to two cells
+    farther, and on a concave Cell Fracture export, Suzanne, one of the pieces assembled from the
+    result was not closed). Returns the labels, the
     full-resolution graph (every edge with a free end: the cut's energy) and the expansion's log (its
     energies on that graph)."""
     free = ~keep

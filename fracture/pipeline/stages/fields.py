@@ -95,8 +95,13 @@ def known_key(ctx: RunContext, name: str) -> str:
     depends = {"zeta": (cfg["strength"], cfg["seed"]), "distance": (),
                "zeta pyramid": (cfg["strength"], cfg["seed"], cfg["pyramid"]),
                "xi pyramid": (cfg["stress"], cfg["pyramid"])}[name]
-    grid = (cfg["grid"]["resolution"], cfg["grid"]["padding"])
-    return digest(name, ctx.keys["coarse"], grid, depends, code_version())
+    return digest(name, ctx.keys["coarse"], grid_inputs(cfg), depends, code_version())
+
+
+def grid_inputs(cfg: dict) -> tuple:
+    """What of a config's tree (``Config.tree()``) the field grid is made of, beside the coarse stage's
+    exterior (``fields.build.grid_for``): for the keys of what is kept per grid."""
+    return cfg["grid"]["resolution"], cfg["grid"]["padding"]
 
 
 def cached_parts(ctx: RunContext) -> dict:

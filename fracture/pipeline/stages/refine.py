@@ -113,10 +113,11 @@ class _CachedBand:
 
     def __init__(self, ctx: RunContext):
         from fracture.pipeline.cache import code_version, digest
+        from fracture.pipeline.stages.fields import grid_inputs
 
         cfg = ctx.config.tree()
         self.cache = ctx.cache
-        self.key = digest("search band", ctx.keys["coarse"], (cfg["grid"]["resolution"], cfg["grid"]["padding"]),
+        self.key = digest("search band", ctx.keys["coarse"], grid_inputs(cfg),
                           (cfg["refine"]["band"], cfg["refine"]["core"]), code_version())
 
     def get(self):
