@@ -73,3 +73,24 @@ def test_the_candidates_of_a_move_hold_every_pair_close_after_it():
         with_candidates = close_pairs(Y, E, UP, gap, candidates)
         assert np.array_equal(with_candidates[0], pairs) and np.array_equal(with_candidates[1], crossing)
     assert len(candidate_pairs(X, E, gap)) < len(candidates)  # the move widens the search
+
+
+def test_per_vertex_moves_widen_only_their_own_edges_search():
+    """With one largest move per vertex: every pair that comes within the gap at positions within each
+    vertex's own move is among the candidates, and one vertex that moves far does not pair every edge
+    with every other (as one distance for all would)."""
+    rng = np.random.default_rng(6)
+    X = rng.uniform(0, 1, (400, 3)) * [1, 1, 0.01]
+    E = np.stack([np.arange(0, 400, 2), np.arange(1, 400, 2)], 1)
+    X[E[:, 1]] = X[E[:, 0]] + rng.normal(0, 0.03, (200, 3)) * [1, 1, 0]
+    gap = 0.01
+    move = rng.uniform(0, 0.02, len(X))
+    move[7] = 0.5  # one far move
+    candidates = candidate_pairs(X, E, gap, move)
+    known = {tuple(p) for p in candidates.tolist()}
+    for _ in range(5):
+        d = rng.normal(size=X.shape)
+        Y = X + (move * rng.uniform(0, 1, len(X)))[:, None] * d / np.linalg.norm(d, axis=1)[:, None]
+        pairs, _ = close_pairs(Y, E, UP, gap)
+        assert {tuple(p) for p in pairs.tolist()} <= known
+    assert len(candidates) < 0.25 * len(candidate_pairs(X, E, gap, float(move.max())))

@@ -283,3 +283,21 @@ def test_moves_that_make_triangles_cross_are_taken_back_and_the_others_kept():
     assert count == before == self_intersections(out, F2)
     np.testing.assert_array_equal(out[below], V2[below])
     np.testing.assert_array_equal(out[free], X2[free])
+
+
+def test_a_second_round_reaches_a_tilted_sheet_beyond_the_first_rounds_cores():
+    """A weak sheet tilted up to 14.6 cells from a flat cut: one search leaves its far end beyond the pieces'
+    cores (above the flow alone), a second from the first one's surface reaches it and ends below the flow
+    alone; the new vertices still hang from the coarse triangles."""
+    case = weak_sheet_case("tilted", 8.0)
+    _, once = _refine(case, max_triangles=12000)
+    r, twice = _refine(case, max_triangles=12000, search_rounds=2)
+    _, alone = _refine(case, max_triangles=12000, search="none")
+    assert once.sampled[1] > alone.sampled[1]
+    assert twice.sampled[1] < alone.sampled[1] and twice.search.sampled[1] < once.search.sampled[1]
+    assert any("2 rounds" in note for note in twice.search.notes)
+    base = twice.search.surface.base
+    assert base.shape == (len(twice.search.surface.V), len(case.cut_V))
+    np.testing.assert_allclose(np.asarray(base.sum(axis=1)).ravel(), 1.0)
+    d = case.distance_to_sheet(area_samples(r.mesh.V, r.mesh.F))
+    assert np.mean(np.abs(d) <= 1.0) > 0.995

@@ -95,8 +95,9 @@ class BoundaryOnB:
             return 0
         gap = _CURVE_GAP * self.h
         # every round's positions lie between the surface's and X1: one candidate search serves them all
-        ends = E.ravel()  # a vertex on two edges counts twice: the same largest move
-        move = float(np.sqrt(((X1[ends] - self.mesh.V[ends]) ** 2).sum(axis=1).max()))
+        move = np.zeros(len(X1))
+        ends = np.unique(E)
+        move[ends] = np.linalg.norm(X1[ends] - self.mesh.V[ends], axis=1)
         candidates = candidate_pairs(self.mesh.V, E, gap, move)
         pairs, crossing = close_pairs(self.mesh.V, E, self.B.normal_at, gap, candidates)
         close = {tuple(x) for x in pairs.tolist()}

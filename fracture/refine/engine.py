@@ -92,7 +92,7 @@ from fracture.refine.order import spatial_order
 from fracture.mesh.fracture_surface import FractureSurface
 from fracture.refine.params import RefineParams
 from fracture.refine.remesh import PsiSplits
-from fracture.refine.search import SearchResult, graph_cut_search, search_band
+from fracture.refine.search import SearchResult, search_band, search_in_rounds
 from fracture.refine.state import VertexState
 from fracture.refine.step import (BOUNDARY_MOVE, ImplicitStep, StepSize, cotangent_weights, limit_by_shortest_edge,
                                   limit_moves)
@@ -568,8 +568,8 @@ def default_search(params: RefineParams, distance: np.ndarray | None = None, nam
             prepared = search_band(mesh, pyramid.grid, B, params.band, params.core, distance, names)
             if bands is not None:
                 bands.put(prepared)
-        return graph_cut_search(mesh, pyramid, B, params.band, params.tension, distance=distance, core=params.core,
-                                names=names, grain=grain, prepared=prepared)
+        return search_in_rounds(mesh, pyramid, B, params.band, params.tension, rounds=params.search_rounds,
+                                distance=distance, prepared=prepared, core=params.core, names=names, grain=grain)
 
     return search
 

@@ -44,6 +44,10 @@ class RefineParams(Section):
                          "than this fraction of the piece's depth (a minimum cut favours small pieces: without a core a "
                          "small piece could be cut down to a sliver; higher lets the cut reach weak material deeper "
                          "in the pieces and shrink the network more)")
+    search_rounds: int = integer(1, 1, 4, "searches in all, each from the last one's surface while it lowers the "
+                                 "functional: a crack may then travel several bands, and the pieces' cores shrink "
+                                 "with them (a tilted weak sheet beyond the first search's cores; each round costs "
+                                 "a search)")
     polish_stages: int = integer(0, 0, 8, "after the search, the flow polishes its surface on this many stages of the "
                                  "coarse-to-fine schedule before the last one, on level 0 (0: level 0 alone, which "
                                  "keeps the thin weak layers the cut found, a brick wall's; 1: the surface also settles "

@@ -217,7 +217,8 @@ def search_band(mesh: FractureSurface, grid, B: Exterior, band: float, core: flo
 
 def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, tension: float,
                      distance: np.ndarray | None = None, grain=None, core: float = 0.4,
-                     names: list[str] | None = None, prepared: SearchBand | None = None) -> SearchResult:
+                     names: list[str] | None = None, prepared: SearchBand | None = None,
+                     origin: FractureSurface | None = None) -> SearchResult:
     """Search the band of ``band`` grid cells around ``mesh`` (the coarse surface) for the labelling of
     least weighted area (module notes).
 
@@ -227,7 +228,9 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
     ``distance`` (optional) is the distance of every grid node to the coarse surface; ``grain``
     (optional, a :class:`fields.grain.Grain`) makes the cost of a surface element depend on its normal
     (per node the edge weights of :class:`~fracture.refine.cut_weights.GrainWeights`); ``prepared``
-    (optional) the band :func:`search_band` made of the same surface, grid, B, ``band`` and ``core``.
+    (optional) the band :func:`search_band` made of the same surface, grid, B, ``band`` and ``core``;
+    ``origin`` (optional, default ``mesh``) the coarse surface the new vertices hang from in the tree
+    and their travel is measured from (:func:`search_in_rounds` searches again from a searched surface).
     """
     clock = time.perf_counter()
     seconds: dict[str, float] = {}
@@ -303,7 +306,8 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
     used, inv = np.unique(F, return_inverse=True)  # the vertices the coarsening collapsed away go
     V, F = V[used], inv.reshape(-1, 3).astype(np.int64)
     tick("contour")
-    base, travel = _tree_base(V, F, sides, V0, F0, S0)
+    tree = mesh if origin is None else origin
+    base, travel = _tree_base(V, F, sides, tree.V, tree.F, tree.sides)
     surface = FractureSurface(V, F, sides, n_coarse=len(V), base=base)
     before = energy(V0, F0, pyramid.value(V0) + offset, grain)
     after = energy(V, F, pyramid.value(V) + offset, grain)
@@ -320,6 +324,41 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
         result.surface = None
         result.notes.append(f"search: the cut's surface does not lower the functional ({sampled[1]:.6g} against the "
                             f"coarse {sampled[0]:.6g}); the coarse surface is kept")
+    return result
+
+
+def search_in_rounds(mesh: FractureSurface, pyramid, B: Exterior, band: float, tension: float, rounds: int = 1,
+                     distance: np.ndarray | None = None, prepared: SearchBand | None = None, **options
+                     ) -> SearchResult:
+    """:func:`graph_cut_search` of ``mesh`` (the coarse surface), then again from its own surface, up to
+    ``rounds`` searches in all, while each lowers the functional (on dense samples) further.
+
+    A round's band and cores are measured from the last round's surface, so a crack may travel up to
+    ``rounds`` bands from the coarse one, and the cores shrink with the pieces (a minimum cut favours small
+    pieces: module notes, 1). A weak sheet 8 voxels off a tilted cut, beyond the first round's cores, is
+    reached by the second (`docs/design-measurements.md`). ``options`` go to every round; ``distance`` and
+    ``prepared`` (of the coarse surface) to the first. The result's energies run from the coarse surface to
+    the last kept round's, its seconds are summed and its notes say how many rounds were kept."""
+    result = graph_cut_search(mesh, pyramid, B, band, tension, distance=distance, prepared=prepared, **options)
+    kept = 1
+    while kept < rounds and result.surface is not None:
+        again = graph_cut_search(result.surface, pyramid, B, band, tension, origin=mesh, **options)
+        seconds = {k: result.seconds.get(k, 0.0) + again.seconds.get(k, 0.0)
+                   for k in result.seconds.keys() | again.seconds.keys()}
+        if again.surface is None:
+            result.seconds = seconds
+            result.notes.append(f"search: round {kept + 1} did not lower the functional further; round {kept}'s "
+                                "surface is kept (refine.search_rounds)")
+            break
+        result = SearchResult(again.surface, travel=again.travel, free_nodes=result.free_nodes,
+                              labels_changed=result.labels_changed + again.labels_changed,
+                              cut_energy=(result.cut_energy[0], again.cut_energy[1]),
+                              functional=(result.functional[0], again.functional[1]),
+                              sampled=(result.sampled[0], again.sampled[1]), seconds=seconds,
+                              notes=result.notes + again.notes)
+        kept += 1
+    if kept > 1:
+        result.notes.append(f"search: {kept} rounds, each from the last one's surface (refine.search_rounds)")
     return result
 
 
