@@ -76,7 +76,7 @@ def test_the_candidates_of_a_move_hold_every_pair_close_after_it():
 
 
 def test_per_vertex_moves_widen_only_their_own_edges_search():
-    """With one largest move per vertex: every pair that comes within the gap at positions within each
+    """With each edge's ends' largest move: every pair that comes within the gap at positions within each
     vertex's own move is among the candidates, and one vertex that moves far does not pair every edge
     with every other (as one distance for all would)."""
     rng = np.random.default_rng(6)
@@ -86,7 +86,7 @@ def test_per_vertex_moves_widen_only_their_own_edges_search():
     gap = 0.01
     move = rng.uniform(0, 0.02, len(X))
     move[7] = 0.5  # one far move
-    candidates = candidate_pairs(X, E, gap, move)
+    candidates = candidate_pairs(X, E, gap, move[E].max(axis=1))
     known = {tuple(p) for p in candidates.tolist()}
     for _ in range(5):
         d = rng.normal(size=X.shape)

@@ -95,9 +95,7 @@ class BoundaryOnB:
             return 0
         gap = _CURVE_GAP * self.h
         # every round's positions lie between the surface's and X1: one candidate search serves them all
-        move = np.zeros(len(X1))
-        ends = np.unique(E)
-        move[ends] = np.linalg.norm(X1[ends] - self.mesh.V[ends], axis=1)
+        move = np.linalg.norm(X1[E] - self.mesh.V[E], axis=2).max(axis=1)  # per edge, its ends' largest
         candidates = candidate_pairs(self.mesh.V, E, gap, move)
         pairs, crossing = close_pairs(self.mesh.V, E, self.B.normal_at, gap, candidates)
         close = {tuple(x) for x in pairs.tolist()}

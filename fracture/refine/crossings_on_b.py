@@ -118,18 +118,17 @@ def _point_segment(p, a, b):
 
 def candidate_pairs(X: np.ndarray, E: np.ndarray, gap: float, move=0.0) -> np.ndarray:
     """Pairs of edges ``E`` (sorted, unique) among which are all those that come within ``gap`` of each
-    other at ``X``, or at any positions of their vertices within ``move`` of ``X`` (one distance, or one
-    per vertex of ``X``): an edge's midpoint moves by at most its ends' largest move ``m`` and its length
+    other at ``X``, or at any positions of their vertices within ``move`` of ``X`` (one distance, or per
+    edge its ends' largest): an edge's midpoint moves by at most its ends' largest move ``m`` and its length
     changes by at most ``2 m``, so each edge is searched for as if ``4 m`` longer. One search then serves
-    the checks of a step's trial positions (:func:`close_pairs`). Per vertex, one boundary vertex that
+    the checks of a step's trial positions (:func:`close_pairs`). Per edge, one boundary vertex that
     moves far widens its own edges' search only: with one distance for all, a step that put one vertex
     five cells away on B paired every boundary edge of the collapsing wall's searched surface with a
     fifth of the others (1.1 million pairs, 0.7 s per step)."""
     if len(E) < 2:
         return np.zeros((0, 2), np.int64)
     A, B = X[E[:, 0]], X[E[:, 1]]
-    m = np.maximum(move[E[:, 0]], move[E[:, 1]]) if np.ndim(move) else move
-    return _candidates(0.5 * (A + B), np.linalg.norm(B - A, axis=1) + 4.0 * m, gap)
+    return _candidates(0.5 * (A + B), np.linalg.norm(B - A, axis=1) + 4.0 * np.asarray(move, np.float64), gap)
 
 
 def _candidates(M: np.ndarray, L: np.ndarray, gap: float) -> np.ndarray:
