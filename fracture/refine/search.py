@@ -178,11 +178,10 @@ def search_band(mesh: FractureSurface, grid, B: Exterior, band: float, core: flo
     reach = (band + 2.0) * h
     box = _node_box(grid, V0.min(axis=0) - reach, V0.max(axis=0) + reach)
     sub = _BoxGrid(grid, box)
-    P = sub.points()
     if distance is not None:
         d = distance[box].ravel()
     else:
-        d = np.sqrt(np.maximum(igl.point_mesh_squared_distance(P, V0, F0)[0], 0.0))
+        d = np.sqrt(np.maximum(igl.point_mesh_squared_distance(sub.points(), V0, F0)[0], 0.0))
     # a node on B is outside: a sheet's crossing of B then lies inside an edge (its winding number is
     # anything from 0 to 1 there)
     inside, on_b = B.grid_nodes(sub.origin, sub.spacing, sub.shape, _ON_B * h, asked=d <= reach)
@@ -193,7 +192,7 @@ def search_band(mesh: FractureSurface, grid, B: Exterior, band: float, core: flo
             f"search: the band of {band:g} cells holds no grid node inside the object; the coarse surface is "
             "kept (refine.band)"))
     side_of = _SideOf(V0, F0, S0, h)
-    coarse = _sides(P[near], V0, F0, S0, side_of)
+    coarse = _sides(sub.points(near), V0, F0, S0, side_of)
     # every piece keeps the nodes beyond the band and its core (what a node may become: see _reach)
     dn = d[near]
     depth = _depths(B, V0, F0, S0, side_of, n_pieces)
@@ -207,7 +206,7 @@ def search_band(mesh: FractureSurface, grid, B: Exterior, band: float, core: flo
             f"search: the band of {band:g} cells holds no free grid node inside the object; the coarse surface "
             "is kept (refine.band)"))
     coarse, _ = _mend(sub, near, coarse, keep)
-    missing = [c for c in range(n_pieces) if c in set(S0.ravel().tolist()) and not (coarse == c).any()]
+    missing = np.setdiff1d(np.unique(S0), coarse).tolist()  # pieces of the coarse surface no node holds
     if missing:
         return SearchBand(box, near, coarse, keep, empty=(
             f"search: piece{'s' if len(missing) > 1 else ''} {_named(missing, names)} hold no grid node "
@@ -255,15 +254,15 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
         return SearchResult(None, notes=[sb.empty], seconds=seconds)
     sub = _BoxGrid(grid, sb.box)
     near, coarse, keep = sb.near, sb.coarse, sb.keep
-    P = sub.points()
+    P = sub.points(near)  # the band's nodes' points, in the order of ``near``
 
     # 2. the cut
     shifted = (psi[sb.box] + offset).ravel()
-    node_weights = None if grain is None else GrainWeights(grain)(sub.spacing, P[near])
+    node_weights = None if grain is None else GrainWeights(grain)(sub.spacing, P)
     free = ~keep
 
     def reach_of(ids):
-        return _reach(sub, near[ids], P[near[ids]], V0, F0, S0, band * h + h)
+        return _reach(sub, near[ids], P[ids], V0, F0, S0, band * h + h)
 
     labels, graph, log = _cut(sub, near, keep, coarse, shifted, node_weights, reach_of)
     tick("cut")
@@ -387,8 +386,9 @@ class _BoxGrid:
     def size(self) -> int:
         return int(np.prod(self.shape))
 
-    def points(self) -> np.ndarray:
-        idx = np.stack(np.unravel_index(np.arange(self.size), self.shape), 1)
+    def points(self, ids: np.ndarray | None = None) -> np.ndarray:
+        """The points of the nodes ``ids`` (flat indices; default every node)."""
+        idx = np.stack(np.unravel_index(np.arange(self.size) if ids is None else ids, self.shape), 1)
         return self.origin + idx * self.spacing
 
 
