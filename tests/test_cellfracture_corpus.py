@@ -95,6 +95,28 @@ def test_exports_run_end_to_end_with_the_global_search(corpus, case, tmp_path):
 
 
 @pytest.mark.slow
+def test_the_searched_rims_cross_nowhere_on_the_surface(corpus, tmp_path):
+    """On cube_20 at its own grid the search's rims, each moved across its sheet to where psi is least,
+    made two cracks cross on a face of the cube (the flow keeps what it starts with, and the pieces could
+    not be cut out); those moves are taken back."""
+    from fracture.io.ply import read_ply
+    from fracture.mesh.exterior import Exterior
+    from fracture.refine.crossings_on_b import close_pairs
+
+    cfg = load_config(REPO / "configs" / "blender_cube8.yaml",
+                      [f"input.path={corpus / 'cube_20' / 'blender_obj'}", "refine.search=graphcut",
+                       "refine.iterations=1", "refine.max_triangles=3000", "refine.snapshots=false"])
+    out = runner.run(cfg, tmp_path / "run", progress=False, until="refine")
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["stats"]["refine"]["search"]["replaced_coarse_surface"]
+    V, F, _, _ = read_ply(out / "refined" / "fracture_surface.ply")
+    BV, BF, _, _ = read_ply(out / "coarse" / "exterior.ply")
+    B = Exterior(BV, BF)
+    e, count = unique_edges(F)
+    assert close_pairs(V, e[count == 1], B.normal_at)[1].sum() == 0
+
+
+@pytest.mark.slow
 def test_the_rotated_cube_ply_runs_at_the_full_budget(corpus, tmp_path):
     """The PLY of cube_rotated_8 at the default budget: new boundary vertices, settled onto the cube's
     surface near its edges, once took a point across another crack's boundary there (B's closest point

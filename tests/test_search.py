@@ -301,3 +301,38 @@ def test_a_second_round_reaches_a_tilted_sheet_beyond_the_first_rounds_cores():
     np.testing.assert_allclose(np.asarray(base.sum(axis=1)).ravel(), 1.0)
     d = case.distance_to_sheet(area_samples(r.mesh.V, r.mesh.F))
     assert np.mean(np.abs(d) <= 1.0) > 0.995
+
+
+def test_rim_moves_that_make_rims_cross_on_b_are_taken_back_and_the_others_kept():
+    """Rim edges on the plane z = 0 (B's normal there is z): two vertices of one curve moved past each other
+    make its edges cross on B, and go back; a move elsewhere that crosses nothing stays. A pair that crossed
+    before stays, and a move of one of its edges too."""
+    from fracture.refine.crossings_on_b import close_pairs
+    from fracture.refine.search import _rims_uncrossed
+
+    def normal_at(P):
+        return np.tile([0.0, 0.0, 1.0], (len(P), 1))
+
+    x = np.linspace(0.0, 1.0, 11)
+    V = np.stack([x, 0.5 + 0 * x, 0 * x], 1)
+    E = np.stack([np.arange(10), np.arange(1, 11)], 1)
+    X = V.copy()
+    X[3] = [0.45, 0.52, 0.0]  # b past c, c back past b: the edges (2, 3) and (4, 5) cross
+    X[4] = [0.25, 0.54, 0.0]
+    X[8] = [0.8, 0.55, 0.0]  # a bend: crosses nothing
+    assert close_pairs(X, E, normal_at)[1].sum() > 0
+    out = _rims_uncrossed(V, X, E, normal_at)
+    assert close_pairs(out, E, normal_at)[1].sum() == 0
+    np.testing.assert_array_equal(out[[3, 4]], V[[3, 4]])
+    np.testing.assert_array_equal(out[8], X[8])
+
+    # a second curve across the first before any move (at the bend): that crossing stays, and the bend too
+    V2 = np.concatenate([V, [[0.75, 0.3, 0.0], [0.75, 0.7, 0.0]]])
+    E2 = np.concatenate([E, [[11, 12]]])
+    X2 = np.concatenate([X, V2[11:]])
+    before = int(close_pairs(V2, E2, normal_at)[1].sum())
+    assert before == 1
+    out = _rims_uncrossed(V2, X2, E2, normal_at)
+    assert close_pairs(out, E2, normal_at)[1].sum() == before
+    np.testing.assert_array_equal(out[[3, 4]], V2[[3, 4]])
+    np.testing.assert_array_equal(out[8], X2[8])

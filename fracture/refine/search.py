@@ -79,6 +79,7 @@ from fracture.mesh.multilabel import contour_labels
 from fracture.mesh.sampling import area_barycentric, uniform_barycentric
 from fracture.mesh.sheets import coarsen_sheets
 from fracture.mesh.topology import barycentric_weights, face_frames, unique_edges
+from fracture.refine.crossings_on_b import close_pairs
 from fracture.refine.cut_weights import OFFSETS, GrainWeights, area_weights
 from fracture.refine.expansion import PottsGraph, expand
 from fracture.refine.flow import energy, face_terms, sampled_energy
@@ -209,7 +210,8 @@ def search_band(mesh: FractureSurface, grid, B: Exterior, band: float, core: flo
     missing = np.setdiff1d(np.unique(S0), coarse).tolist()  # pieces of the coarse surface no node holds
     if missing:
         return SearchBand(box, near, coarse, keep, empty=(
-            f"search: piece{'s' if len(missing) > 1 else ''} {_named(missing, names)} hold no grid node "
+            f"search: piece{'s' if len(missing) > 1 else ''} {_named(missing, names)} "
+            f"hold{'' if len(missing) > 1 else 's'} no grid node "
             "(thinner than a cell): the coarse surface is kept"))
     return SearchBand(box, near, coarse, keep)
 
@@ -296,11 +298,11 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
         return SearchResult(None, seconds=seconds, notes=["search: the cut left no fracture surface; the coarse "
                                                           "surface is kept"])
     crossings = self_intersections(V, F)
-    V, crossings = _uncrossed(V, _apart(V, _rim_to_least(V, F, B, pyramid.value, h), h), F, crossings)
+    V, crossings = _untangled(V, _apart(V, _rim_to_least(V, F, B, pyramid.value, h), h), F, B, crossings)
     X = _smooth(V, F, B)
     X = _where_lower(X, _to_valley(X, F, pyramid.value, h, float(np.ptp(psi))), F, sides, pyramid.value, h, offset,
                      grain)
-    V, crossings = _uncrossed(V, _apart(V, X, h), F, crossings)
+    V, crossings = _untangled(V, _apart(V, X, h), F, B, crossings)
     V, F, sides = coarsen_sheets(V, F, sides, cell=h, crossings=crossings)
     used, inv = np.unique(F, return_inverse=True)  # the vertices the coarsening collapsed away go
     V, F = V[used], inv.reshape(-1, 3).astype(np.int64)
@@ -835,6 +837,48 @@ def _uncrossed(V: np.ndarray, X: np.ndarray, F: np.ndarray, crossings: int, roun
         moved = np.isin(F, back).any(axis=1)
         pairs = np.concatenate([pairs[~(moved[pairs[:, 0]] | moved[pairs[:, 1]])], meeting_pairs(X, F, moved)])
     return (X, len(pairs)) if len(pairs) <= crossings else (V, crossings)
+
+
+def _rims_uncrossed(V: np.ndarray, X: np.ndarray, E: np.ndarray, normal_at, rounds: int = 8) -> np.ndarray:
+    """``X`` (moved vertices of ``V``) with the moved ends of rim edges ``E`` that cross another on B where
+    they did not in ``V`` (seen along B's normal: :mod:`fracture.refine.crossings_on_b`) back where they
+    were, until none does (at worst ``V`` itself). Rim vertices moved each on its own across their sheet
+    (:func:`_rim_to_least`) can zigzag so that a curve crosses itself or another on B with no triangles
+    meeting in space: B could not be cut along both (Section 5)."""
+
+    def crossing(P):
+        pairs, cross = close_pairs(P, E, normal_at)
+        return pairs[cross]
+
+    had = crossing(V)
+    had = set((had[:, 0] * len(E) + had[:, 1]).tolist())
+    X = X.copy()
+    for _ in range(rounds):
+        pairs = crossing(X)
+        new = pairs[~np.isin(pairs[:, 0] * len(E) + pairs[:, 1], list(had))] if had else pairs
+        if not len(new):
+            return X
+        back = np.unique(E[new].ravel())
+        back = back[(X[back] != V[back]).any(axis=1)]
+        if not len(back):
+            break
+        X[back] = V[back]
+    return V
+
+
+def _untangled(V: np.ndarray, X: np.ndarray, F: np.ndarray, B: Exterior, crossings: int) -> tuple[np.ndarray, int]:
+    """``X`` (moved vertices of ``V``, which has ``crossings`` crossing pairs of triangles) with what makes
+    triangles cross in space (:func:`_uncrossed`) or rims cross on B (:func:`_rims_uncrossed`) taken back,
+    the two in turn until neither takes back anything (at worst ``V``); and the pairs that cross."""
+    e, count = unique_edges(F)
+    E = e[count == 1]
+    for _ in range(4):
+        Y = _rims_uncrossed(V, X, E, B.normal_at)
+        Y, pairs = _uncrossed(V, Y, F, crossings)
+        if np.array_equal(Y, X):
+            return X, pairs
+        X = Y
+    return V, crossings
 
 
 def _smooth(V: np.ndarray, F: np.ndarray, B: Exterior) -> np.ndarray:
