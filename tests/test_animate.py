@@ -11,7 +11,7 @@ from conftest import BUDGETS, CONFIGS, SAMPLE, SCENE_CASES, scene_config
 from fracture.pipeline import runner
 from fracture.pipeline.config import load_config
 from fracture.mesh.exterior import Exterior
-from fracture.pieces.imprint import BRIDGE_DEPTH, imprint_boundary, split_bridge_edges
+from fracture.pieces.imprint import BRIDGE_DEPTH, imprint_boundary, split_bridge_edges, subdivide_boundary
 from fracture.io.meshes import read_obj_objects
 from fracture.io.obj import ObjFrames
 from fracture.pieces.assembly import Pieces, build_pieces, mesh_checks, overlap_and_gap
@@ -163,6 +163,20 @@ def test_bridge_edges_along_b_are_split_into_the_material():
     mesh2 = FractureSurface.from_coarse(V2, np.array([[0, 1, 2], [1, 0, 3]]), np.array([[0, 1], [0, 1]]))
     split_bridge_edges(mesh2, Exterior(BV, BF))
     assert np.allclose(mesh2.V[4], [0.5, 0.5, 0.5])
+
+
+def test_boundary_splits_beside_a_vertex_off_b_put_no_two_vertices_in_one_place():
+    """A boundary vertex a collision kept off B, outside the cube's corner, and one on the corner: every
+    point of the edge between them has the corner as its closest point of B, so each split of the edge
+    (its midpoint is off B) put a new vertex on the other one, round after round. Splits that take no
+    new point of B are not made; the edges along B are split as before."""
+    BV, BF = box((0, 0, 0), (1, 1, 1), (4, 4, 4))
+    V = np.array([[1.05, 1.05, 1.05], [1.0, 1.0, 1.0], [0.8, 0.8, 0.9]])
+    mesh = FractureSurface.from_coarse(V, np.array([[0, 1, 2]]), np.array([[0, 1]]))
+    made = subdivide_boundary(mesh, Exterior(BV, BF), 0.01)
+    assert made > 0
+    gaps = np.linalg.norm(mesh.V[:, None] - mesh.V[None], axis=2) + np.eye(len(mesh.V))
+    assert gaps.min() > 1e-6
 
 
 def test_obj_frames_round_trip(tmp_path):

@@ -407,6 +407,10 @@ def subdivide_boundary(mesh: FractureSurface, exterior: Exterior, tolerance: flo
         face, E = rows // 3, row_edges(mesh.F, rows)
         d2, _, closest = exterior.closest(0.5 * (mesh.V[E[:, 0]] + mesh.V[E[:, 1]]))
         far = np.flatnonzero(d2 > tolerance ** 2)
+        # a midpoint whose closest point of B is where an end's is adds nothing: beside a vertex that stays
+        # off B (a collision kept it there) at a crease of B, every split took the same point of B
+        ends = exterior.closest(mesh.V[E[far].ravel()])[2].reshape(-1, 2, 3)
+        far = far[np.linalg.norm(closest[far, None] - ends, axis=2).min(axis=1) > tolerance]
         # one split edge per triangle per round
         far = far[np.unique(face[far], return_index=True)[1]]
         far = far[~splits_would_cross(mesh.V, E, far, closest[far], exterior.normal_at)]
