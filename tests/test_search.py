@@ -249,6 +249,31 @@ def test_a_coarsened_sheet_that_folds_two_triangles_together_keeps_its_triangles
     assert len(sheets._same_corners(out)) == 0 and len(out) == len(F)
 
 
+def test_a_coarsened_sheet_joined_to_itself_along_an_edge_keeps_its_triangles(monkeypatch):
+    """A collapse that puts four triangles of one sheet on an edge (two parts of the sheet joined there:
+    the pieces either side would pinch, and one of Blender's Suzanne exports was not closed) is not
+    taken; three sheets meeting at a junction edge, one triangle each, are no pinch."""
+    import fracture.mesh.sheets as sheets
+    from conftest import grid_sheet
+
+    junction = np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4]])
+    assert len(sheets._sheet_pinches(junction, np.array([[0, 1], [1, 2], [0, 2]]))) == 0
+    V, F = grid_sheet(6, 0.0)
+    sides = np.tile([0, 1], (len(F), 1))
+    a, b = F[12, 0], F[12, 1]  # an inner edge of the grid: two triangles on it
+
+    def pinched(X, T, target):
+        mid = 0.5 * (X[a] + X[b])
+        X2 = np.vstack([X, mid + [0.0, 0.0, 0.3], mid + [0.05, 0.05, 0.6]])
+        return X2, np.vstack([T, [[a, b, len(X)], [b, a, len(X) + 1]]])
+
+    X2, F2 = pinched(V, F, 0)
+    assert len(sheets._sheet_pinches(F2, np.tile([0, 1], (len(F2), 1)))) == 4
+    monkeypatch.setattr(sheets, "_collapse_curved", pinched)
+    X, out, out_sides = sheets.coarsen_sheets(V, F, sides, cell=0.5)
+    assert len(sheets._sheet_pinches(out, out_sides)) == 0 and len(out) == len(F)
+
+
 def test_moves_that_make_triangles_cross_are_taken_back_and_the_others_kept():
     """Two parallel sheets a tenth apart, the upper one over half of the lower: a vertex of the lower one
     lifted through the upper one goes back (with its neighbours); one lifted where nothing is above it

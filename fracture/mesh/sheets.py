@@ -108,11 +108,23 @@ def _same_corners(F: np.ndarray) -> np.ndarray:
     return np.flatnonzero(count[inverse.ravel()] > 1)
 
 
+def _sheet_pinches(F: np.ndarray, sides: np.ndarray) -> np.ndarray:
+    """The triangles on an edge that three or more triangles of their own sheet share (a collapse that
+    joined two parts of a sheet along an edge: the pieces on either side would pinch there)."""
+    E = np.sort(F[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    base = int(sides.max(initial=0)) + 1
+    sheet = np.repeat(sides[:, 0] * base + sides[:, 1], 3)
+    n = int(F.max(initial=0)) + 1
+    key = (E[:, 0] * n + E[:, 1]) * (base * base) + sheet
+    _, inverse, count = np.unique(key, return_inverse=True, return_counts=True)
+    return np.unique(np.flatnonzero(count[inverse.ravel()] > 2) // 3)
+
+
 def coarsen_sheets(X: np.ndarray, FF: np.ndarray, sides: np.ndarray, cell: float | None = None,
                    crossings: int = 0):
     """Coarsened sheets (module notes), except for sheets whose coarsened triangles would cross another
-    sheet (or themselves) or fold two triangles onto the same three vertices: those keep their
-    triangles. Without ``cell``, a few triangles per rim vertex (flat sheets); with it, triangles of
+    sheet (or themselves), fold two triangles onto the same three vertices or join two parts of the sheet
+    along an edge: those keep their triangles. Without ``cell``, a few triangles per rim vertex (flat sheets); with it, triangles of
     about two cells' area (curved ones). ``crossings``: the crossing
     pairs of triangles the sheets have already (none, for a contour), which the result may keep. Returns
     the points (``X`` followed by the new inner vertices), triangles and sides."""
@@ -128,7 +140,7 @@ def coarsen_sheets(X: np.ndarray, FF: np.ndarray, sides: np.ndarray, cell: float
         count, pairs = self_intersections(XS_all, F_all, report=100000)
         # two triangles on the same three vertices (a fold the collapse can leave) cross nowhere but
         # enclose no volume: the pieces on either side would be one
-        folded = _same_corners(F_all)
+        folded = np.concatenate([_same_corners(F_all), _sheet_pinches(F_all, S_all)])
         if count <= crossings and not len(folded):
             return XS_all, F_all, S_all
         bad = np.concatenate([pairs.ravel() if count > crossings else np.zeros(0, np.int64), folded])
