@@ -11,7 +11,8 @@ from conftest import BUDGETS, CONFIGS, SAMPLE, SCENE_CASES, scene_config
 from fracture.pipeline import runner
 from fracture.pipeline.config import load_config
 from fracture.mesh.exterior import Exterior
-from fracture.pieces.imprint import BRIDGE_DEPTH, imprint_boundary, split_bridge_edges, subdivide_boundary
+from fracture.pieces.imprint import (BRIDGE_DEPTH, clip_tangent_triangles, imprint_boundary, split_bridge_edges,
+                                     subdivide_boundary)
 from fracture.io.meshes import read_obj_objects
 from fracture.io.obj import ObjFrames
 from fracture.pieces.assembly import Pieces, build_pieces, mesh_checks, overlap_and_gap
@@ -177,6 +178,20 @@ def test_boundary_splits_beside_a_vertex_off_b_put_no_two_vertices_in_one_place(
     assert made > 0
     gaps = np.linalg.norm(mesh.V[:, None] - mesh.V[None], axis=2) + np.eye(len(mesh.V))
     assert gaps.min() > 1e-6
+
+
+def test_an_ear_that_turns_the_boundary_back_on_itself_is_clipped():
+    """An ear of S over the cube's edge whose two boundary edges meet at 6 degrees (on a random Blender
+    Suzanne export such a needle's two traces on B ran into each other): it goes, the ears beside it whose
+    edges open wider stay."""
+    BV, BF = box((0, 0, 0), (1, 1, 1), (4, 4, 4))
+    a, t, b = [0.9, 0.5, 1.0], [1.0, 0.5, 0.9], [0.92, 0.5, 1.0]
+    c, d, e = [0.91, 0.5, 0.8], [0.9, 0.45, 0.9], [0.92, 0.55, 0.9]
+    V = np.array([a, t, b, c, d, e])
+    F = np.array([[0, 1, 2], [2, 0, 3], [0, 4, 3], [2, 3, 5]])
+    mesh = FractureSurface.from_coarse(V, F, np.tile([0, 1], (4, 1)))
+    assert clip_tangent_triangles(mesh, Exterior(BV, BF)) == 1
+    assert sorted(map(sorted, mesh.F.tolist())) == sorted(map(sorted, F[1:].tolist()))
 
 
 def test_obj_frames_round_trip(tmp_path):

@@ -46,6 +46,8 @@ CHORD = 0.05
 # An ear of S (two boundary edges) whose centroid is closer to B than this
 # fraction of its longest edge lies along B (see clip_tangent_triangles).
 TANGENT = 0.1
+# An ear of S whose two boundary edges meet at less than this angle (degrees) is clipped (_hairpins).
+HAIRPIN = 10.0
 # An interior edge of S between two boundary vertices is split, and the new
 # vertex put this fraction of the edge's length inside B.
 BRIDGE_DEPTH = 0.2
@@ -326,8 +328,24 @@ def _walk_section(surf: _Surface, p: int, q: int, claimed: set, cut: set, where:
                      f"{np.round(P, 6).tolist()} and {np.round(Q, 6).tolist()}: the path along it does not end{_RETRY}")
 
 
+def _hairpins(T: np.ndarray, boundary: np.ndarray) -> np.ndarray:
+    """Which ears (corners ``T (k, 3, 3)``; ``boundary (k, 3)``: edge ``i``, from corner ``i`` to ``i + 1``, is
+    on S's boundary) have two boundary edges that meet at an angle under :data:`HAIRPIN` degrees at their
+    common corner: the boundary turns back on itself there, and the traces of the two edges on B would run
+    side by side closer than B's triangles resolve."""
+    two = boundary.sum(axis=1) == 2
+    tip = (np.argmin(boundary, axis=1) + 2) % 3  # the corner opposite the edge that is not on the boundary
+    rows = np.arange(len(T))
+    P = T[rows, tip]
+    a = T[rows, (tip + 1) % 3] - P
+    b = T[rows, (tip + 2) % 3] - P
+    cos = np.einsum("ij,ij->i", a, b) / np.maximum(np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1), tol.tiny)
+    return two & (cos > np.cos(np.radians(HAIRPIN)))
+
+
 def clip_tangent_triangles(mesh: FractureSurface, exterior: Exterior, ratio: float = TANGENT, max_rounds: int = 20) -> int:
-    """Remove ears of S that lie along B: two boundary edges, centroid within ``ratio`` of their size from B.
+    """Remove ears of S that lie along B (two boundary edges, centroid within ``ratio`` of their size from B)
+    or turn its boundary back on itself (:func:`_hairpins`).
 
     Such a triangle separates nothing (B is on one of its sides); kept, it
     would double a patch of B (a flat B) or cut through it (a curved B).
@@ -346,7 +364,7 @@ def clip_tangent_triangles(mesh: FractureSurface, exterior: Exterior, ratio: flo
         T = mesh.V[mesh.F[cand]]
         size = np.linalg.norm(T - np.roll(T, 1, axis=1), axis=2).max(axis=1)
         d2, _, _ = exterior.closest(T.mean(axis=1))
-        flat = cand[d2 < (ratio * size) ** 2]
+        flat = cand[(d2 < (ratio * size) ** 2) | _hairpins(T, boundary[cand])]
         if not len(flat):
             break
         keep = np.ones(len(mesh.F), bool)
