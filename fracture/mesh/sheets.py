@@ -124,8 +124,8 @@ def coarsen_sheets(X: np.ndarray, FF: np.ndarray, sides: np.ndarray, cell: float
                    crossings: int = 0):
     """Coarsened sheets (module notes), except for sheets whose coarsened triangles would cross another
     sheet (or themselves), fold two triangles onto the same three vertices or join two parts of the sheet
-    along an edge: those keep their triangles. Without ``cell``, a few triangles per rim vertex (flat sheets); with it, triangles of
-    about two cells' area (curved ones). ``crossings``: the crossing
+    along an edge: those keep their triangles. Without ``cell``, a few triangles per rim vertex (flat
+    sheets); with it, triangles of about two cells' area (curved ones). ``crossings``: the crossing
     pairs of triangles the sheets have already (none, for a contour), which the result may keep. Returns
     the points (``X`` followed by the new inner vertices), triangles and sides."""
     keep = np.zeros(len(FF), bool)

@@ -339,7 +339,8 @@ def _hairpins(T: np.ndarray, boundary: np.ndarray) -> np.ndarray:
     P = T[rows, tip]
     a = T[rows, (tip + 1) % 3] - P
     b = T[rows, (tip + 2) % 3] - P
-    cos = np.einsum("ij,ij->i", a, b) / np.maximum(np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1), tol.tiny)
+    lengths = np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1)
+    cos = np.einsum("ij,ij->i", a, b) / np.maximum(lengths, tol.tiny)
     return two & (cos > np.cos(np.radians(HAIRPIN)))
 
 
