@@ -310,22 +310,32 @@ def test_moves_that_make_triangles_cross_are_taken_back_and_the_others_kept():
     np.testing.assert_array_equal(out[free], X2[free])
 
 
-def test_a_second_round_reaches_a_tilted_sheet_beyond_the_first_rounds_cores():
+def test_a_second_round_reaches_a_tilted_sheet_beyond_the_first_rounds_cores(monkeypatch):
     """A weak sheet tilted up to 14.6 cells from a flat cut: one search leaves its far end beyond the pieces'
-    cores (above the flow alone), a second from the first one's surface reaches it and ends below the flow
-    alone; the new vertices still hang from the coarse triangles."""
+    cores (above the flow alone), its cut lying against them on over half its weight; so a second search
+    runs from the first one's surface by itself, reaches it and ends below the flow alone (as two rounds
+    asked for do); the new vertices still hang from the coarse triangles. A search whose cut lies free of
+    its limits (the sheet parallel to the cut) stays one round."""
+    import fracture.refine.search as search
+
     case = weak_sheet_case("tilted", 8.0)
-    _, once = _refine(case, max_triangles=12000)
-    r, twice = _refine(case, max_triangles=12000, search_rounds=2)
+    r, auto = _refine(case, max_triangles=12000)
+    _, twice = _refine(case, max_triangles=12000, search_rounds=2)
     _, alone = _refine(case, max_triangles=12000, search="none")
-    assert once.sampled[1] > alone.sampled[1]
-    assert twice.sampled[1] < alone.sampled[1] and twice.search.sampled[1] < once.search.sampled[1]
-    assert any("2 rounds" in note for note in twice.search.notes)
-    base = twice.search.surface.base
-    assert base.shape == (len(twice.search.surface.V), len(case.cut_V))
+    monkeypatch.setattr(search, "_PRESSED", 2.0)  # no round by itself
+    _, once = _refine(case, max_triangles=12000)
+    assert once.search.pressed >= 0.5 and once.sampled[1] > alone.sampled[1]
+    for rounds in (auto, twice):
+        assert rounds.sampled[1] < alone.sampled[1] and rounds.search.sampled[1] < once.search.sampled[1]
+        assert any("2 rounds" in note for note in rounds.search.notes)
+    base = auto.search.surface.base
+    assert base.shape == (len(auto.search.surface.V), len(case.cut_V))
     np.testing.assert_allclose(np.asarray(base.sum(axis=1)).ravel(), 1.0)
     d = case.distance_to_sheet(area_samples(r.mesh.V, r.mesh.F))
     assert np.mean(np.abs(d) <= 1.0) > 0.995
+    monkeypatch.undo()
+    _, flat = _refine(weak_sheet_case("flat", 8.0), max_triangles=12000)
+    assert flat.search.pressed < 0.5 and not any("rounds" in note for note in flat.search.notes)
 
 
 def test_rim_moves_that_make_rims_cross_on_b_are_taken_back_and_the_others_kept():

@@ -119,6 +119,12 @@ _COARSE_MIN = 4000
 # against four, the minimum cuts of the clay and the Jell-O take 0.3 s instead of 0.8-1.0 s; the cut is
 # dearer by at most 0.3 % (the wall), the polished functional by 0.24 %, the weak shares within 0.4 points)
 _FINE_BAND = 2
+# A search is made again from its own surface when its cut lies against the nodes its band keeps (beyond the
+# band, or in a piece's core) on at least this share of its weight (search_in_rounds), up to _MOST_ROUNDS in
+# all: a tilted weak sheet 8 voxels off the cut pressed 52 % of its cut there; the scenes 0-27 % (the marble
+# bunny the most, the clay 17 %), the other weak sheets 0-12 % (docs/design-measurements.md).
+_PRESSED = 0.5
+_MOST_ROUNDS = 4
 # Rounds of joining islands to the pieces around them.
 _ISLAND_ROUNDS = 3
 # The sheets' vertices move along their normals to where psi is least within this much of a cell (_to_valley) ...
@@ -147,6 +153,7 @@ class SearchResult:
     cut_energy: tuple[float, float] = (0.0, 0.0)
     functional: tuple[float, float] = (0.0, 0.0)
     sampled: tuple[float, float] = (0.0, 0.0)  # the same on dense samples: what decides
+    pressed: float = 0.0  # the share of the cut's weight on edges to nodes the band keeps (its limits)
     seconds: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
 
@@ -267,6 +274,8 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
         return _reach(sub, near[ids], P[ids], V0, F0, S0, band * h + h)
 
     labels, graph, log = _cut(sub, near, keep, coarse, shifted, node_weights, reach_of)
+    cut = labels[graph.p] != labels[graph.q]
+    pressed = float(graph.w[cut & (keep[graph.p] | keep[graph.q])].sum() / max(graph.w[cut].sum(), tol.tiny))
     tick("cut")
 
     # 3. islands join the piece around them
@@ -320,7 +329,7 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
     result = SearchResult(surface, travel=travel / h, free_nodes=int(free.sum()),
                           labels_changed=int((labels != coarse).sum()),
                           cut_energy=(log.energy[0], graph.energy(labels)), functional=(before, after),
-                          sampled=sampled, seconds=seconds, notes=notes)
+                          sampled=sampled, pressed=pressed, seconds=seconds, notes=notes)
     if sampled[1] >= sampled[0]:
         result.surface = None
         result.notes.append(f"search: the cut's surface does not lower the functional ({sampled[1]:.6g} against the "
@@ -332,7 +341,9 @@ def search_in_rounds(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
                      distance: np.ndarray | None = None, prepared: SearchBand | None = None, **options
                      ) -> SearchResult:
     """:func:`graph_cut_search` of ``mesh`` (the coarse surface), then again from its own surface, up to
-    ``rounds`` searches in all, while each lowers the functional (on dense samples) further.
+    ``rounds`` searches in all, and one more (up to :data:`_MOST_ROUNDS`) whenever the last one's cut lay
+    against the nodes its band keeps on at least :data:`_PRESSED` of its weight (the least surface lies
+    beyond the band's limits), while each lowers the functional (on dense samples) further.
 
     A round's band and cores are measured from the last round's surface, so a crack may travel up to
     ``rounds`` bands from the coarse one, and the cores shrink with the pieces (a minimum cut favours small
@@ -341,8 +352,11 @@ def search_in_rounds(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
     ``prepared`` (of the coarse surface) to the first. The result's energies run from the coarse surface to
     the last kept round's, its seconds are summed and its notes say how many rounds were kept."""
     result = graph_cut_search(mesh, pyramid, B, band, tension, distance=distance, prepared=prepared, **options)
-    kept = 1
-    while kept < rounds and result.surface is not None:
+    kept, why = 1, []
+    while result.surface is not None and (kept < rounds or (result.pressed >= _PRESSED and kept < _MOST_ROUNDS)):
+        if kept >= rounds:
+            why.append(f"round {kept}'s cut lay against its band's limits on {100 * result.pressed:.0f} % of its "
+                       "weight")
         again = graph_cut_search(result.surface, pyramid, B, band, tension, origin=mesh, **options)
         seconds = {k: result.seconds.get(k, 0.0) + again.seconds.get(k, 0.0)
                    for k in result.seconds.keys() | again.seconds.keys()}
@@ -355,11 +369,12 @@ def search_in_rounds(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
                               labels_changed=result.labels_changed + again.labels_changed,
                               cut_energy=(result.cut_energy[0], again.cut_energy[1]),
                               functional=(result.functional[0], again.functional[1]),
-                              sampled=(result.sampled[0], again.sampled[1]), seconds=seconds,
-                              notes=result.notes + again.notes)
+                              sampled=(result.sampled[0], again.sampled[1]), pressed=again.pressed,
+                              seconds=seconds, notes=result.notes + again.notes)
         kept += 1
     if kept > 1:
-        result.notes.append(f"search: {kept} rounds, each from the last one's surface (refine.search_rounds)")
+        result.notes.append(f"search: {kept} rounds, each from the last one's surface ("
+                            f"{'; '.join(why) if why else 'refine.search_rounds'})")
     return result
 
 

@@ -139,6 +139,7 @@ def _search_stats(result) -> dict | None:
         "functional_coarse_and_searched": [float(e) for e in result.functional],
         "functional_sampled_coarse_and_searched": [float(e) for e in result.sampled],
         "travel_mean_cells": float(result.travel.mean()) if len(result.travel) else 0.0,
+        "cut_against_band_limits": round(float(result.pressed), 4),
         "seconds": {k: round(v, 4) for k, v in result.seconds.items()},
         "notes": list(result.notes),
     }
