@@ -307,11 +307,13 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
         return SearchResult(None, seconds=seconds, notes=["search: the cut left no fracture surface; the coarse "
                                                           "surface is kept"])
     crossings = self_intersections(V, F)
-    V, crossings = _untangled(V, _apart(V, _rim_to_least(V, F, B, pyramid.value, h), h), F, B, crossings)
-    X = _smooth(V, F, B)
-    X = _where_lower(X, _to_valley(X, F, pyramid.value, h, float(np.ptp(psi))), F, sides, pyramid.value, h, offset,
-                     grain)
-    V, crossings = _untangled(V, _apart(V, X, h), F, B, crossings)
+    edges = unique_edges(F)  # the triangles stay the same until the coarsening: their edges and counts
+    V, crossings = _untangled(V, _apart(V, _rim_to_least(V, F, B, pyramid.value, h, edges=edges), h), F, B, crossings,
+                              edges)
+    X = _smooth(V, F, B, edges)
+    X = _where_lower(X, _to_valley(X, F, pyramid.value, h, float(np.ptp(psi)), edges=edges), F, sides, pyramid.value,
+                     h, offset, grain)
+    V, crossings = _untangled(V, _apart(V, X, h), F, B, crossings, edges)
     V, F, sides = coarsen_sheets(V, F, sides, cell=h, crossings=crossings)
     used, inv = np.unique(F, return_inverse=True)  # the vertices the coarsening collapsed away go
     V, F = V[used], inv.reshape(-1, 3).astype(np.int64)
@@ -737,11 +739,13 @@ def _least_on_lines(X0: np.ndarray, D: np.ndarray, u: np.ndarray, psi_at) -> tup
     return u[k] + np.clip(shift, -1.0, 1.0) * (u[1] - u[0]), f
 
 
-def _rim_to_least(V: np.ndarray, F: np.ndarray, B: Exterior, psi_at, h: float, samples: int = 9) -> np.ndarray:
+def _rim_to_least(V: np.ndarray, F: np.ndarray, B: Exterior, psi_at, h: float, samples: int = 9,
+                  edges: tuple | None = None) -> np.ndarray:
     """The sheets' rim vertices (on boundary edges) moved along B across their sheet, within a cell either
     side, to where psi is least: the contour puts a rim point between two nodes, where the cut's labels
-    change, which the psi of a thin layer on B does not see."""
-    e, count = unique_edges(F)
+    change, which the psi of a thin layer on B does not see. ``edges``: :func:`unique_edges` of ``F``, if
+    known."""
+    e, count = unique_edges(F) if edges is None else edges
     rim = np.unique(e[count == 1])
     if not len(rim):
         return V
@@ -768,7 +772,8 @@ def _vertex_normals(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     return np.stack([np.bincount(F.ravel(), np.repeat(n[:, c], 3), len(V)) for c in range(3)], 1)
 
 
-def _to_valley(V: np.ndarray, F: np.ndarray, psi_at, h: float, span: float, samples: int = 7) -> np.ndarray:
+def _to_valley(V: np.ndarray, F: np.ndarray, psi_at, h: float, span: float, samples: int = 7,
+               edges: tuple | None = None) -> np.ndarray:
     """The vertices off the sheets' feature curves (rims and junctions) moved along their normals, within
     :data:`_VALLEY_REACH` of a cell, to where psi is least (the least of ``samples`` values, moved to the
     vertex of the parabola through it and its neighbours), where that is lower than where they are by
@@ -777,8 +782,9 @@ def _to_valley(V: np.ndarray, F: np.ndarray, psi_at, h: float, span: float, samp
     The contour crosses each grid edge where psi is least along the edge, but no nearer a node than
     :data:`_NODE_GAP` of it, and the smoothing then evens out the terraces: a thin weak layer (mortar) or
     one on a plane of nodes ends a tenth of a cell or more off the sheet's valley, where the integral of
-    psi is well above its floor. On the collapsing wall this lowers the search's functional by 13 %."""
-    e, count = unique_edges(F)
+    psi is well above its floor. On the collapsing wall this lowers the search's functional by 13 %.
+    ``edges``: :func:`unique_edges` of ``F``, if known."""
+    e, count = unique_edges(F) if edges is None else edges
     held = np.zeros(len(V), bool)
     held[e[count != 2].ravel()] = True
     normal = _vertex_normals(V, F)
@@ -854,57 +860,66 @@ def _uncrossed(V: np.ndarray, X: np.ndarray, F: np.ndarray, crossings: int, roun
     return (X, len(pairs)) if len(pairs) <= crossings else (V, crossings)
 
 
-def _rims_uncrossed(V: np.ndarray, X: np.ndarray, E: np.ndarray, normal_at, rounds: int = 8) -> np.ndarray:
+def _rims_uncrossed(V: np.ndarray, X: np.ndarray, E: np.ndarray, normal_at, had: set | None = None,
+                    rounds: int = 8) -> np.ndarray:
     """``X`` (moved vertices of ``V``) with the moved ends of rim edges ``E`` that cross another on B where
     they did not in ``V`` (seen along B's normal: :mod:`fracture.refine.crossings_on_b`) back where they
-    were, until none does (at worst ``V`` itself). Rim vertices moved each on its own across their sheet
-    (:func:`_rim_to_least`) can zigzag so that a curve crosses itself or another on B with no triangles
-    meeting in space: B could not be cut along both (Section 5)."""
-
-    def crossing(P):
-        pairs, cross = close_pairs(P, E, normal_at)
-        return pairs[cross]
-
-    had = crossing(V)
-    had = set((had[:, 0] * len(E) + had[:, 1]).tolist())
-    X = X.copy()
+    were, until none does (at worst ``V`` itself); ``X`` itself when nothing went back. Rim vertices moved
+    each on its own across their sheet (:func:`_rim_to_least`) can zigzag so that a curve crosses itself or
+    another on B with no triangles meeting in space: B could not be cut along both (Section 5). ``had``:
+    :func:`_rim_crossings` of ``V``, if known."""
+    had = _rim_crossings(V, E, normal_at) if had is None else had
+    out = X
     for _ in range(rounds):
-        pairs = crossing(X)
+        pairs = _rim_crossings(out, E, normal_at, keys=False)
         new = pairs[~np.isin(pairs[:, 0] * len(E) + pairs[:, 1], list(had))] if had else pairs
         if not len(new):
-            return X
+            return out
         back = np.unique(E[new].ravel())
-        back = back[(X[back] != V[back]).any(axis=1)]
+        back = back[(out[back] != V[back]).any(axis=1)]
         if not len(back):
             break
-        X[back] = V[back]
+        out = out.copy() if out is X else out
+        out[back] = V[back]
     return V
 
 
-def _untangled(V: np.ndarray, X: np.ndarray, F: np.ndarray, B: Exterior, crossings: int) -> tuple[np.ndarray, int]:
+def _rim_crossings(P: np.ndarray, E: np.ndarray, normal_at, keys: bool = True):
+    """The pairs of rim edges ``E`` that cross on B at positions ``P`` (``(k, 2)``; with ``keys``, as a set
+    of ``i * len(E) + j``)."""
+    pairs, cross = close_pairs(P, E, normal_at)
+    pairs = pairs[cross]
+    return set((pairs[:, 0] * len(E) + pairs[:, 1]).tolist()) if keys else pairs
+
+
+def _untangled(V: np.ndarray, X: np.ndarray, F: np.ndarray, B: Exterior, crossings: int,
+               edges: tuple | None = None) -> tuple[np.ndarray, int]:
     """``X`` (moved vertices of ``V``, which has ``crossings`` crossing pairs of triangles) with what makes
-    triangles cross in space (:func:`_uncrossed`) or rims cross on B (:func:`_rims_uncrossed`) taken back,
-    the two in turn until neither takes back anything (at worst ``V``); and the pairs that cross."""
-    e, count = unique_edges(F)
+    rims cross on B (:func:`_rims_uncrossed`) or triangles cross in space (:func:`_uncrossed`) taken back,
+    the two in turn until the rims' guard takes back nothing after the triangles' (at worst ``V``); and the
+    pairs that cross. ``edges``: :func:`unique_edges` of ``F``, if known."""
+    e, count = unique_edges(F) if edges is None else edges
     E = e[count == 1]
+    had = _rim_crossings(V, E, B.normal_at)
+    X = _rims_uncrossed(V, X, E, B.normal_at, had)
     for _ in range(4):
-        Y = _rims_uncrossed(V, X, E, B.normal_at)
-        Y, pairs = _uncrossed(V, Y, F, crossings)
-        if np.array_equal(Y, X):
-            return X, pairs
-        X = Y
+        Y, pairs = _uncrossed(V, X, F, crossings)
+        Z = _rims_uncrossed(V, Y, E, B.normal_at, had)
+        if Z is Y:
+            return Y, pairs
+        X = Z
     return V, crossings
 
 
-def _smooth(V: np.ndarray, F: np.ndarray, B: Exterior) -> np.ndarray:
+def _smooth(V: np.ndarray, F: np.ndarray, B: Exterior, edges: tuple | None = None) -> np.ndarray:
     """Taubin's lambda-mu smoothing of the contour's terraces, the sheets' feature curves (rims on B:
     boundary edges; junctions: edges of three or more triangles) smoothed along themselves (a vertex on one
     curve over its two neighbours on it, a rim vertex then put back on B), the points where curves meet
     held (:func:`_uncrossed` takes back what makes triangles cross).
 
     Written here because the surface is non-manifold along its junctions, which pymeshlab's and libigl's
-    smoothing filters do not take."""
-    e, count = unique_edges(F)
+    smoothing filters do not take. ``edges``: :func:`unique_edges` of ``F``, if known."""
+    e, count = unique_edges(F) if edges is None else edges
     feature = count != 2
     on_feature = np.zeros(len(V), bool)
     on_feature[e[feature].ravel()] = True
