@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from fracture.mesh.edges import edge_table
 from fracture.mesh.intersect import self_intersections
 from fracture.mesh.topology import unique_edges
 
@@ -111,11 +112,10 @@ def _same_corners(F: np.ndarray) -> np.ndarray:
 def _sheet_pinches(F: np.ndarray, sides: np.ndarray) -> np.ndarray:
     """The triangles on an edge that three or more triangles of their own sheet share (a collapse that
     joined two parts of a sheet along an edge: the pieces on either side would pinch there)."""
-    E = np.sort(F[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    base = int(sides.max(initial=0)) + 1
-    sheet = np.repeat(sides[:, 0] * base + sides[:, 1], 3)
-    n = int(F.max(initial=0)) + 1
-    key = (E[:, 0] * n + E[:, 1]) * (base * base) + sheet
+    if not len(F):
+        return np.zeros(0, np.int64)
+    _, sheet = np.unique(sides[:, 0] * (int(sides.max()) + 1) + sides[:, 1], return_inverse=True)
+    key = edge_table(F, int(F.max()) + 1).eid * (int(sheet.max()) + 1) + np.repeat(sheet.ravel(), 3)
     _, inverse, count = np.unique(key, return_inverse=True, return_counts=True)
     return np.unique(np.flatnonzero(count[inverse.ravel()] > 2) // 3)
 

@@ -77,8 +77,8 @@ def expand(graph: PottsGraph, labels: np.ndarray, free: np.ndarray, reach: dict 
 
     ``reach[a]`` (optional) are the nodes that may take label ``a`` (without ``reach``: every free node;
     a label ``reach`` does not name takes none): a region with no energy of its own never grows an
-    island of ``a`` away from ``a``'s nodes, so the caller may limit each move to the nodes near them. Cycles over the labels until one changes nothing
-    or ``cycles`` are done. With two labels one cut gives the global minimum: every free node starts
+    island of ``a`` away from ``a``'s nodes, so the caller may limit each move to the nodes near them.
+    Cycles over the labels until one changes nothing or ``cycles`` are done. With two labels one cut gives the global minimum: every free node starts
     with the first, and the move of the second reaches every labelling of them.
     """
     labels = np.array(labels, np.int64, copy=True)

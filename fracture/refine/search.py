@@ -860,7 +860,7 @@ def _uncrossed(V: np.ndarray, X: np.ndarray, F: np.ndarray, crossings: int, roun
     return (X, len(pairs)) if len(pairs) <= crossings else (V, crossings)
 
 
-def _rims_uncrossed(V: np.ndarray, X: np.ndarray, E: np.ndarray, normal_at, had: set | None = None,
+def _rims_uncrossed(V: np.ndarray, X: np.ndarray, E: np.ndarray, normal_at, had: np.ndarray | None = None,
                     rounds: int = 8) -> np.ndarray:
     """``X`` (moved vertices of ``V``) with the moved ends of rim edges ``E`` that cross another on B where
     they did not in ``V`` (seen along B's normal: :mod:`fracture.refine.crossings_on_b`) back where they
@@ -871,11 +871,10 @@ def _rims_uncrossed(V: np.ndarray, X: np.ndarray, E: np.ndarray, normal_at, had:
     had = _rim_crossings(V, E, normal_at) if had is None else had
     out = X
     for _ in range(rounds):
-        pairs = _rim_crossings(out, E, normal_at, keys=False)
-        new = pairs[~np.isin(pairs[:, 0] * len(E) + pairs[:, 1], list(had))] if had else pairs
+        new = np.setdiff1d(_rim_crossings(out, E, normal_at), had)
         if not len(new):
             return out
-        back = np.unique(E[new].ravel())
+        back = np.unique(E[np.concatenate([new // len(E), new % len(E)])].ravel())
         back = back[(out[back] != V[back]).any(axis=1)]
         if not len(back):
             break
@@ -884,12 +883,10 @@ def _rims_uncrossed(V: np.ndarray, X: np.ndarray, E: np.ndarray, normal_at, had:
     return V
 
 
-def _rim_crossings(P: np.ndarray, E: np.ndarray, normal_at, keys: bool = True):
-    """The pairs of rim edges ``E`` that cross on B at positions ``P`` (``(k, 2)``; with ``keys``, as a set
-    of ``i * len(E) + j``)."""
+def _rim_crossings(P: np.ndarray, E: np.ndarray, normal_at) -> np.ndarray:
+    """The pairs ``(i, j)`` of rim edges ``E`` that cross on B at positions ``P``, as ``i * len(E) + j``."""
     pairs, cross = close_pairs(P, E, normal_at)
-    pairs = pairs[cross]
-    return set((pairs[:, 0] * len(E) + pairs[:, 1]).tolist()) if keys else pairs
+    return pairs[cross, 0] * len(E) + pairs[cross, 1]
 
 
 def _untangled(V: np.ndarray, X: np.ndarray, F: np.ndarray, B: Exterior, crossings: int,
