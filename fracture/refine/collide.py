@@ -58,7 +58,7 @@ _ALL_EDGES = 0b111000
 
 
 @numba.njit(cache=True)
-def _point_triangle_distance2(p, a, b, c):
+def point_triangle_distance2(p, a, b, c):
     """Squared distance from p to triangle abc (Ericson, Real-Time Collision Detection 5.1.5)."""
     ab, ac, ap = vec.sub(b, a), vec.sub(c, a), vec.sub(p, a)
     d1, d2 = vec.dot(ab, ap), vec.dot(ac, ap)
@@ -224,7 +224,7 @@ def _segments_cross_at(p, q, r, s, eps):
 
 @numba.njit(cache=True)
 def vertex_triangle_hit(p0, p1, a0, a1, b0, b1, c0, c1, eta2, times):
-    start = _point_triangle_distance2(p0, a0, b0, c0)
+    start = point_triangle_distance2(p0, a0, b0, c0)
     # the distance shrinks by at most the largest move of p relative to a corner
     # (the triangle's points are convex combinations of its corners): a pair
     # further apart than that cannot meet, whatever the path (most pairs)
@@ -240,7 +240,7 @@ def vertex_triangle_hit(p0, p1, a0, a1, b0, b1, c0, c1, eta2, times):
             return True
     # contact at the end of the step that is closer than at its start (pairs
     # resting in contact, e.g. sheets meeting on B, may stay so)
-    end = _point_triangle_distance2(p1, a1, b1, c1)
+    end = point_triangle_distance2(p1, a1, b1, c1)
     return end <= eta2 and end < start
 
 

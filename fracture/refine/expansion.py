@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import maxflow
+import numba
 import numpy as np
 
 
@@ -54,15 +55,6 @@ class PottsGraph:
         ptr_p = np.searchsorted(self.p[by_p], np.arange(self.n + 1))
         ptr_q = np.searchsorted(self.q[by_q], np.arange(self.n + 1))
         return np.stack([by_p, by_q]), ptr_p, ptr_q
-
-    def incident(self, nodes: np.ndarray, member: np.ndarray) -> np.ndarray:
-        """The edges with an end among ``nodes`` (distinct node ids; ``member`` marks them, ``(n,)``), each
-        once."""
-        order, ptr_p, ptr_q = self._by_node
-        nodes = np.asarray(nodes, np.int64)
-        first = order[0][_ranges(ptr_p[nodes], ptr_p[nodes + 1])]
-        second = order[1][_ranges(ptr_q[nodes], ptr_q[nodes + 1])]
-        return np.concatenate([first, second[~member[self.p[second]]]])
 
 
 @dataclass
@@ -130,31 +122,61 @@ def _move(graph: PottsGraph, labels: np.ndarray, nodes: np.ndarray, a: int) -> n
     (1 - x_p) x_q``: two unary terms and an arc ``p -> q`` (cut when p keeps
     and q takes ``a``). An edge with one moving end is a unary term of it.
     """
-    local = np.full(graph.n, -1, np.int64)
-    local[nodes] = np.arange(len(nodes))
-    touch = graph.incident(nodes, local >= 0)
-    P, Q, W = graph.p[touch], graph.q[touch], graph.w[touch]
-    lp, lq = local[P], local[Q]
-    Lp, Lq = labels[P], labels[Q]
-    A = W * (Lp != Lq)
-    B = W * (Lp != a)
-    C = W * (Lq != a)
+    order, ptr_p, ptr_q = graph._by_node
+    arc_p, arc_q, cap, source, sink = _move_terms(np.asarray(nodes, np.int64), int(a), np.asarray(labels, np.int64),
+                                                  graph.p, graph.q, graph.w, order, ptr_p, ptr_q)
+    return min_cut(len(nodes), arc_p, arc_q, cap, source, sink)
+
+
+@numba.njit(cache=True)
+def _move_terms(nodes, a, labels, p, q, w, order, ptr_p, ptr_q):
+    """The arcs (ends as positions in ``nodes``, capacities) and the source's and sink's capacities of the
+    move of :func:`_move`, read from each moving node's edges (``order`` and the row pointers of
+    :attr:`PottsGraph._by_node`); one pass over the edges the move touches (it ran as some twenty NumPy
+    calls over gathered copies of them: on the clay's 56 moves 0.13 s against the cuts' 0.36 s)."""
     n = len(nodes)
+    member = np.zeros(len(labels), np.bool_)
+    local = np.empty(len(labels), np.int64)  # read only where member
+    for i in range(n):
+        member[nodes[i]] = True
+        local[nodes[i]] = i
     cost0 = np.zeros(n)  # energy of each node keeping its label (unary parts)
     cost1 = np.zeros(n)  # ... taking a
-    both = (lp >= 0) & (lq >= 0)
-    only_p = (lp >= 0) & ~both
-    only_q = (lq >= 0) & ~both
-    cost1 += np.bincount(lp[both], C[both] - A[both], n)
-    cost1 -= np.bincount(lq[both], C[both], n)  # (D - C) x_q with D = 0
-    cost0 += np.bincount(lp[only_p], A[only_p], n)
-    cost1 += np.bincount(lp[only_p], C[only_p], n)  # p takes a, q keeps Lq: W [Lq != a]
-    cost0 += np.bincount(lq[only_q], A[only_q], n)
-    cost1 += np.bincount(lq[only_q], B[only_q], n)  # q takes a, p keeps Lp: W [Lp != a]
-    K = B[both] + C[both] - A[both]
-    low = np.minimum(cost0, cost1)
-    # x = 1 is the sink's side: the arc from the source is cut then, so it carries cost1
-    return min_cut(n, lp[both], lq[both], K, cost1 - low, cost0 - low)
+    arcs = 0
+    for i in range(n):
+        for e in order[0, ptr_p[nodes[i]]:ptr_p[nodes[i] + 1]]:
+            arcs += member[q[e]]
+    arc_p = np.empty(arcs, np.int32)
+    arc_q = np.empty(arcs, np.int32)
+    cap = np.empty(arcs)
+    k = 0
+    for i in range(n):
+        v = nodes[i]
+        for e in order[0, ptr_p[v]:ptr_p[v + 1]]:  # edges (v, u)
+            u = q[e]
+            A = w[e] if labels[v] != labels[u] else 0.0
+            C = w[e] if labels[u] != a else 0.0
+            if member[u]:  # both move: (C - A) x_v - C x_u + (B + C - A) (1 - x_v) x_u
+                B = w[e] if labels[v] != a else 0.0
+                cost1[i] += C - A
+                cost1[local[u]] -= C
+                arc_p[k], arc_q[k], cap[k] = i, local[u], B + C - A
+                k += 1
+            else:  # v takes a, u keeps its label: w [labels[u] != a]
+                cost0[i] += A
+                cost1[i] += C
+        for e in order[1, ptr_q[v]:ptr_q[v + 1]]:  # edges (u, v) with u fixed (the others were read above)
+            u = p[e]
+            if not member[u]:
+                cost0[i] += w[e] if labels[u] != labels[v] else 0.0
+                cost1[i] += w[e] if labels[u] != a else 0.0
+    source = np.empty(n)
+    sink = np.empty(n)
+    for i in range(n):  # x = 1 is the sink's side: the arc from the source is cut then, so it carries cost1
+        low = min(cost0[i], cost1[i])
+        source[i] = cost1[i] - low
+        sink[i] = cost0[i] - low
+    return arc_p, arc_q, cap, source, sink
 
 
 def min_cut(n: int, p: np.ndarray, q: np.ndarray, cap: np.ndarray, source: np.ndarray, sink: np.ndarray
@@ -170,13 +192,3 @@ def min_cut(n: int, p: np.ndarray, q: np.ndarray, cap: np.ndarray, source: np.nd
     g.add_grid_tedges(nodes, np.asarray(source, np.float64), np.asarray(sink, np.float64))
     g.maxflow()
     return np.asarray(g.get_grid_segments(nodes), bool)
-
-
-def _ranges(start: np.ndarray, stop: np.ndarray) -> np.ndarray:
-    """The integers of the ranges ``[start[i], stop[i])``, one after the other."""
-    count = stop - start
-    total = int(count.sum())
-    if not total:
-        return np.zeros(0, np.int64)
-    first = np.repeat(start - np.concatenate([[0], np.cumsum(count)[:-1]]), count)
-    return first + np.arange(total)

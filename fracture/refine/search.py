@@ -83,6 +83,7 @@ from fracture.refine.crossings_on_b import close_pairs
 from fracture.refine.cut_weights import OFFSETS, GrainWeights, area_weights
 from fracture.refine.expansion import PottsGraph, expand
 from fracture.refine.flow import energy, face_terms, sampled_energy
+from fracture.refine.reach import nodes_near_sheets
 from fracture.tolerances import tol
 
 # Points just off each face of the coarse surface, per unit area (in cells^-2), that tell a node its side.
@@ -271,7 +272,7 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
     free = ~keep
 
     def reach_of(ids):
-        return _reach(sub, near[ids], P[ids], V0, F0, S0, band * h + h)
+        return _reach(sub, near[ids], V0, F0, S0, band * h + h)
 
     labels, graph, log = _cut(sub, near, keep, coarse, shifted, node_weights, reach_of)
     cut = labels[graph.p] != labels[graph.q]
@@ -616,29 +617,12 @@ def _cube_dilation(mask: np.ndarray, cells: int) -> np.ndarray:
     return ndimage.maximum_filter(mask, size=2 * cells + 1, mode="constant", cval=False)
 
 
-def _reach(sub: _BoxGrid, near, P: np.ndarray, V0, F0, S0, radius: float) -> dict:
-    """Per piece, the band's nodes (``near``, of the box ``sub``; points ``P``) within ``radius`` of a coarse
-    sheet of that piece: where it may grow. Each sheet reads only the nodes of the box around it (the
-    clay's 13 pieces meet on 40 sheets: a test of every band node per sheet took 0.15 s)."""
-    out: dict[int, list] = {}
+def _reach(sub: _BoxGrid, near, V0, F0, S0, radius: float) -> dict:
+    """Per piece, the band's nodes ``near`` (flat indices of the box ``sub``) within ``radius`` of a coarse
+    sheet of that piece: where it may grow (:mod:`fracture.refine.reach`), in positions of ``near``."""
     where = np.full(sub.size, -1, np.int64)
     where[near] = np.arange(len(near))
-    where = where.reshape(sub.shape)
-    pair = np.sort(S0, axis=1)
-    key = _sheet_key(S0)
-    for k in np.unique(key):
-        faces = np.flatnonzero(key == k)
-        T = V0[F0[faces]].reshape(-1, 3)
-        box = _node_box(sub, T.min(axis=0) - radius, T.max(axis=0) + radius)
-        ids = where[box].ravel()
-        ids = ids[ids >= 0]
-        if not len(ids):
-            continue
-        d2 = igl.point_mesh_squared_distance(P[ids], V0, F0[faces])[0]
-        ids = ids[d2 <= radius * radius]
-        for c in pair[faces[0]]:
-            out.setdefault(int(c), []).append(ids)
-    return {c: np.unique(np.concatenate(v)) for c, v in out.items()}
+    return nodes_near_sheets(where.reshape(sub.shape), sub.origin, sub.spacing, V0, F0, S0, radius, len(near))
 
 
 def _islands(sub: _BoxGrid, near, labels, keep) -> np.ndarray:
