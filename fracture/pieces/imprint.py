@@ -32,7 +32,7 @@ import numpy as np
 
 from fracture.errors import InputError
 from fracture.mesh.exterior import Exterior
-from fracture.refine.crossings_on_b import splits_would_cross
+from fracture.refine.crossings_on_b import edges_would_cross, splits_would_cross
 from fracture.mesh.edges import edge_table, row_edges
 from fracture.mesh.fracture_surface import FractureSurface
 from fracture.tolerances import tol
@@ -366,6 +366,7 @@ def clip_tangent_triangles(mesh: FractureSurface, exterior: Exterior, ratio: flo
         size = np.linalg.norm(T - np.roll(T, 1, axis=1), axis=2).max(axis=1)
         d2, _, _ = exterior.closest(T.mean(axis=1))
         flat = cand[(d2 < (ratio * size) ** 2) | _hairpins(T, boundary[cand])]
+        flat = flat[~_chords_would_cross(mesh, boundary, flat, exterior)]
         if not len(flat):
             break
         keep = np.ones(len(mesh.F), bool)
@@ -373,6 +374,24 @@ def clip_tangent_triangles(mesh: FractureSurface, exterior: Exterior, ratio: flo
         mesh.F, mesh.sides = mesh.F[keep], mesh.sides[keep]
         total += len(flat)
     return total
+
+
+def _chords_would_cross(mesh: FractureSurface, boundary: np.ndarray, ears: np.ndarray, exterior: Exterior
+                        ) -> np.ndarray:
+    """Which of the ``ears`` (triangles; ``boundary (m, 3)`` marks every triangle's boundary edges) would,
+    removed, leave their third side as a boundary edge that crosses another on B: an ear whose two boundary
+    edges go around the end of another crack's rim (over a crease of B and back) has its chord across that
+    rim, and the two could not both be cut into B."""
+    F = mesh.F
+    rows = np.flatnonzero(boundary.ravel())
+    E = row_edges(F, rows)
+    gone = np.isin(rows // 3, ears)
+    chorded = ears[boundary[ears].sum(axis=1) == 2]  # an ear of three boundary edges leaves none
+    k = np.argmin(boundary[chorded], axis=1)
+    chords = np.stack([F[chorded, k], F[chorded, (k + 1) % 3]], 1)
+    bad = np.zeros(len(ears), bool)
+    bad[np.searchsorted(ears, chorded)] = edges_would_cross(mesh.V, E, gone, chords, exterior.normal_at)
+    return bad
 
 
 def collapse_short_boundary(mesh: FractureSurface, length: float) -> int:

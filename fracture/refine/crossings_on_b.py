@@ -171,11 +171,20 @@ def splits_would_cross(V: np.ndarray, E: np.ndarray, which: np.ndarray, M: np.nd
     X = np.concatenate([V, M])
     m = len(V) + np.arange(k)
     halves = np.concatenate([np.stack([E[which, 0], m], 1), np.stack([m, E[which, 1]], 1)])
-    keep = np.ones(len(E), bool)
-    keep[which] = False
-    first_new = int(keep.sum())
-    pairs = crossing_pairs(X, np.concatenate([E[keep], halves]), normal_at)
-    bad = np.zeros(k, bool)
+    gone = np.zeros(len(E), bool)
+    gone[which] = True
+    bad = edges_would_cross(X, E, gone, halves, normal_at)
+    return bad[:k] | bad[k:]
+
+
+def edges_would_cross(X: np.ndarray, E: np.ndarray, gone: np.ndarray, new: np.ndarray, normal_at) -> np.ndarray:
+    """Which of the boundary edges ``new`` would cross on B another boundary edge (or one another) if they
+    replaced the edges ``E[gone]`` (a mask), ``(len(new),)``."""
+    if not len(new):
+        return np.zeros(0, bool)
+    first_new = int((~gone).sum())
+    pairs = crossing_pairs(X, np.concatenate([E[~gone], new]), normal_at)
+    bad = np.zeros(len(new), bool)
     for side in pairs.T:
-        bad[(side[side >= first_new] - first_new) % k] = True
+        bad[side[side >= first_new] - first_new] = True
     return bad
