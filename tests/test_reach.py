@@ -7,11 +7,14 @@ import pytest
 from fracture.refine.reach import nodes_near_sheets
 
 
-@pytest.mark.parametrize("seed", range(3))
-def test_the_nodes_near_a_pieces_sheets_are_those_within_the_radius(seed):
+@pytest.mark.parametrize("seed,pieces_at_once", [(0, 4), (1, 4), (2, 4), (3, 1), (4, 3)])
+def test_the_nodes_near_a_pieces_sheets_are_those_within_the_radius(seed, pieces_at_once, monkeypatch):
     """Random triangles between random pairs of four pieces (large and small, some beyond the grid), a
     grid of unequal spacing and a random half of its nodes asked: each piece's nodes are exactly those
-    asked within the radius of one of its triangles."""
+    asked within the radius of one of its triangles, also when the pieces' masks are made a few pieces at a
+    time."""
+    from fracture.refine import reach
+
     rng = np.random.default_rng(seed)
     origin, spacing, shape = np.array([-0.2, 0.1, 0.0]), np.array([0.1, 0.12, 0.09]), (14, 11, 12)
     F = np.arange(60).reshape(-1, 3)
@@ -23,6 +26,7 @@ def test_the_nodes_near_a_pieces_sheets_are_those_within_the_radius(seed):
     where.flat[asked] = np.arange(len(asked))
     P = origin + np.stack(np.unravel_index(asked, shape), 1) * spacing
     radius = 0.25
+    monkeypatch.setattr(reach, "_MASK_BYTES", pieces_at_once * len(asked))
     found = nodes_near_sheets(where, origin, spacing, V, F, sides, radius, len(asked))
     assert sorted(found) == [0, 1, 2, 3]
     for c in range(4):

@@ -18,6 +18,11 @@ from fracture.mesh import vec
 from fracture.refine.collide import point_triangle_distance2
 
 
+# The pieces' masks of nodes take at most this many bytes at once (a Cell Fracture export of a hundred pieces
+# and a band of a million nodes is marked in a few rounds).
+_MASK_BYTES = 1 << 26
+
+
 def nodes_near_sheets(where: np.ndarray, origin, spacing, V: np.ndarray, F: np.ndarray, sides: np.ndarray,
                       radius: float, count: int) -> dict[int, np.ndarray]:
     """Per piece, the nodes within ``radius`` of a coarse triangle it lies on.
@@ -27,19 +32,27 @@ def nodes_near_sheets(where: np.ndarray, origin, spacing, V: np.ndarray, F: np.n
     pieces on either side of each triangle). Returns ``{piece: sorted numbers of its nodes}`` for every
     piece of ``sides`` (an empty array for a piece with none)."""
     pieces = np.unique(sides)
+    out = {int(c): np.zeros(0, np.int64) for c in pieces}
     if not len(F) or not count:
-        return {int(c): np.zeros(0, np.int64) for c in pieces}
-    near = _mark(np.ascontiguousarray(where, np.int64), np.asarray(origin, np.float64),
-                 np.asarray(spacing, np.float64), np.ascontiguousarray(V, np.float64),
-                 np.ascontiguousarray(F, np.int64), np.ascontiguousarray(sides, np.int64),
-                 float(radius), int(sides.max()) + 1, int(count))
-    return {int(c): np.flatnonzero(near[c]) for c in pieces}
+        return out
+    args = (np.ascontiguousarray(where, np.int64), np.asarray(origin, np.float64), np.asarray(spacing, np.float64),
+            np.ascontiguousarray(V, np.float64))
+    # a mask of the nodes per piece, for as many pieces at a time as _MASK_BYTES hold
+    for group in np.array_split(pieces, -(-len(pieces) * count // _MASK_BYTES)):
+        local = np.full(int(sides.max()) + 1, -1, np.int64)
+        local[group] = np.arange(len(group))
+        mine = np.flatnonzero((local[sides] >= 0).any(axis=1))
+        near = _mark(*args, np.ascontiguousarray(F[mine], np.int64), local[sides[mine]], float(radius), len(group),
+                     int(count))
+        out.update({int(c): np.flatnonzero(near[k]) for k, c in enumerate(group)})
+    return out
 
 
 @numba.njit(cache=True, parallel=True)
 def _mark(where, origin, spacing, V, F, sides, radius, n_pieces, count):
-    """``near[c, n]``: node number ``n`` lies within ``radius`` of a triangle with piece ``c`` on a side.
-    Threads write only True, so two triangles marking one node in two threads agree."""
+    """``near[c, n]``: node number ``n`` lies within ``radius`` of a triangle with piece ``c`` on a side
+    (``sides``: the triangles' pieces numbered ``0..n_pieces-1``, -1 for one not asked). Threads write only
+    True, so two triangles marking one node in two threads agree."""
     near = np.zeros((n_pieces, count), np.bool_)
     shape = where.shape
     r2 = radius * radius
@@ -57,10 +70,12 @@ def _mark(where, origin, spacing, V, F, sides, radius, n_pieces, count):
             for j in range(lo[1], hi[1] + 1):
                 for k in range(lo[2], hi[2] + 1):
                     n = where[i, j, k]
-                    if n < 0 or (near[s0, n] and near[s1, n]):
+                    if n < 0 or ((s0 < 0 or near[s0, n]) and (s1 < 0 or near[s1, n])):
                         continue
                     p = (origin[0] + i * spacing[0], origin[1] + j * spacing[1], origin[2] + k * spacing[2])
                     if point_triangle_distance2(p, a, b, c) <= r2:
-                        near[s0, n] = True
-                        near[s1, n] = True
+                        if s0 >= 0:
+                            near[s0, n] = True
+                        if s1 >= 0:
+                            near[s1, n] = True
     return near
