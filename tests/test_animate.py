@@ -75,6 +75,42 @@ def test_imprinting_keeps_the_tree_and_puts_the_boundary_on_b():
     assert s_edges == b_edges
 
 
+def test_a_boundary_vertex_off_b_whose_trace_fails_is_merged_into_its_neighbour(monkeypatch):
+    """A boundary vertex of the slanted cut moved off B into the cube (as a collision leaves one) and the
+    trace of its edge to a neighbour refused once (on a Blender cube such a vertex beside a crease had its
+    closest point of B across the crease, and two cracks crossed there): the vertex is merged into the
+    neighbour, B is cut again, and every piece closes. A refused trace between two vertices on B is the
+    user's error as before."""
+    from fracture.errors import InputError
+    from fracture.mesh.topology import boundary_edges
+    import fracture.pieces.imprint as imprint
+
+    BV, BF, mesh = slanted_cut()
+    E = boundary_edges(mesh.F)
+    on_face = [v for v in np.unique(E) if 0.05 < mesh.V[v, 1] < 0.95 and mesh.V[v, 2] == 1.0]
+    v = on_face[0]
+    mesh.V[v, 2] -= 0.003  # a third of a B triangle below the top face
+    neighbour = int(next(e[1] if e[0] == v else e[0] for e in E.tolist() if v in e))
+    embed = imprint._embed
+
+    def refuse_while_there(BV, BF, E, *rest):  # every order, while v is on the boundary
+        if (E == v).any():
+            raise imprint._TraceFailed(InputError("animate: the trace folds"), (neighbour, v))
+        return embed(BV, BF, E, *rest)
+
+    monkeypatch.setattr(imprint, "_embed", refuse_while_there)
+    im = imprint_boundary(BV, BF, mesh)
+    assert im.merged_off_b == 1 and v not in mesh.F and neighbour in mesh.F
+    pieces = build_pieces(im, mesh, 2, lambda faces: np.zeros(len(faces), np.int64))
+    assert all(mesh_checks(V, F)["closed_oriented"] for _, V, F in pieces.parts)
+
+    BV, BF, mesh = slanted_cut()
+    monkeypatch.setattr(imprint, "_embed", lambda *args: (_ for _ in ()).throw(
+        imprint._TraceFailed(InputError("animate: the trace folds"), tuple(E[0]))))
+    with pytest.raises(InputError, match="the trace folds"):
+        imprint_boundary(BV, BF, mesh)
+
+
 def bump_cut():
     """The unit cube (B) and the height field z = 0.7 + 0.4 b(x) b(y) (S, b a bump, 0 on the sides).
 

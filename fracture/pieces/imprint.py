@@ -52,6 +52,12 @@ HAIRPIN = 10.0
 # vertex put this fraction of the edge's length inside B.
 BRIDGE_DEPTH = 0.2
 
+# A boundary vertex of S farther from B than this fraction of B's median edge is off B (a collision of the
+# refinement kept it there); a trace from one that cannot be embedded is repaired (_merge_off_b) at most
+# _REPAIRS times.
+OFF_B = 1e-3
+_REPAIRS = 4
+
 # What a user can change when S cannot be imprinted (said after each such refusal).
 _RETRY = "; a different seed or refine.max_triangles gives other refined cracks there"
 
@@ -71,6 +77,9 @@ class Imprint:
         The triangle of S on each cut edge.
     origin : (len(F),) int
         The original B triangle each triangle lies in.
+    merged_off_b : int
+        Boundary vertices of S off B whose traces could not be embedded, merged into a neighbour on the
+        boundary (:func:`_merge_off_b`).
     """
 
     V: np.ndarray
@@ -79,6 +88,7 @@ class Imprint:
     cut_edges: np.ndarray
     cut_faces: np.ndarray
     origin: np.ndarray
+    merged_off_b: int = 0
 
 
 class _Surface:
@@ -503,7 +513,10 @@ def imprint_boundary(BV: np.ndarray, BF: np.ndarray, mesh: FractureSurface, wher
 
     Boundary vertices of ``mesh`` move onto B exactly (by at most their
     distance to it plus :data:`SNAP` of a B triangle). New vertices of
-    ``mesh`` are recorded in its barycentric tree.
+    ``mesh`` are recorded in its barycentric tree. Where a trace cannot be
+    embedded from a boundary vertex off B, that vertex is merged into its
+    neighbour and the boundary embedded again (:func:`_merge_off_b`, at most
+    :data:`_REPAIRS` times; the result says how many).
     """
     BV = np.asarray(BV, np.float64)
     BF = np.asarray(BF, np.int64)
@@ -513,34 +526,43 @@ def imprint_boundary(BV: np.ndarray, BF: np.ndarray, mesh: FractureSurface, wher
     collapse_short_boundary(mesh, 10 * SNAP * h)
     subdivide_boundary(mesh, exterior, CHORD * h)
     split_bridge_edges(mesh, exterior)
-    rows = edge_table(mesh.F, len(mesh.V)).boundary_rows
-    sface, E = rows // 3, row_edges(mesh.F, rows)  # edges as directed in their triangle
-    verts = np.unique(E)
-    _, f0, closest = exterior.closest(mesh.V[verts])
-    length = np.linalg.norm(mesh.V[E[:, 1]] - mesh.V[E[:, 0]], axis=1)
-    error = None
-    for order in _trace_orders(length):
+    merged = 0
+    while True:
+        rows = edge_table(mesh.F, len(mesh.V)).boundary_rows
+        sface, E = rows // 3, row_edges(mesh.F, rows)  # edges as directed in their triangle
+        verts = np.unique(E)
+        d2, f0, closest = exterior.closest(mesh.V[verts])
         try:
-            surf, to_b, chains = _embed(BV, BF, E, verts, f0, closest, order, where)
+            length = np.linalg.norm(mesh.V[E[:, 1]] - mesh.V[E[:, 0]], axis=1)
+            surf, to_b, chains = _embed_in_some_order(BV, BF, E, verts, f0, closest, length, where)
             break
-        except InputError as e:
-            error = error or e
-    else:
-        raise error
+        except _TraceFailed as failed:
+            off = np.zeros(len(mesh.V))
+            off[verts] = np.sqrt(d2)
+            if merged == _REPAIRS or not _merge_off_b(mesh, failed.edge, off, OFF_B * h):
+                raise failed.error from None
+            merged += 1
     # S's boundary vertices take their positions on B
     mesh.V[verts] = np.array([surf.V[to_b[v]] for v in verts.tolist()])
 
     BV_cut = np.array(surf.V)
     cut_edges, cut_faces, to_fracture = _split_fracture_edges(mesh, E, sface, chains, BV_cut, to_b)
     return Imprint(V=BV_cut, F=np.array(surf.F, np.int64), to_fracture=to_fracture,
-                   cut_edges=cut_edges, cut_faces=cut_faces, origin=np.array(surf.origin, np.int64))
+                   cut_edges=cut_edges, cut_faces=cut_faces, origin=np.array(surf.origin, np.int64),
+                   merged_off_b=merged)
 
 
-def _trace_orders(length: np.ndarray):
-    """Orders in which to trace S's boundary edges, tried in turn until one embeds them all."""
-    yield np.argsort(length, kind="stable")
-    yield np.arange(len(length))
-    yield np.argsort(-length, kind="stable")
+def _embed_in_some_order(BV, BF, E, verts, f0, closest, length, where):
+    """:func:`_embed` with S's boundary edges (of ``length``) traced shortest first, then in other orders
+    until one embeds them all (a long edge traced early can fence a short one's ends apart); raises the
+    first order's :class:`_TraceFailed` if none does."""
+    failed = None
+    for order in (np.argsort(length, kind="stable"), np.arange(len(E)), np.argsort(-length, kind="stable")):
+        try:
+            return _embed(BV, BF, E, verts, f0, closest, order, where)
+        except _TraceFailed as e:
+            failed = failed or e
+    raise failed
 
 
 def _embed(BV, BF, E, verts, f0, closest, order, where):
@@ -556,10 +578,53 @@ def _embed(BV, BF, E, verts, f0, closest, order, where):
     chains = [None] * len(E)
     for i in order.tolist():
         a, b = E[i].tolist()
-        chain = _trace(surf, to_b[a], to_b[b], claimed, cut, where)
+        try:
+            chain = _trace(surf, to_b[a], to_b[b], claimed, cut, where)
+        except InputError as e:
+            raise _TraceFailed(e, (a, b)) from None
         cut.update((min(x, y), max(x, y)) for x, y in zip(chain[:-1], chain[1:]))
         chains[i] = chain
     return surf, to_b, chains
+
+
+class _TraceFailed(Exception):
+    """The trace of S's boundary edge ``edge`` (its two vertices) could not be embedded: ``error`` says why."""
+
+    def __init__(self, error: InputError, edge: tuple[int, int]):
+        super().__init__(str(error))
+        self.error, self.edge = error, edge
+
+
+def _merge_off_b(mesh: FractureSurface, edge: tuple[int, int], off: np.ndarray, limit: float) -> bool:
+    """Merge the end of S's boundary ``edge`` that lies off B (``off``: each vertex's distance to B, more
+    than ``limit``; the farther end if both do) into the other end; whether it was merged.
+
+    A boundary vertex a collision of the refinement kept off B has its closest point of B where it may not
+    belong: beside a crease of B, on the face across it from its neighbours (on a Blender cube two cracks
+    then crossed there). Merged into its neighbour along the boundary, its triangle on the edge goes and
+    the boundary runs from the neighbour on; the link condition keeps S's topology."""
+    a, b = edge
+    if max(off[a], off[b]) <= limit:
+        return False
+    gone, kept = (a, b) if off[a] >= off[b] else (b, a)
+    return _collapse(mesh, kept, gone)
+
+
+def _collapse(mesh: FractureSurface, kept: int, gone: int) -> bool:
+    """Merge vertex ``gone`` of S into ``kept`` (its neighbour on one triangle: the triangle goes) if their
+    only common neighbour is that triangle's third corner (the link condition); whether it was merged."""
+    F = mesh.F
+    around_kept = np.flatnonzero((F == kept).any(axis=1))
+    around_gone = np.flatnonzero((F == gone).any(axis=1))
+    both = np.intersect1d(around_kept, around_gone)
+    if len(both) != 1 or len(np.intersect1d(F[around_kept], F[around_gone])) != 3:
+        return False
+    F = F.copy()
+    F[around_gone] = np.where(F[around_gone] == gone, kept, F[around_gone])
+    keep = np.ones(len(F), bool)
+    keep[both] = False
+    mesh.F, mesh.sides = F[keep], mesh.sides[keep]
+    return True
 
 
 def _split_fracture_edges(mesh: FractureSurface, E, sface, chains, BV_cut: np.ndarray, to_b: dict):

@@ -52,6 +52,10 @@ def animate_stage(ctx: RunContext) -> None:
     mesh = copy.deepcopy(ctx.products.refined)
     with ctx.bar(cf.n_frames + 3, "animate") as bar:
         im = imprint_boundary(BV, BF, mesh, where="animate")
+        if im.merged_off_b:
+            ctx.notes.append(f"animate: {im.merged_off_b} boundary vertex{'es' if im.merged_off_b > 1 else ''} of the "
+                             "refined surface that collisions had kept off the object's surface merged into a "
+                             "neighbour, so that the cracks could be cut into it")
         bar.update()
 
         def fallback(faces):  # patches without a cut: the coarse exterior's label
@@ -103,7 +107,7 @@ def animate_stage(ctx: RunContext) -> None:
     ctx.products.transfer = transfer
     ctx.counts.update(pieces=pieces.n_pieces, piece_triangles=int(sum(len(f) for f in pieces.faces)),
                       frames_written=transfer.n_frames if opts.obj_frames else 0)
-    ctx.stats["animate"] = checks
+    ctx.stats["animate"] = {**checks, "boundary_vertices_merged_off_b": im.merged_off_b}
 
 
 def _save_transfer(ctx: RunContext, tr: Transfer) -> None:
