@@ -89,7 +89,7 @@ def test_a_boundary_vertex_off_b_whose_trace_fails_is_merged_into_its_neighbour(
     E = boundary_edges(mesh.F)
     on_face = [v for v in np.unique(E) if 0.05 < mesh.V[v, 1] < 0.95 and mesh.V[v, 2] == 1.0]
     v = on_face[0]
-    mesh.V[v, 2] -= 0.003  # a third of a B triangle below the top face
+    mesh.V[v, 2] -= 0.003  # 3 % of B's edge below the top face
     neighbour = int(next(e[1] if e[0] == v else e[0] for e in E.tolist() if v in e))
     embed = imprint._embed
 
@@ -104,11 +104,28 @@ def test_a_boundary_vertex_off_b_whose_trace_fails_is_merged_into_its_neighbour(
     pieces = build_pieces(im, mesh, 2, lambda faces: np.zeros(len(faces), np.int64))
     assert all(mesh_checks(V, F)["closed_oriented"] for _, V, F in pieces.parts)
 
-    BV, BF, mesh = slanted_cut()
-    monkeypatch.setattr(imprint, "_embed", lambda *args: (_ for _ in ()).throw(
-        imprint._TraceFailed(InputError("animate: the trace folds"), tuple(E[0]))))
+    def refuse(BV, BF, E, *rest):  # an edge with an end off B if there is one
+        X = mesh.V[E]
+        off = np.flatnonzero(((X[..., 2] == 0.997) & (X[..., 1] > 0.0) & (X[..., 1] < 1.0)).any(axis=1))
+        raise imprint._TraceFailed(InputError("animate: the trace folds"), tuple(E[off[0] if len(off) else 0]))
+
+    collapse, merges = imprint._collapse, []
+
+    def counted(*args):
+        merges.append(collapse(*args))
+        return merges[-1]
+
+    monkeypatch.setattr(imprint, "_embed", refuse)
+    monkeypatch.setattr(imprint, "_collapse", counted)
+    BV, BF, mesh = slanted_cut()  # every boundary vertex on B: nothing to merge
     with pytest.raises(InputError, match="the trace folds"):
         imprint_boundary(BV, BF, mesh)
+    assert merges == []
+    BV, BF, mesh = slanted_cut()
+    mesh.V[:, 2] = np.where(mesh.V[:, 2] == 1.0, 0.997, mesh.V[:, 2])  # the top rim off B: at most four merges
+    with pytest.raises(InputError, match="the trace folds"):
+        imprint_boundary(BV, BF, mesh)
+    assert sum(merges) == imprint._REPAIRS
 
 
 def bump_cut():

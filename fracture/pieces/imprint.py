@@ -368,7 +368,8 @@ def clip_tangent_triangles(mesh: FractureSurface, exterior: Exterior, ratio: flo
         # triangle with fewer would split the fan of its corner opposite them, cutting off a cap of S
         # whose rim, imprinted on B, is oriented against the rest of the cut; the bridges such a
         # triangle has are split instead (split_bridge_edges)
-        boundary = edge_table(mesh.F, len(mesh.V)).row_count.reshape(-1, 3) == 1
+        count = edge_table(mesh.F, len(mesh.V)).row_count.reshape(-1, 3)
+        boundary = count == 1
         cand = np.flatnonzero(boundary.sum(axis=1) >= 2)
         if not len(cand):
             break
@@ -376,7 +377,7 @@ def clip_tangent_triangles(mesh: FractureSurface, exterior: Exterior, ratio: flo
         size = np.linalg.norm(T - np.roll(T, 1, axis=1), axis=2).max(axis=1)
         d2, _, _ = exterior.closest(T.mean(axis=1))
         flat = cand[(d2 < (ratio * size) ** 2) | _hairpins(T, boundary[cand])]
-        flat = flat[~_chords_would_cross(mesh, boundary, flat, exterior)]
+        flat = flat[~_chords_would_cross(mesh, count, flat, exterior)]
         if not len(flat):
             break
         keep = np.ones(len(mesh.F), bool)
@@ -386,22 +387,32 @@ def clip_tangent_triangles(mesh: FractureSurface, exterior: Exterior, ratio: flo
     return total
 
 
-def _chords_would_cross(mesh: FractureSurface, boundary: np.ndarray, ears: np.ndarray, exterior: Exterior
+def _chords_would_cross(mesh: FractureSurface, count: np.ndarray, ears: np.ndarray, exterior: Exterior
                         ) -> np.ndarray:
-    """Which of the ``ears`` (triangles; ``boundary (m, 3)`` marks every triangle's boundary edges) would,
-    removed, leave their third side as a boundary edge that crosses another on B: an ear whose two boundary
-    edges go around the end of another crack's rim (over a crease of B and back) has its chord across that
-    rim, and the two could not both be cut into B."""
+    """Which of the ``ears`` (triangles; ``count (m, 3)``: each triangle's edges' triangle counts, 1 on the
+    boundary) would, removed, leave their third side as a boundary edge that crosses another on B: an ear
+    whose two boundary edges go around the end of another crack's rim (over a crease of B and back) has its
+    chord across that rim, and the two could not both be cut into B. Tested against the boundary that the
+    removal of the others leaves, until the ears kept change no more."""
     F = mesh.F
-    rows = np.flatnonzero(boundary.ravel())
+    rows = np.flatnonzero(count.ravel() == 1)
     E = row_edges(F, rows)
-    gone = np.isin(rows // 3, ears)
-    chorded = ears[boundary[ears].sum(axis=1) == 2]  # an ear of three boundary edges leaves none
-    k = np.argmin(boundary[chorded], axis=1)
-    chords = np.stack([F[chorded, k], F[chorded, (k + 1) % 3]], 1)
     bad = np.zeros(len(ears), bool)
-    bad[np.searchsorted(ears, chorded)] = edges_would_cross(mesh.V, E, gone, chords, exterior.normal_at)
-    return bad
+    while True:
+        going = ears[~bad]
+        # the third side becomes a boundary edge if it had two triangles and the other one stays
+        third = count[going] == 2
+        f = going[third.any(axis=1)]
+        k = np.argmax(third[third.any(axis=1)], axis=1)
+        chords = np.stack([F[f, k], F[f, (k + 1) % 3]], 1)
+        key = np.sort(chords, axis=1)
+        _, inverse, twice = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+        once = twice[inverse.ravel()] == 1  # a chord two removed ears share goes with them
+        crossing = np.zeros(len(f), bool)
+        crossing[once] = edges_would_cross(mesh.V, E, np.isin(rows // 3, going), chords[once], exterior.normal_at)
+        if not crossing.any():
+            return bad
+        bad[np.searchsorted(ears, f[crossing])] = True
 
 
 def collapse_short_boundary(mesh: FractureSurface, length: float) -> int:
@@ -602,7 +613,7 @@ def _merge_off_b(mesh: FractureSurface, edge: tuple[int, int], off: np.ndarray, 
     A boundary vertex a collision of the refinement kept off B has its closest point of B where it may not
     belong: beside a crease of B, on the face across it from its neighbours (on a Blender cube two cracks
     then crossed there). Merged into its neighbour along the boundary, its triangle on the edge goes and
-    the boundary runs from the neighbour on; the link condition keeps S's topology."""
+    the boundary runs from the neighbour on (:func:`_collapse`)."""
     a, b = edge
     if max(off[a], off[b]) <= limit:
         return False
@@ -612,7 +623,8 @@ def _merge_off_b(mesh: FractureSurface, edge: tuple[int, int], off: np.ndarray, 
 
 def _collapse(mesh: FractureSurface, kept: int, gone: int) -> bool:
     """Merge vertex ``gone`` of S into ``kept`` (its neighbour on one triangle: the triangle goes) if their
-    only common neighbour is that triangle's third corner (the link condition); whether it was merged."""
+    only common neighbour is that triangle's third corner (the link condition for an edge on the boundary,
+    as :func:`collapse_short_boundary` asks it); whether it was merged."""
     F = mesh.F
     around_kept = np.flatnonzero((F == kept).any(axis=1))
     around_gone = np.flatnonzero((F == gone).any(axis=1))

@@ -59,8 +59,13 @@ _ALL_EDGES = 0b111000
 
 @numba.njit(cache=True)
 def point_triangle_distance2(p, a, b, c):
-    """Squared distance from p to triangle abc (Ericson, Real-Time Collision Detection 5.1.5)."""
+    """Squared distance from p to triangle abc (Ericson, Real-Time Collision Detection 5.1.5); a triangle
+    of no area (two corners in one place, or three on a line) is its three edges."""
     ab, ac, ap = vec.sub(b, a), vec.sub(c, a), vec.sub(p, a)
+    n = vec.cross(ab, ac)
+    if vec.dot(n, n) == 0.0:  # Ericson's regions divide by the area
+        return min(_point_segment_distance2(p, a, b), _point_segment_distance2(p, b, c),
+                   _point_segment_distance2(p, c, a))
     d1, d2 = vec.dot(ab, ap), vec.dot(ac, ap)
     if d1 <= 0.0 and d2 <= 0.0:
         q = a
@@ -90,6 +95,16 @@ def point_triangle_distance2(p, a, b, c):
             v, w = vb * s, vc * s
             q = (a[0] + ab[0] * v + ac[0] * w, a[1] + ab[1] * v + ac[1] * w, a[2] + ab[2] * v + ac[2] * w)
     d = vec.sub(p, q)
+    return vec.dot(d, d)
+
+
+@numba.njit(cache=True)
+def _point_segment_distance2(p, a, b):
+    """Squared distance from p to segment ab (a point if a = b)."""
+    ab, ap = vec.sub(b, a), vec.sub(p, a)
+    length2 = vec.dot(ab, ab)
+    t = min(max(vec.dot(ap, ab) / length2, 0.0), 1.0) if length2 > 0.0 else 0.0
+    d = (ap[0] - t * ab[0], ap[1] - t * ab[1], ap[2] - t * ab[2])
     return vec.dot(d, d)
 
 

@@ -18,8 +18,8 @@ from fracture.mesh import vec
 from fracture.refine.collide import point_triangle_distance2
 
 
-# The pieces' masks of nodes take at most this many bytes at once (a Cell Fracture export of a hundred pieces
-# and a band of a million nodes is marked in a few rounds).
+# The pieces' masks of nodes take at most this many bytes at once, or one piece's if that is more (a Cell
+# Fracture export of a hundred pieces and a band of a million nodes is marked in a few rounds).
 _MASK_BYTES = 1 << 26
 
 
@@ -38,7 +38,7 @@ def nodes_near_sheets(where: np.ndarray, origin, spacing, V: np.ndarray, F: np.n
     args = (np.ascontiguousarray(where, np.int64), np.asarray(origin, np.float64), np.asarray(spacing, np.float64),
             np.ascontiguousarray(V, np.float64))
     # a mask of the nodes per piece, for as many pieces at a time as _MASK_BYTES hold
-    for group in np.array_split(pieces, -(-len(pieces) * count // _MASK_BYTES)):
+    for group in np.array_split(pieces, min(-(-len(pieces) * count // _MASK_BYTES), len(pieces))):
         local = np.full(int(sides.max()) + 1, -1, np.int64)
         local[group] = np.arange(len(group))
         mine = np.flatnonzero((local[sides] >= 0).any(axis=1))

@@ -576,6 +576,8 @@ def _cut(sub: _BoxGrid, near, keep, labels, shifted, node_weights, reach_of
     fine_reach = {}
     ids = np.flatnonzero(moving)
     for a, r in reach_of(ids).items():
+        if not len(r):
+            continue
         grown = _dilated(sub, ijk, start_labels == a, _FINE_BAND)
         fine_reach[a] = ids[r][grown[ids[r]]]
     out, log = expand(graph.among(moving), start_labels, moving, fine_reach, cycles=_CYCLES)

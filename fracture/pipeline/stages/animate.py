@@ -53,7 +53,7 @@ def animate_stage(ctx: RunContext) -> None:
     with ctx.bar(cf.n_frames + 3, "animate") as bar:
         im = imprint_boundary(BV, BF, mesh, where="animate")
         if im.merged_off_b:
-            ctx.notes.append(f"animate: {im.merged_off_b} boundary vertex{'es' if im.merged_off_b > 1 else ''} of the "
+            ctx.notes.append(f"animate: {im.merged_off_b} boundary {'vertices' if im.merged_off_b > 1 else 'vertex'} of the "
                              "refined surface that collisions had kept off the object's surface merged into a "
                              "neighbour, so that the cracks could be cut into it")
         bar.update()
