@@ -19,7 +19,7 @@ from fracture.pieces.assembly import Pieces, build_pieces, mesh_checks, overlap_
 from fracture.io.ply import read_ply
 from fracture.mesh.primitives import box, grid_faces
 from fracture.mesh.fracture_surface import FractureSurface
-from fracture.mesh.topology import signed_volume
+from fracture.mesh.topology import face_frames, signed_volume
 
 
 def slanted_cut(n: int = 7):
@@ -126,6 +126,72 @@ def test_a_boundary_vertex_off_b_whose_trace_fails_is_merged_into_its_neighbour(
     with pytest.raises(InputError, match="the trace folds"):
         imprint_boundary(BV, BF, mesh)
     assert sum(merges) == imprint._REPAIRS
+
+
+def _box_with_a_bump():
+    """The unit cube with a tent of three vertices a hundredth of a triangle across raised 5e-4 over the
+    middle of one top triangle (its edges far shorter than B's: a bump the import's contour can leave)."""
+    BV, BF = box((0, 0, 0), (1, 1, 1), (4, 4, 4))
+    _, n = face_frames(BV, BF)
+    f = int(np.flatnonzero(n[:, 2] > 0.99)[0])
+    A, B, C = BF[f]
+    mid = BV[BF[f]].mean(axis=0)
+    tent = mid + 0.01 * (BV[BF[f]] - mid) + [0.0, 0.0, 5e-4]
+    a, b, c = len(BV), len(BV) + 1, len(BV) + 2
+    faces = [[a, b, c], [A, B, b], [A, b, a], [B, C, c], [B, c, b], [C, A, a], [C, a, c]]
+    return np.vstack([BV, tent]), np.vstack([np.delete(BF, f, axis=0), faces])
+
+
+def test_short_edges_of_b_are_collapsed_and_its_solid_kept():
+    from fracture.mesh.clean import collapse_short_edges
+    from fracture.mesh.topology import closed_oriented, signed_volume
+
+    BV, BF = _box_with_a_bump()
+    h = float(np.median(np.linalg.norm(BV[BF[:, 1]] - BV[BF[:, 0]], axis=1)))
+    V, F, joined = collapse_short_edges(BV, BF, 0.1 * h)
+    assert joined == 2 and len(V) == len(BV) - 2 and len(F) == len(BF) - 4
+    assert closed_oriented(F) and signed_volume(V, F) == pytest.approx(1.0, abs=1e-5)  # the tent flattened
+    assert collapse_short_edges(V, F, 0.1 * h)[2] == 0  # nothing more to do
+    V2, F2, none = collapse_short_edges(BV, BF, 10.0)  # every edge: no solid would be left
+    assert none == 0 and V2 is BV and F2 is BF
+
+
+def test_s_is_imprinted_again_on_b_without_its_short_edges_when_it_cannot_be_as_b_is(monkeypatch):
+    """When S cannot be imprinted on B as it is (on random Blender PLY exports two cracks' traces crossed
+    over bumps of B a few hundredths of a cell across), B's short edges are collapsed and S, as it was
+    before the first try, imprinted on that B; if that fails too, or B has no short edge, the first refusal
+    stands."""
+    from fracture.errors import InputError
+    import fracture.pieces.imprint as imprint
+
+    imprint_as_is, calls = imprint._imprint, []
+
+    def refuse_the_first(BV, BF, mesh, where):
+        calls.append((len(BV), len(mesh.F)))
+        if len(calls) == 1:
+            mesh.F = mesh.F[:1]  # what a failed try leaves behind
+            raise InputError("animate: two of its cracks cross each other")
+        return imprint_as_is(BV, BF, mesh, where)
+
+    monkeypatch.setattr(imprint, "_imprint", refuse_the_first)
+    BV, BF = _box_with_a_bump()
+    _, _, mesh = slanted_cut()
+    faces = len(mesh.F)
+    im = imprint_boundary(BV, BF, mesh)
+    assert im.joined_b == 2 and calls == [(len(BV), faces), (len(BV) - 2, faces)]
+    assert len(mesh.F) > faces  # the second try's surface, split along B
+
+    calls.clear()
+    monkeypatch.setattr(imprint, "_imprint", lambda BV, BF, mesh, where: (calls.append(1), (_ for _ in ()).throw(
+        InputError(f"animate: refused on {len(BV)} vertices")))[1])
+    with pytest.raises(InputError, match=f"refused on {len(BV)} vertices"):
+        imprint_boundary(BV, BF, slanted_cut()[2])
+    assert len(calls) == 2
+    BV, BF, mesh = slanted_cut()  # no short edge: no second try
+    calls.clear()
+    with pytest.raises(InputError):
+        imprint_boundary(BV, BF, mesh)
+    assert len(calls) == 1
 
 
 def bump_cut():

@@ -14,13 +14,23 @@ vertices, remove duplicate and null faces), then flips the slivers away
 (pymeshlab's T-vertex removal by edge flips). The result is taken only if it
 is still closed and encloses the same volume; otherwise the surface is kept as
 it was.
+
+:func:`collapse_short_edges` joins the corners of edges far shorter than the
+surface's own (the slivers and bumps of a few hundredths of a cell that the
+contour's bisection leaves where B's creases meet the cracks); the imprint
+asks for it when a crack cannot be traced across such a bump. Written here
+because pymeshlab merges vertices by proximity, also across a thin part of
+the object, and libigl's decimation stops at a face count, not a length.
 """
 
 from __future__ import annotations
 
+import igl
 import numpy as np
+import scipy.sparse as sp
+from scipy.sparse import csgraph
 
-from fracture.mesh.topology import diagonal, face_frames, signed_volume, unique_edges
+from fracture.mesh.topology import closed_oriented, diagonal, face_frames, signed_volume, unique_edges
 from fracture.tolerances import tol
 
 
@@ -57,3 +67,36 @@ def remove_flat_triangles(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.
             or abs(signed_volume(W, G) - volume) > tol.closure * max(abs(volume), diagonal(V) ** 3)):
         return V, F, 0
     return W, G, flat
+
+
+def collapse_short_edges(V: np.ndarray, F: np.ndarray, length: float) -> tuple[np.ndarray, np.ndarray, int]:
+    """The closed surface ``(V, F)`` with the corners of every edge shorter than ``length`` joined (each
+    group of corners so connected at their mean), the triangles left without three corners and pairs of
+    opposite triangles on the same corners removed; and how many vertices went. The input comes back (and
+    0) when there is no such edge or the result would not be closed, vertex-manifold and free of crossings
+    with the same volume (within ``tol.closure``)."""
+    from fracture.mesh.intersect import self_intersections
+
+    e, _ = unique_edges(F)
+    short = e[np.linalg.norm(V[e[:, 1]] - V[e[:, 0]], axis=1) < length]
+    if not len(short):
+        return V, F, 0
+    n = len(V)
+    graph = sp.coo_matrix((np.ones(len(short)), (short[:, 0], short[:, 1])), shape=(n, n))
+    k, group = csgraph.connected_components(graph, directed=False)
+    W = np.zeros((k, 3))
+    np.add.at(W, group, V)
+    W /= np.bincount(group, minlength=k)[:, None]
+    G = group[F]
+    G = G[(G[:, 0] != G[:, 1]) & (G[:, 1] != G[:, 2]) & (G[:, 2] != G[:, 0])]
+    _, inverse, count = np.unique(np.sort(G, axis=1), axis=0, return_inverse=True, return_counts=True)
+    G = G[count[inverse.ravel()] == 1]  # a flattened bump leaves its two sides on the same corners
+    used, inverse = np.unique(G, return_inverse=True)
+    W, G = W[used], inverse.reshape(-1, 3).astype(np.int64)
+    volume = signed_volume(V, F)
+    if (not len(G) or not closed_oriented(G) or not np.all(igl.is_vertex_manifold(G))
+            or abs(signed_volume(W, G) - volume) > tol.closure * max(abs(volume), diagonal(V) ** 3)
+            or self_intersections(W, G)):
+        return V, F, 0
+    return W, G, n - len(W)
+

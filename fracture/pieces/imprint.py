@@ -25,12 +25,14 @@ of B. It touches only the triangles along the cut.
 
 from __future__ import annotations
 
+import copy
 import heapq
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
 from fracture.errors import InputError
+from fracture.mesh.clean import collapse_short_edges
 from fracture.mesh.exterior import Exterior
 from fracture.refine.crossings_on_b import edges_would_cross, splits_would_cross
 from fracture.mesh.edges import edge_table, row_edges
@@ -58,6 +60,9 @@ BRIDGE_DEPTH = 0.2
 OFF_B = 1e-3
 _REPAIRS = 4
 
+# B's edges shorter than this fraction of its median edge are collapsed when S cannot be imprinted as B is.
+SHORT_EDGE = 0.1
+
 # What a user can change when S cannot be imprinted (said after each such refusal).
 _RETRY = "; a different seed or refine.max_triangles gives other refined cracks there"
 
@@ -80,6 +85,9 @@ class Imprint:
     merged_off_b : int
         Boundary vertices of S off B whose traces could not be embedded, merged into a neighbour on the
         boundary (:func:`_merge_off_b`).
+    joined_b : int
+        B's vertices that went where its short edges were collapsed before S could be imprinted (0: B as
+        it was given).
     """
 
     V: np.ndarray
@@ -89,6 +97,7 @@ class Imprint:
     cut_faces: np.ndarray
     origin: np.ndarray
     merged_off_b: int = 0
+    joined_b: int = 0
 
 
 class _Surface:
@@ -527,8 +536,33 @@ def imprint_boundary(BV: np.ndarray, BF: np.ndarray, mesh: FractureSurface, wher
     ``mesh`` are recorded in its barycentric tree. Where a trace cannot be
     embedded from a boundary vertex off B, that vertex is merged into its
     neighbour and the boundary embedded again (:func:`_merge_off_b`, at most
-    :data:`_REPAIRS` times; the result says how many).
+    :data:`_REPAIRS` times; the result says how many). If S still cannot be
+    imprinted, B's edges shorter than :data:`SHORT_EDGE` of its median edge
+    (bumps of a few hundredths of a cell that the contour leaves at B's
+    creases, over which two cracks' traces crossed on random Blender
+    exports) are collapsed (:func:`fracture.mesh.clean.collapse_short_edges`)
+    and S imprinted on that B from where it was; the result says how many of
+    B's vertices went, and the first refusal stands if this fails too.
     """
+    before = copy.deepcopy(mesh)
+    try:
+        return _imprint(BV, BF, mesh, where)
+    except InputError as refused:
+        BV = np.asarray(BV, np.float64)
+        h = float(np.median(np.linalg.norm(BV[BF[:, 1]] - BV[BF[:, 0]], axis=1)))
+        W, G, joined = collapse_short_edges(BV, np.asarray(BF, np.int64), SHORT_EDGE * h)
+        if not joined:
+            raise
+        for f in fields(mesh):
+            setattr(mesh, f.name, getattr(before, f.name))
+        try:
+            return replace(_imprint(W, G, mesh, where), joined_b=joined)
+        except InputError:
+            raise refused from None
+
+
+def _imprint(BV: np.ndarray, BF: np.ndarray, mesh: FractureSurface, where: str) -> Imprint:
+    """:func:`imprint_boundary` on B as it is."""
     BV = np.asarray(BV, np.float64)
     BF = np.asarray(BF, np.int64)
     exterior = Exterior(BV, BF)

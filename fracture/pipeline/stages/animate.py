@@ -56,6 +56,10 @@ def animate_stage(ctx: RunContext) -> None:
             ctx.notes.append(f"animate: {im.merged_off_b} boundary {'vertices' if im.merged_off_b > 1 else 'vertex'} of the "
                              "refined surface that collisions had kept off the object's surface merged into a "
                              "neighbour, so that the cracks could be cut into it")
+        if im.joined_b:
+            ctx.notes.append(f"animate: the cracks could not be cut into the object's surface as it was; its edges "
+                             f"shorter than a tenth of its typical edge (slivers and bumps of the import's contour) were "
+                             f"collapsed ({im.joined_b} vertices joined), and then they could")
         bar.update()
 
         def fallback(faces):  # patches without a cut: the coarse exterior's label
@@ -107,7 +111,8 @@ def animate_stage(ctx: RunContext) -> None:
     ctx.products.transfer = transfer
     ctx.counts.update(pieces=pieces.n_pieces, piece_triangles=int(sum(len(f) for f in pieces.faces)),
                       frames_written=transfer.n_frames if opts.obj_frames else 0)
-    ctx.stats["animate"] = {**checks, "boundary_vertices_merged_off_b": im.merged_off_b}
+    ctx.stats["animate"] = {**checks, "boundary_vertices_merged_off_b": im.merged_off_b,
+                            "exterior_vertices_joined": im.joined_b}
 
 
 def _save_transfer(ctx: RunContext, tr: Transfer) -> None:
