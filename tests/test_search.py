@@ -210,6 +210,7 @@ def test_the_polish_runs_on_the_stages_asked_for_after_the_search():
 def test_sheets_move_into_a_thin_valley_of_psi_only_where_their_integral_falls():
     from conftest import grid_sheet
 
+    from fracture.mesh.topology import unique_edges
     from fracture.refine.search import _to_valley, _where_lower
 
     h, width = 0.05, 0.5  # a weak layer half a cell wide on the plane z = 0.5
@@ -221,7 +222,7 @@ def test_sheets_move_into_a_thin_valley_of_psi_only_where_their_integral_falls()
     V2[:, 0] += 2.0  # a second sheet beside it, between two other pieces
     V, F = np.vstack([V1, V2]), np.vstack([F1, F2 + len(V1)])
     sides = np.vstack([np.tile([0, 1], (len(F1), 1)), np.tile([1, 2], (len(F2), 1))])
-    X = _to_valley(V, F, psi, h, span=0.9)
+    X = _to_valley(V, F, psi, h, 0.9, unique_edges(F))
     rim = np.zeros(len(V), bool)
     for start in (0, len(V1)):  # each sheet's boundary stays where it is
         ij = np.stack(np.unravel_index(np.arange(81), (9, 9)), 1)

@@ -30,6 +30,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
+from fracture.mesh.intersect import self_intersections
 from fracture.mesh.topology import closed_oriented, diagonal, face_frames, signed_volume, unique_edges
 from fracture.tolerances import tol
 
@@ -75,8 +76,6 @@ def collapse_short_edges(V: np.ndarray, F: np.ndarray, length: float) -> tuple[n
     opposite triangles on the same corners removed; and how many vertices went. The input comes back (and
     0) when there is no such edge or the result would not be closed, vertex-manifold and free of crossings
     with the same volume (within ``tol.closure``)."""
-    from fracture.mesh.intersect import self_intersections
-
     e, _ = unique_edges(F)
     short = e[np.linalg.norm(V[e[:, 1]] - V[e[:, 0]], axis=1) < length]
     if not len(short):

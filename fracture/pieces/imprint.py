@@ -434,30 +434,13 @@ def collapse_short_boundary(mesh: FractureSurface, length: float) -> int:
     """
     E = row_edges(mesh.F, edge_table(mesh.F, len(mesh.V)).boundary_rows)
     short = np.flatnonzero(np.linalg.norm(mesh.V[E[:, 1]] - mesh.V[E[:, 0]], axis=1) < length)
-    if not len(short):
-        return 0
-    F = mesh.F.copy()
-    gone = np.zeros(len(F), bool)
-    merged = np.arange(len(mesh.V))
+    merged = np.arange(len(mesh.V))  # where each vertex went
     done = 0
     for i in short.tolist():
         a, b = merged[E[i, 0]], merged[E[i, 1]]
-        if a == b:
-            continue
-        around_a = np.flatnonzero(~gone & (F == a).any(axis=1))
-        around_b = np.flatnonzero(~gone & (F == b).any(axis=1))
-        both = np.intersect1d(around_a, around_b)
-        if len(both) != 1:
-            continue
-        common = np.intersect1d(F[around_a], F[around_b])
-        if len(common) != 3:  # a, b and the third corner only
-            continue
-        gone[both] = True
-        F[around_b] = np.where(F[around_b] == b, a, F[around_b])
-        merged[merged == b] = a
-        done += 1
-    mesh.F = F[~gone]
-    mesh.sides = mesh.sides[~gone]
+        if a != b and _collapse(mesh, a, b):
+            merged[merged == b] = a
+            done += 1
     return done
 
 
@@ -548,9 +531,8 @@ def imprint_boundary(BV: np.ndarray, BF: np.ndarray, mesh: FractureSurface, wher
     try:
         return _imprint(BV, BF, mesh, where)
     except InputError as refused:
-        BV = np.asarray(BV, np.float64)
-        h = float(np.median(np.linalg.norm(BV[BF[:, 1]] - BV[BF[:, 0]], axis=1)))
-        W, G, joined = collapse_short_edges(BV, np.asarray(BF, np.int64), SHORT_EDGE * h)
+        BV, BF = np.asarray(BV, np.float64), np.asarray(BF, np.int64)
+        W, G, joined = collapse_short_edges(BV, BF, SHORT_EDGE * _median_edge(BV, BF))
         if not joined:
             raise
         for f in fields(mesh):
@@ -566,7 +548,7 @@ def _imprint(BV: np.ndarray, BF: np.ndarray, mesh: FractureSurface, where: str) 
     BV = np.asarray(BV, np.float64)
     BF = np.asarray(BF, np.int64)
     exterior = Exterior(BV, BF)
-    h = float(np.median(np.linalg.norm(BV[BF[:, 1]] - BV[BF[:, 0]], axis=1)))
+    h = _median_edge(BV, BF)
     clip_tangent_triangles(mesh, exterior)
     collapse_short_boundary(mesh, 10 * SNAP * h)
     subdivide_boundary(mesh, exterior, CHORD * h)
@@ -595,6 +577,11 @@ def _imprint(BV: np.ndarray, BF: np.ndarray, mesh: FractureSurface, where: str) 
     return Imprint(V=BV_cut, F=np.array(surf.F, np.int64), to_fracture=to_fracture,
                    cut_edges=cut_edges, cut_faces=cut_faces, origin=np.array(surf.origin, np.int64),
                    merged_off_b=merged)
+
+
+def _median_edge(BV: np.ndarray, BF: np.ndarray) -> float:
+    """B's median edge length (each triangle's first edge): the scale of the imprint's tolerances."""
+    return float(np.median(np.linalg.norm(BV[BF[:, 1]] - BV[BF[:, 0]], axis=1)))
 
 
 def _embed_in_some_order(BV, BF, E, verts, f0, closest, length, where):
@@ -657,8 +644,8 @@ def _merge_off_b(mesh: FractureSurface, edge: tuple[int, int], off: np.ndarray, 
 
 def _collapse(mesh: FractureSurface, kept: int, gone: int) -> bool:
     """Merge vertex ``gone`` of S into ``kept`` (its neighbour on one triangle: the triangle goes) if their
-    only common neighbour is that triangle's third corner (the link condition for an edge on the boundary,
-    as :func:`collapse_short_boundary` asks it); whether it was merged."""
+    only common neighbour is that triangle's third corner (the link condition for an edge on the boundary);
+    whether it was merged."""
     F = mesh.F
     around_kept = np.flatnonzero((F == kept).any(axis=1))
     around_gone = np.flatnonzero((F == gone).any(axis=1))

@@ -309,10 +309,10 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
                                                           "surface is kept"])
     crossings = self_intersections(V, F)
     edges = unique_edges(F)  # the triangles stay the same until the coarsening: their edges and counts
-    V, crossings = _untangled(V, _apart(V, _rim_to_least(V, F, B, pyramid.value, h, edges=edges), h), F, B, crossings,
+    V, crossings = _untangled(V, _apart(V, _rim_to_least(V, F, B, pyramid.value, h, edges), h), F, B, crossings,
                               edges)
     X = _smooth(V, F, B, edges)
-    X = _where_lower(X, _to_valley(X, F, pyramid.value, h, float(np.ptp(psi)), edges=edges), F, sides, pyramid.value,
+    X = _where_lower(X, _to_valley(X, F, pyramid.value, h, float(np.ptp(psi)), edges), F, sides, pyramid.value,
                      h, offset, grain)
     V, crossings = _untangled(V, _apart(V, X, h), F, B, crossings, edges)
     V, F, sides = coarsen_sheets(V, F, sides, cell=h, crossings=crossings)
@@ -725,13 +725,12 @@ def _least_on_lines(X0: np.ndarray, D: np.ndarray, u: np.ndarray, psi_at) -> tup
     return u[k] + np.clip(shift, -1.0, 1.0) * (u[1] - u[0]), f
 
 
-def _rim_to_least(V: np.ndarray, F: np.ndarray, B: Exterior, psi_at, h: float, samples: int = 9,
-                  edges: tuple | None = None) -> np.ndarray:
+def _rim_to_least(V: np.ndarray, F: np.ndarray, B: Exterior, psi_at, h: float, edges: tuple, samples: int = 9
+                  ) -> np.ndarray:
     """The sheets' rim vertices (on boundary edges) moved along B across their sheet, within a cell either
     side, to where psi is least: the contour puts a rim point between two nodes, where the cut's labels
-    change, which the psi of a thin layer on B does not see. ``edges``: :func:`unique_edges` of ``F``, if
-    known."""
-    e, count = unique_edges(F) if edges is None else edges
+    change, which the psi of a thin layer on B does not see. ``edges``: :func:`unique_edges` of ``F``."""
+    e, count = edges
     rim = np.unique(e[count == 1])
     if not len(rim):
         return V
@@ -758,8 +757,8 @@ def _vertex_normals(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     return np.stack([np.bincount(F.ravel(), np.repeat(n[:, c], 3), len(V)) for c in range(3)], 1)
 
 
-def _to_valley(V: np.ndarray, F: np.ndarray, psi_at, h: float, span: float, samples: int = 7,
-               edges: tuple | None = None) -> np.ndarray:
+def _to_valley(V: np.ndarray, F: np.ndarray, psi_at, h: float, span: float, edges: tuple, samples: int = 7
+               ) -> np.ndarray:
     """The vertices off the sheets' feature curves (rims and junctions) moved along their normals, within
     :data:`_VALLEY_REACH` of a cell, to where psi is least (the least of ``samples`` values, moved to the
     vertex of the parabola through it and its neighbours), where that is lower than where they are by
@@ -769,8 +768,8 @@ def _to_valley(V: np.ndarray, F: np.ndarray, psi_at, h: float, span: float, samp
     :data:`_NODE_GAP` of it, and the smoothing then evens out the terraces: a thin weak layer (mortar) or
     one on a plane of nodes ends a tenth of a cell or more off the sheet's valley, where the integral of
     psi is well above its floor. On the collapsing wall this lowers the search's functional by 13 %.
-    ``edges``: :func:`unique_edges` of ``F``, if known."""
-    e, count = unique_edges(F) if edges is None else edges
+    ``edges``: :func:`unique_edges` of ``F``."""
+    e, count = edges
     held = np.zeros(len(V), bool)
     held[e[count != 2].ravel()] = True
     normal = _vertex_normals(V, F)
@@ -875,13 +874,13 @@ def _rim_crossings(P: np.ndarray, E: np.ndarray, normal_at) -> np.ndarray:
     return pairs[cross, 0] * len(E) + pairs[cross, 1]
 
 
-def _untangled(V: np.ndarray, X: np.ndarray, F: np.ndarray, B: Exterior, crossings: int,
-               edges: tuple | None = None) -> tuple[np.ndarray, int]:
+def _untangled(V: np.ndarray, X: np.ndarray, F: np.ndarray, B: Exterior, crossings: int, edges: tuple
+               ) -> tuple[np.ndarray, int]:
     """``X`` (moved vertices of ``V``, which has ``crossings`` crossing pairs of triangles) with what makes
     rims cross on B (:func:`_rims_uncrossed`) or triangles cross in space (:func:`_uncrossed`) taken back,
     the two in turn until the rims' guard takes back nothing after the triangles' (at worst ``V``); and the
-    pairs that cross. ``edges``: :func:`unique_edges` of ``F``, if known."""
-    e, count = unique_edges(F) if edges is None else edges
+    pairs that cross. ``edges``: :func:`unique_edges` of ``F``."""
+    e, count = edges
     E = e[count == 1]
     had = _rim_crossings(V, E, B.normal_at)
     X = _rims_uncrossed(V, X, E, B.normal_at, had)
@@ -894,15 +893,15 @@ def _untangled(V: np.ndarray, X: np.ndarray, F: np.ndarray, B: Exterior, crossin
     return V, crossings
 
 
-def _smooth(V: np.ndarray, F: np.ndarray, B: Exterior, edges: tuple | None = None) -> np.ndarray:
+def _smooth(V: np.ndarray, F: np.ndarray, B: Exterior, edges: tuple) -> np.ndarray:
     """Taubin's lambda-mu smoothing of the contour's terraces, the sheets' feature curves (rims on B:
     boundary edges; junctions: edges of three or more triangles) smoothed along themselves (a vertex on one
     curve over its two neighbours on it, a rim vertex then put back on B), the points where curves meet
     held (:func:`_uncrossed` takes back what makes triangles cross).
 
     Written here because the surface is non-manifold along its junctions, which pymeshlab's and libigl's
-    smoothing filters do not take. ``edges``: :func:`unique_edges` of ``F``, if known."""
-    e, count = unique_edges(F) if edges is None else edges
+    smoothing filters do not take. ``edges``: :func:`unique_edges` of ``F``."""
+    e, count = edges
     feature = count != 2
     on_feature = np.zeros(len(V), bool)
     on_feature[e[feature].ravel()] = True
