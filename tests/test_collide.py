@@ -160,21 +160,33 @@ def test_every_vertex_and_edge_is_represented_once_by_a_triangle_on_it():
 
 
 def test_the_representatives_find_the_colliding_features_that_testing_all_of_them_finds():
+    """On one thread and on two (the pairs are tested in chunks, one thread each)."""
+    import numba
+
     from fracture.mesh import hashgrid
     from fracture.mesh.intersect import box_grid, swept_boxes
     from fracture.refine.collide import feature_tests, path_boxes, represented_features
     from fracture.mesh.edges import edge_table
     eta = 1e-3
-    for seed in range(3):
-        X0, F, X1 = _two_sheets_with_a_fin(seed)
-        table = edge_table(F, len(X0))
-        expect = colliding_vertices(X0, X1, F, eta)
-        lo, hi = swept_boxes(X0, X1, F, eta)
-        stop = np.zeros(len(X0), bool)
-        feature_tests(X0, X1, F, path_boxes(X0, X1), lo, hi, represented_features(F, len(X0), table.eid),
-                       hashgrid.pairs(box_grid(lo, hi, X0, F)), eta, True, np.zeros(len(X0), bool),
-                       np.zeros(len(X0), bool), stop)
-        assert expect.sum() > 20 and np.array_equal(stop, expect)
+    before = numba.get_num_threads()
+    try:
+        for seed in range(3):
+            X0, F, X1 = _two_sheets_with_a_fin(seed)
+            table = edge_table(F, len(X0))
+            expect = colliding_vertices(X0, X1, F, eta)
+            lo, hi = swept_boxes(X0, X1, F, eta)
+            pairs = hashgrid.pairs(box_grid(lo, hi, X0, F))
+            counts = []
+            for threads in (1, min(2, numba.config.NUMBA_NUM_THREADS)):
+                numba.set_num_threads(threads)
+                stop = np.zeros(len(X0), bool)
+                counts.append(feature_tests(X0, X1, F, path_boxes(X0, X1), lo, hi,
+                                            represented_features(F, len(X0), table.eid), pairs, eta, True,
+                                            np.zeros(len(X0), bool), np.zeros(len(X0), bool), stop))
+                assert expect.sum() > 20 and np.array_equal(stop, expect)
+            assert counts[0] == counts[1] > 0
+    finally:
+        numba.set_num_threads(before)
 
 
 def test_the_pairs_touching_moved_vertices_are_the_same_on_one_thread_and_two():

@@ -211,3 +211,46 @@ def test_an_edge_is_flipped_only_if_an_angle_opposite_it_is_obtuse():
         assert not wants or corner_obtuse(V, 2, 0, 1) or corner_obtuse(V, 3, 1, 0)
         assert corner_obtuse(V, 2, 0, 1) == (np.dot(V[0] - V[2], V[1] - V[2]) < 0.0)
     assert flips > 2000
+
+
+@pytest.mark.parametrize("seed", [3, 4])
+def test_the_edges_tried_first_are_those_whose_opposite_angles_add_up_to_more_than_pi(seed):
+    """The first pass's candidates, found on every thread at once: the edges with two triangles whose
+    opposite angles, measured here with arccos, add up to more than pi."""
+    from fracture.mesh.edges import edge_table
+    from fracture.refine.flips import _not_delaunay
+    V, F, _ = _two_sheets(seed)
+    V = V + np.random.default_rng(seed).normal(scale=0.02, size=V.shape)  # some angles obtuse
+    table = edge_table(F, len(V))
+    got = _not_delaunay(V, F, table.first, table.second, table.count)
+
+    def angle(f, k):  # the angle at corner k of triangle f
+        a, b, c = V[F[f, k]], V[F[f, (k + 1) % 3]], V[F[f, (k + 2) % 3]]
+        u, v = b - a, c - a
+        return np.arccos(np.clip(u @ v / np.linalg.norm(u) / np.linalg.norm(v), -1.0, 1.0))
+
+    two = np.flatnonzero(table.count == 2)
+    # directed edge r = 3 f + k runs from corner k to k + 1: the corner opposite it is k + 2
+    total = np.array([angle(r // 3, (r + 2) % 3) + angle(s // 3, (s + 2) % 3)
+                      for r, s in zip(table.first[two], table.second[two])])
+    clear = np.abs(total - np.pi) > 1e-9
+    assert 20 < got[two].sum() < len(two) // 2
+    assert np.array_equal(got[two][clear], (total > np.pi)[clear]) and not got[table.count != 2].any()
+
+
+def test_the_flipped_triangles_meet_the_same_ones_on_one_thread_and_two():
+    import numba
+
+    from fracture.mesh.intersect import triangle_grid
+    from fracture.refine.flips import flip_regions, unsafe_flips
+    V, F, sides = _two_sheets(3)
+    grid = triangle_grid(V, F.copy())
+    group = flip_regions(len(F), _plain_passes(V, F, sides, 3))
+    out, before = [], numba.get_num_threads()
+    try:
+        for threads in (1, min(2, numba.config.NUMBA_NUM_THREADS)):
+            numba.set_num_threads(threads)
+            out.append(unsafe_flips(V, F, grid, group, np.zeros(len(V), bool)))
+    finally:
+        numba.set_num_threads(before)
+    assert 0 < out[0].sum() < len(out[0]) and np.array_equal(out[0], out[1])

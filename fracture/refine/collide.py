@@ -348,8 +348,11 @@ def _any_on(on, F, f):
     return on[F[f, 0]] or on[F[f, 1]] or on[F[f, 2]]
 
 
-@numba.njit(cache=True)
-def feature_tests(X0, X1, F, B, lo, hi, rep, pairs, eta, every, on, sure, stop):
+# The pairs are tested in this many chunks per thread (pairs near a fold cost more than the rest).
+_CHUNKS_PER_THREAD = 4
+
+
+def feature_tests(X0, X1, F, B, lo, hi, rep, pairs, eta, every, on, sure, stop) -> int:
     """Test the features that the triangles of each overlapping pair represent against each other:
     the vertices of each against the other triangle, and the edges of one against the edges of the
     other. ``B`` holds the vertices' path boxes (:func:`path_boxes`), ``lo, hi`` the triangles'
@@ -360,13 +363,32 @@ def feature_tests(X0, X1, F, B, lo, hi, rep, pairs, eta, every, on, sure, stop):
 
     Every vertex-triangle pair whose swept boxes overlap is tested once, from
     the pair of the vertex's representative and the triangle (their boxes
-    overlap too); every edge pair once, from its representatives' pair.
+    overlap too); every edge pair once, from its representatives' pair. The
+    pairs are tested on every thread in contiguous chunks; threads only ever
+    set entries of ``stop``, so its result does not depend on their number.
     """
+    return _feature_tests(X0, X1, F, B, lo, hi, rep, pairs, eta, every, on, sure, stop, numba.get_num_threads())
+
+
+@numba.njit(cache=True, parallel=True)
+def _feature_tests(X0, X1, F, B, lo, hi, rep, pairs, eta, every, on, sure, stop, threads):
+    n = pairs.shape[0]
+    k = max(1, min(n, _CHUNKS_PER_THREAD * threads))
+    hits = np.zeros(k, np.int64)
+    for c in numba.prange(k):
+        hits[c] = _feature_tests_of(X0, X1, F, B, lo, hi, rep, pairs, c * n // k, (c + 1) * n // k, eta, every, on,
+                                    sure, stop)
+    return hits.sum()
+
+
+@numba.njit(cache=True)
+def _feature_tests_of(X0, X1, F, B, lo, hi, rep, pairs, begin, end, eta, every, on, sure, stop):
+    """:func:`feature_tests` of the pairs ``begin:end``."""
     times = np.empty(4)
     eta2 = eta * eta
     box = np.empty((6, 6))  # the edges' path boxes of both triangles, the first three grown by eta
     hits = 0
-    for i in range(pairs.shape[0]):
+    for i in range(begin, end):
         a, b = pairs[i, 0], pairs[i, 1]
         if share_certified(F, a, b, sure):
             continue  # every feature of one fan: they cannot meet

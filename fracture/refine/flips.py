@@ -130,7 +130,7 @@ def flip_passes(V, F, sides, max_passes, pairs, table):
     made = {(np.int64(0), np.int64(0))}
     made.clear()
     busy = np.zeros(m, np.bool_)
-    work = first[count == 2]
+    work = first[_not_delaunay(V, F, first, second, count)]
     total = 0
     for _ in range(max_passes):
         busy[:] = False
@@ -148,6 +148,25 @@ def flip_passes(V, F, sides, max_passes, pairs, table):
             work[4 * j], work[4 * j + 1], work[4 * j + 2], work[4 * j + 3] = 3 * f + 1, 3 * f + 2, 3 * g + 1, 3 * g + 2
         total += flipped
     return total
+
+
+@numba.njit(cache=True, parallel=True)
+def _not_delaunay(V, F, first, second, count):
+    """Per edge: it has two triangles and the angles opposite it add up to more than pi, the first
+    test of :func:`_try_flip`, made for every edge at once on every thread (most edges pass it: the
+    first pass then tries the few others, in their order, with the same outcome: an edge whose
+    triangle an earlier flip of the pass changed is skipped anyway)."""
+    out = np.zeros(count.shape[0], np.bool_)
+    for e in numba.prange(count.shape[0]):
+        if count[e] != 2:
+            continue
+        r, r2 = first[e], second[e]
+        f, g = r // 3, r2 // 3
+        u, v, w = F[f, r % 3], F[f, (r + 1) % 3], F[f, (r + 2) % 3]
+        x = F[g, (r2 + 2) % 3]
+        out[e] = ((corner_obtuse(V, w, u, v) or corner_obtuse(V, x, v, u))
+                  and corner_cot(V, w, u, v) + corner_cot(V, x, v, u) < -_DELAUNAY)
+    return out
 
 
 def pair_buffer(m: int, passes: int) -> np.ndarray:
@@ -193,8 +212,11 @@ def _boxes_apart(V, F, f, c):
     return False
 
 
-@numba.njit(cache=True)
-def _meet_found(V, F, tris, starts, grid, ids, skip, sure, eps, out):
+# Groups of triangles are looked up in this many chunks per thread.
+_CHUNKS_PER_THREAD = 4
+
+
+def _meet_found(V, F, tris, starts, grid, ids, skip, sure, eps, out) -> None:
     """Mark in ``out`` the triangles ``tris`` that meet a triangle found in ``grid`` (element ``i`` is
     triangle ``ids[i]``); triangles with ``skip``, and those that share a vertex in ``sure``
     (:func:`~fracture.refine.fans.certified_fans`), are left out. Triangles already marked are not
@@ -204,11 +226,27 @@ def _meet_found(V, F, tris, starts, grid, ids, skip, sure, eps, out):
     other (those joined by flips): a group looks up the box around its
     triangles once (a look-up scans whole buckets, and a box twice as large
     finds little more), then each of its triangles tests what that found.
+    The groups are looked up on every thread, in contiguous chunks (each
+    writes only its own triangles' entries of ``out``).
     """
+    _meet_found_parallel(V, F, tris, starts, grid, ids, skip, sure, eps, out, numba.get_num_threads())
+
+
+@numba.njit(cache=True, parallel=True)
+def _meet_found_parallel(V, F, tris, starts, grid, ids, skip, sure, eps, out, threads):
+    n = starts.shape[0] - 1
+    k = max(1, min(n, _CHUNKS_PER_THREAD * threads))
+    for c in numba.prange(k):
+        _meet_found_of(V, F, tris, starts, c * n // k, (c + 1) * n // k, grid, ids, skip, sure, eps, out)
+
+
+@numba.njit(cache=True)
+def _meet_found_of(V, F, tris, starts, begin, end, grid, ids, skip, sure, eps, out):
+    """:func:`_meet_found` of the groups ``begin:end``."""
     buf = np.empty(256, np.int64)
     lo = np.empty(3)
     hi = np.empty(3)
-    for j in range(starts.shape[0] - 1):
+    for j in range(begin, end):
         lo[:] = np.inf
         hi[:] = -np.inf
         for i in range(starts[j], starts[j + 1]):
