@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from conftest import colliding_vertices, grid_sheet
 from fracture.mesh.intersect import meeting_pairs, self_intersections
 from fracture.refine.collide import stop_collisions
@@ -68,6 +69,37 @@ def test_testing_only_the_moving_vertices_stops_the_same_ones():
     assert np.array_equal(stopped[moving], everything[moving])
     assert found == pairs  # every colliding pair has a moving vertex, and is counted once
     assert np.array_equal(Xa, Xb) and self_intersections(Xb, F) == 0
+
+
+def test_a_few_moving_vertices_look_up_their_pairs_and_stop_as_the_full_listing_does(monkeypatch):
+    """Few moving vertices (the boundary settling onto B) take their triangles' pairs from one look-up
+    each (:func:`~fracture.mesh.hashgrid.pairs_with`), not from the listing of every pair."""
+    from fracture.mesh import hashgrid
+    rng = np.random.default_rng(6)
+    V1, F1 = grid_sheet(20, 0.0)
+    V2, F2 = grid_sheet(20, 0.03, 0.013)
+    V = np.vstack([V1, V2]) + rng.normal(0, 0.002, (2 * len(V1), 3))
+    F = np.vstack([F1, F2 + len(V1)])
+    moving = rng.choice(len(V1), 8, replace=False)  # on the first sheet, pushed through the second
+    X1 = V.copy()
+    X1[moving, 2] += rng.uniform(0.02, 0.06, len(moving))
+    everything, pairs = stop_collisions(V, Xa := X1.copy(), F, 1e-3)
+    assert 0 < everything[moving].sum() < len(moving)
+    listed = hashgrid.pairs
+    monkeypatch.setattr(hashgrid, "pairs", lambda grid: pytest.fail("every pair was listed"))
+    stopped, found = stop_collisions(V, Xb := X1.copy(), F, 1e-3, moving=moving)
+    monkeypatch.undo()
+    assert np.array_equal(stopped[moving], everything[moving]) and found == pairs
+    assert np.array_equal(Xa, Xb) and self_intersections(Xb, F) == 0
+    # the pairs looked up are the listing's rows with a triangle on a moving vertex
+    from fracture.mesh.intersect import box_grid, swept_boxes
+    lo, hi = swept_boxes(V, X1, F, 1e-3)
+    grid = box_grid(lo, hi, V, F)
+    on = np.isin(F, moving).any(axis=1)
+    every = listed(grid)
+    every = every[on[every[:, 0]] | on[every[:, 1]]]
+    assert np.array_equal(hashgrid.pairs_with(grid, lo, hi, np.flatnonzero(on)),
+                          every[np.lexsort((every[:, 1], every[:, 0]))])
 
 
 def _brute_force_pairs(V, F):

@@ -503,6 +503,33 @@ def gather(grid, qlo, qhi, buf):
     return buf, count
 
 
+def pairs_with(grid, lo: np.ndarray, hi: np.ndarray, elements: np.ndarray) -> np.ndarray:
+    """The rows of :func:`pairs` with an element in ``elements``, in ascending order: each such element's
+    box (``lo[e], hi[e]``, as the grid was built from) is looked up once. When a few elements move
+    among many this costs a small part of listing every pair and keeping those."""
+    chosen = np.zeros(len(lo), bool)
+    chosen[elements] = True
+    out = _pairs_with(grid, lo, hi, np.flatnonzero(chosen), chosen)
+    return out[np.lexsort((out[:, 1], out[:, 0]))]
+
+
+@numba.njit(cache=True)
+def _pairs_with(grid, lo, hi, elements, chosen):
+    buf = np.empty(256, np.int64)
+    out = np.empty((max(1024, _PAIRS_PER_SLOT * elements.shape[0]), 2), np.int64)
+    count = 0
+    for a in elements:
+        buf, k = gather(grid, lo[a], hi[a], buf)
+        out = _room(out, count, k)
+        for i in range(k):
+            g = buf[i]
+            if g == a or (chosen[g] and g < a):
+                continue  # itself, or a pair reported from g's look-up
+            out[count, 0], out[count, 1] = min(a, g), max(a, g)
+            count += 1
+    return out[:count]
+
+
 def cell_size(lo: np.ndarray, hi: np.ndarray, typical: float) -> float:
     """A level-0 cell of size ``typical``, enlarged where the boxes' extent would overflow the packed cells."""
     if not len(lo):

@@ -348,6 +348,9 @@ def _any_on(on, F, f):
     return on[F[f, 0]] or on[F[f, 1]] or on[F[f, 2]]
 
 
+# With fewer than 1/this of the triangles on moving vertices, their pairs are looked up one triangle at a
+# time rather than listed with every other pair (hashgrid.pairs_with).
+_FEW_ACTIVE = 8
 # The pairs are tested in this many chunks per thread (pairs near a fold cost more than the rest).
 _CHUNKS_PER_THREAD = 4
 
@@ -447,15 +450,28 @@ def _vertex_triangle_pair(X0, X1, F, v, f, eta2, times, stop):
 
 
 @numba.njit(cache=True, parallel=True)
-def _pairs_touching(F, pairs, on):
-    """The rows of triangle ``pairs`` with a vertex in ``on`` (in their order)."""
+def _touching(F, on):
+    """Per triangle: it has a vertex in ``on``."""
     touched = np.zeros(F.shape[0], np.bool_)
     for f in numba.prange(F.shape[0]):
         touched[f] = _any_on(on, F, f)
+    return touched
+
+
+@numba.njit(cache=True, parallel=True)
+def _pairs_touching(F, pairs, on):
+    """The rows of triangle ``pairs`` with a vertex in ``on`` (in their order)."""
+    touched = _touching(F, on)
     keep = np.empty(pairs.shape[0], np.bool_)
     for i in numba.prange(pairs.shape[0]):
         keep[i] = touched[pairs[i, 0]] | touched[pairs[i, 1]]
     return pairs[np.flatnonzero(keep)]
+
+
+def _marked(n: int, ids: np.ndarray) -> np.ndarray:
+    out = np.zeros(n, bool)
+    out[ids] = True
+    return out
 
 
 def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, eta: float, table: EdgeTable | None = None,
@@ -515,20 +531,25 @@ def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, eta: float, t
     eta = float(eta)
     lo, hi = swept_boxes(X0, X1, F, eta)
     grid = box_grid(lo, hi, X0, F)
-    overlapping = hashgrid.pairs(grid)
-    rep = represented_features(F, n, np.ascontiguousarray(table.eid, np.int64))
-    B = path_boxes(X0, X1)
-
     # a later round (or, with ``moving``, the first) tests only the triangle pairs with a vertex in ``on``
     every = moving is None
-    on = np.zeros(n, bool)
+    on = np.zeros(n, bool) if every else _marked(n, moving)
+    active = None if every else np.flatnonzero(_touching(F, on))
+    if active is not None and _FEW_ACTIVE * len(active) < len(F):
+        # a few vertices move (the boundary settling onto B): the pairs of the triangles on them alone,
+        # a look-up each (two triangles at rest cannot collide, so neither the first round nor a later
+        # one tests a pair without a moving vertex)
+        overlapping = hashgrid.pairs_with(grid, lo, hi, active)
+    else:
+        overlapping = hashgrid.pairs(grid)
+    rep = represented_features(F, n, np.ascontiguousarray(table.eid, np.int64))
+    B = path_boxes(X0, X1)
     todo = overlapping
     unsure = np.zeros(n, bool)
     sure = unsure
     if every or 4 * len(moving) > n:  # the first round tests the full step of many vertices: certify the fans
         sure = certified_fans(X0, X1, F, closed if closed is not None else closed_vertices(F, n, table))
     if not every:
-        on[moving] = True
         todo = _pairs_touching(F, overlapping, on)
     first = None
     for _ in range(max_rounds):
