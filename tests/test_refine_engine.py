@@ -145,6 +145,27 @@ def test_no_splits_beside_a_boundary_vertex_that_is_off_b():
     assert np.array_equal(mesh.F[(mesh.F == v).any(axis=1)], fan)  # ... around v nothing did
 
 
+def test_a_plan_says_the_budget_is_full_when_it_leaves_out_a_wanted_triangle_split():
+    """The edge splits fit the budget and a single 1-to-3 split more does: every other wanted split of a
+    triangle is left out, and the plan says so (the stage's settle test reads it)."""
+    pyramid = two_weak_sheets()
+    BV, BF = box([0, 0, 0], [1, 1, 1], (8, 8, 8))
+    mesh = flat_cut()
+    r = Refiner(mesh, pyramid, BV, BF, RefineParams(), np.random.default_rng(0))
+    r.begin_stage(*r.stages()[-1])
+    table = r.edges()
+    flow = r._velocity(table)
+
+    def plan(budget):
+        return plan_splits(mesh.V, mesh.F, table, flow.v, flow.w, 10.0 * r.step.start, r.field,
+                           np.random.default_rng(1), near=0.0, far=0.0, budget=budget, off_b=r.onb.off_b)
+
+    every = plan(10_000)
+    assert not every.full and len(every.edges) > 0 and len(every.faces) > 1
+    some = plan(2 * (len(every.edges) + 1))  # room for the edge splits and one triangle's
+    assert len(some.edges) == len(every.edges) and len(some.faces) == 1 and some.full
+
+
 def test_closest_points_on_b_are_asked_again_only_for_vertices_that_moved():
     pyramid = two_weak_sheets()
     BV, BF = box([0, 0, 0], [1, 1, 1], (8, 8, 8))

@@ -178,7 +178,9 @@ def plan_splits(V, F, table: EdgeTable, v, psi, tau, field, rng, *, near, far, b
     E = np.stack([F[ef, k_edge[ef]], F[ef, (k_edge[ef] + 1) % 3]], 1).reshape(-1, 2)
     # 1-to-3 splits of the others
     tf = np.flatnonzero(want & ~has_edge & ~busy)
-    tf = tf[: max(0, budget - len(ef))]
+    room = max(0, budget - len(ef))
+    full |= len(tf) > room
+    tf = tf[:room]
     return SplitPlan(E, t[ef], on, which, tf, bary[tf], full)
 
 
