@@ -21,6 +21,25 @@ class ConfigError(ValueError):
         super().__init__(f"{where}: {key}: {problem}" if key else f"{where}: {problem}")
 
 
+class JoinError(InputError):
+    """The refined fracture surface cannot be joined to the object's surface: its cracks' rims cannot be cut
+    into B (:mod:`fracture.pieces.imprint`).
+
+    Parameters
+    ----------
+    where : str
+        The stage.
+    problem : str
+        What could not be joined, and where.
+    advice : str
+        What to change, appended to the message.
+    """
+
+    def __init__(self, where: str, problem: str, advice: str = ""):
+        self.where, self.problem = where, problem
+        super().__init__(f"{where}: {problem}{advice}")
+
+
 class StageError(ValueError):
     """A stage name on the command line is unknown or not available."""
 
@@ -32,4 +51,4 @@ class ResultError(ValueError):
     """
 
 
-__all__ = ["ConfigError", "InputError", "ResultError", "StageError"]
+__all__ = ["ConfigError", "InputError", "JoinError", "ResultError", "StageError"]

@@ -31,7 +31,7 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-from fracture.errors import InputError
+from fracture.errors import InputError, JoinError
 from fracture.mesh.clean import collapse_short_edges
 from fracture.mesh.exterior import Exterior
 from fracture.refine.crossings_on_b import edges_would_cross, splits_would_cross
@@ -218,9 +218,8 @@ def _insert(surf: _Surface, p, f0, claimed: set, where: str) -> int:
         if v not in claimed:
             return v
         if np.linalg.norm(np.asarray(surf.V[v]) - p) <= tol.coincide * max(1.0, np.abs(p).max()):
-            raise InputError(f"{where}: the refined fracture surface cannot be joined to the object's surface at "
-                             f"{np.round(p, 6).tolist()}: two points where its cracks reach the surface coincide "
-                             f"there{_RETRY}")
+            raise _not_joined(where, f"at {np.round(p, 6).tolist()}: two points where its cracks reach the surface "
+                                     "coincide there")
         # another boundary vertex is there already: insert beside it
         bary = np.maximum(bary, 2 * SNAP)
         bary /= bary.sum()
@@ -321,9 +320,8 @@ def _walk_section(surf: _Surface, p: int, q: int, claimed: set, cut: set, where:
         score = np.where((sa * sb <= 0) & (sa != sb) & (ahead > progress), ahead, -np.inf)
         k = int(np.argmax(score))
         if not np.isfinite(score[k]):
-            raise InputError(f"{where}: the refined fracture surface cannot be joined to the object's surface "
-                             f"between {np.round(U, 6).tolist()} and {np.round(Q, 6).tolist()}: the surface folds "
-                             f"between them{_RETRY}")
+            raise _not_joined(where, f"between {np.round(U, 6).tolist()} and {np.round(Q, 6).tolist()}: the surface "
+                                     "folds between them")
         _, a, b = fan[k]
         t = lam[k]
         if t < SNAP and a not in claimed:
@@ -332,9 +330,8 @@ def _walk_section(surf: _Surface, p: int, q: int, claimed: set, cut: set, where:
             u = b
         else:
             if (min(a, b), max(a, b)) in cut:
-                raise InputError(f"{where}: the refined fracture surface cannot be joined to the object's surface "
-                                 f"near {np.round(Y[k], 6).tolist()}: two of its cracks cross each other on the "
-                                 f"surface there{_RETRY}")
+                raise _not_joined(where, f"near {np.round(Y[k], 6).tolist()}: two of its cracks cross each other "
+                                         "on the surface there")
             # (a claimed end is another curve's vertex: pass beside it, not through it)
             t = min(max(t, 2 * SNAP), 1 - 2 * SNAP)
             u = surf.split_edge(a, b, A[k] + t * (B[k] - A[k]))
@@ -343,8 +340,12 @@ def _walk_section(surf: _Surface, p: int, q: int, claimed: set, cut: set, where:
         if u not in claimed:
             added.append(u)
         claimed.add(u)
-    raise InputError(f"{where}: the refined fracture surface cannot be joined to the object's surface between "
-                     f"{np.round(P, 6).tolist()} and {np.round(Q, 6).tolist()}: the path along it does not end{_RETRY}")
+    raise _not_joined(where, f"between {np.round(P, 6).tolist()} and {np.round(Q, 6).tolist()}: the path along it "
+                             "does not end")
+
+
+def _not_joined(where: str, detail: str) -> JoinError:
+    return JoinError(where, f"the refined fracture surface cannot be joined to the object's surface {detail}", _RETRY)
 
 
 def _hairpins(T: np.ndarray, boundary: np.ndarray) -> np.ndarray:

@@ -23,7 +23,7 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-from fracture.errors import StageError
+from fracture.errors import JoinError, StageError
 from fracture.io import layout
 from fracture.io.atomic import staged_directory
 from fracture.pipeline.config import dump_config
@@ -48,6 +48,39 @@ def timing_table(manifest: dict) -> str:
     rows = [f"  {name:<{width}}  {info['seconds']:8.1f} s" for name, info in stages.items()]
     total = sum(info["seconds"] for info in stages.values())
     return "\n".join(["time per stage:", *rows, f"  {'total':<{width}}  {total:8.1f} s"])
+
+
+def _searched(ctx: RunContext) -> bool:
+    """The refined surface is the global search's, polished (not the coarse surface's)."""
+    search = ctx.stats.get("refine", {}).get("search")
+    return bool(search and search.get("replaced_coarse_surface")) and ctx.config.refine.search != "none"
+
+
+def _refine_without_search(ctx: RunContext, refine: Stage, refused: JoinError, manifest: dict,
+                           notes_from: dict[str, int], out: Path, writer: Executor) -> None:
+    """The searched surface cannot be joined to the object's surface (a later stage raised ``refused``):
+    refine again with the flow alone (``refine.search: none``), which starts from the coarse surface, whose
+    rims lie on B. The first refinement's notes go (its files are replaced, its cache entry stays: it is
+    what that config refines to), and a note says what happened and why."""
+    first = manifest["stages"]["refine"]
+    if isinstance(first.get("cache"), Future):  # its entry copies the files about to be replaced
+        first["cache"] = _stored(first["cache"].result())
+    ctx.wait_for_files()
+    del ctx.notes[notes_from["refine"]:]
+    names = list(ctx.keys)
+    for name in names[names.index("refine"):] if "refine" in names else ():
+        del ctx.keys[name]  # the cache keys of the refinement and of the stages after it are made again
+    cfg = ctx.config
+    ctx.config = cfg.model_copy(update={"refine": cfg.refine.model_copy(update={"search": "none"})})
+    ctx.say("refine: the global search's surface cannot be joined to the object's surface; refining again "
+            "with the flow alone")
+    t0 = time.perf_counter()
+    ctx.tell("stage", name="refine")
+    info = _run_stage(ctx, refine, keep_products=True, out=out, writer=writer)
+    manifest["stages"]["refine"] = {"seconds": round(first["seconds"] + time.perf_counter() - t0, 4), **info,
+                                    "without_search": True}
+    ctx.notes.append(f"refine: the global search's surface was refused: {refused.problem}; refined again with the "
+                     "flow alone (refine.search: none), from the coarse surface")
 
 
 def _sha256(path: Path) -> str:
@@ -187,11 +220,23 @@ def run(cfg: Config, out: str | Path, until: str | None = None, force: bool = Fa
     with staged_directory(out, force) as staging, ThreadPoolExecutor(1, "fracref-writer") as writer:
         ctx = RunContext(config=cfg, dir=staging, progress=progress, listener=listener, cache=cache, writer=writer)
         ctx.path(layout.CONFIG).write_text(dump_config(cfg), encoding="utf-8")
+        notes_from: dict[str, int] = {}  # where each stage's notes begin
         for stage in chosen:
             t0 = time.perf_counter()
+            notes_from[stage.name] = len(ctx.notes)
             ctx.tell("stage", name=stage.name)
             log.info("%s: started", stage.name)
-            info = _run_stage(ctx, stage, keep_products=stage is not stages[-1], out=Path(out), writer=writer)
+            try:
+                info = _run_stage(ctx, stage, keep_products=stage is not stages[-1], out=Path(out), writer=writer)
+            except JoinError as refused:
+                if not _searched(ctx):
+                    raise
+                _refine_without_search(ctx, next(s for s in chosen if s.name == "refine"), refused, manifest,
+                                       notes_from, Path(out), writer)
+                t0 = time.perf_counter()
+                notes_from[stage.name] = len(ctx.notes)
+                ctx.tell("stage", name=stage.name)
+                info = _run_stage(ctx, stage, keep_products=stage is not stages[-1], out=Path(out), writer=writer)
             manifest["stages"][stage.name] = {"seconds": round(time.perf_counter() - t0, 4), **info}
             log.info("%s: done in %.2f s", stage.name, manifest["stages"][stage.name]["seconds"])
         ctx.wait_for_files()  # before their hashes (a write that failed fails the run)

@@ -152,10 +152,11 @@ def flip_passes(V, F, sides, max_passes, pairs, table):
 
 @numba.njit(cache=True, parallel=True)
 def _not_delaunay(V, F, first, second, count):
-    """Per edge: it has two triangles and the angles opposite it add up to more than pi, the first
-    test of :func:`_try_flip`, made for every edge at once on every thread (most edges pass it: the
-    first pass then tries the few others, in their order, with the same outcome: an edge whose
-    triangle an earlier flip of the pass changed is skipped anyway)."""
+    """Per edge: it has two triangles and the angles opposite it add up to more than pi (the Delaunay
+    test of :func:`_try_flip`), for every edge at once on every thread. Most edges are Delaunay; the
+    first pass tries only the others, in their order, with the outcome of trying all: an edge whose
+    triangles no flip of the pass changed yet is tested on the same corners here, and one whose
+    triangle a flip changed is skipped as busy anyway."""
     out = np.zeros(count.shape[0], np.bool_)
     for e in numba.prange(count.shape[0]):
         if count[e] != 2:
