@@ -318,25 +318,38 @@ def test_sigterm_inside_a_compiler_callback_is_taken_after_it(monkeypatch):
     assert exit_info.value.code == 128 + signal.SIGTERM
 
 
-def test_a_searched_surface_that_cannot_be_joined_to_b_is_refined_again_without_the_search(tmp_path, small_config,
-                                                                                          monkeypatch):
-    """The imprint refuses the searched surface (as on some Blender exports, where a rim of the searched
-    cracks spans a part of the object thinner than its edge): the run refines again with the flow alone,
-    says so, and its files are those of a run with ``refine.search: none`` (the config file as given)."""
+JOIN = ("the refined fracture surface cannot be joined to the object's surface near [0.5, 0.5, 0.5]: two of its "
+        "cracks cross each other on the surface there")
+CROSS = "piece 1 (b) crosses itself (3 triangle pairs meet) and the crossings could not be resolved"
+
+
+@pytest.mark.parametrize("why", [JOIN, CROSS])
+def test_a_searched_surface_that_makes_no_sound_pieces_is_refined_again_without_the_search(tmp_path, small_config,
+                                                                                          monkeypatch, why):
+    """The pieces cannot be made of the searched surface (as on some Blender exports: a rim of the searched
+    cracks spans a part of the object thinner than its edge, or a piece crosses itself beyond repair): the
+    run refines again with the flow alone, says so, and its files are those of a run with
+    ``refine.search: none`` (the config file as given)."""
     import fracture.pipeline.stages.animate as animate
-    from fracture.errors import JoinError
+    from fracture.errors import JoinError, ResultError
     from fracture.pipeline.cache import StageCache
 
-    imprint, refused = animate.imprint_boundary, []
+    imprint, verify, refused = animate.imprint_boundary, animate.verify_pieces, []
 
     def refuse_the_first(BV, BF, mesh, where="animate"):
-        if not refused:
+        if why == JOIN and not refused:
             refused.append(len(mesh.F))
-            raise JoinError(where, "the refined fracture surface cannot be joined to the object's surface near "
-                            "[0.5, 0.5, 0.5]: two of its cracks cross each other on the surface there", "; advice")
+            raise JoinError(where, JOIN, "; advice")
         return imprint(BV, BF, mesh, where)
 
+    def refuse_the_first_pieces(checks, names):
+        if why == CROSS and not refused:
+            refused.append(len(names))
+            raise ResultError(f"animate: {CROSS}")
+        return verify(checks, names)
+
     monkeypatch.setattr(animate, "imprint_boundary", refuse_the_first)
+    monkeypatch.setattr(animate, "verify_pieces", refuse_the_first_pieces)
     searched = load_config(small_config, ["refine.search=graphcut", "refine.iterations=3"])
     for cache in (None, StageCache(tmp_path / "cache")):
         refused.clear()
@@ -345,9 +358,8 @@ def test_a_searched_surface_that_cannot_be_joined_to_b_is_refined_again_without_
         assert refused and m["stages"]["refine"]["without_search"] is True
         assert m["stats"]["refine"]["search"] is None  # the second refinement's record
         assert [n for n in m["notes"] if "search" in n] == [
-            "refine: the global search's surface was refused: the refined fracture surface cannot be joined to the "
-            "object's surface near [0.5, 0.5, 0.5]: two of its cracks cross each other on the surface there; "
-            "refined again with the flow alone (refine.search: none), from the coarse surface"]
+            f"refine: the global search's surface was refused: {why}; refined again with the flow alone "
+            "(refine.search: none), from the coarse surface"]
         assert yaml.safe_load((done / "config.yaml").read_text())["refine"]["search"] == "graphcut"
         plain = runner.run(load_config(small_config, ["refine.search=none", "refine.iterations=3"]),
                            tmp_path / f"plain_{cache is None}", progress=False)
@@ -356,6 +368,6 @@ def test_a_searched_surface_that_cannot_be_joined_to_b_is_refined_again_without_
         assert {k: v for k, v in m["files"].items() if k != "config.yaml"} == same
     # a surface the search did not make is refused as it is: one line, nothing written
     refused.clear()
-    with pytest.raises(JoinError, match="cross each other"):
+    with pytest.raises(JoinError if why == JOIN else ResultError, match="cross"):
         runner.run(load_config(small_config, ["refine.iterations=3"]), tmp_path / "flow", progress=False)
     assert not (tmp_path / "flow").exists()

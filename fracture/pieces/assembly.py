@@ -89,6 +89,10 @@ class Pieces:
         0, or the seed of the jitter ``V`` was moved by so that every piece
         could be resolved: seed ``k`` moves by up to ``JITTERS[k - 1]`` of B's
         diagonal (see the module doc).
+    dissent : (d, 3) float or None
+        Where the cut edges whose votes disagree with their patch's component
+        end (:func:`label_patches`): a rim of S that cuts B's patches
+        inconsistently (:mod:`fracture.pieces.holes`).
     """
 
     V: np.ndarray
@@ -100,6 +104,7 @@ class Pieces:
     resolved: list | None = None
     crossings: list | None = None
     jitter_seed: int = 0
+    dissent: np.ndarray | None = None
 
     def __post_init__(self):
         if self.derived is None:
@@ -136,7 +141,8 @@ class Pieces:
         return self.parts[c]
 
 
-def label_patches(im: Imprint, mesh: FractureSurface, n_components: int, fallback) -> tuple[np.ndarray, float]:
+def label_patches(im: Imprint, mesh: FractureSurface, n_components: int, fallback
+                  ) -> tuple[np.ndarray, float, np.ndarray]:
     """Component of each of B's triangles, by patch.
 
     The rule is the one that makes the pieces closed, so it reads only the
@@ -151,7 +157,9 @@ def label_patches(im: Imprint, mesh: FractureSurface, n_components: int, fallbac
     the component its cut edges vote for; patches with no cut edge take
     ``fallback(face_ids)``, the components of their triangles by another rule
     (majority). The second value is the smallest share of a patch's votes
-    that agree with its label (1 unless S's boundary curves on B cross).
+    that agree with its label (1 unless S's boundary curves on B cross), the
+    third the cut edges (rows of ``im.cut_edges``) whose vote disagrees with
+    the label of the patch on either side.
     """
     patch = flood_fill_patches(im.F, im.cut_edges)
     n_patch = int(patch.max()) + 1 if len(patch) else 0
@@ -166,17 +174,19 @@ def label_patches(im: Imprint, mesh: FractureSurface, n_components: int, fallbac
     counted = (forward | backward).astype(np.float64)  # a cut edge off its triangle has no say
     sides = mesh.sides[im.cut_faces]
     votes = np.zeros((n_patch, n_components))
-    np.add.at(votes, (patch[directed_edge_face(im.F, E)], np.where(forward, sides[:, 1], sides[:, 0])), counted)
-    np.add.at(votes, (patch[directed_edge_face(im.F, E[:, ::-1])], np.where(forward, sides[:, 0], sides[:, 1])),
-              counted)
+    along, against = patch[directed_edge_face(im.F, E)], patch[directed_edge_face(im.F, E[:, ::-1])]
+    vote_along, vote_against = np.where(forward, sides[:, 1], sides[:, 0]), np.where(forward, sides[:, 0], sides[:, 1])
+    np.add.at(votes, (along, vote_along), counted)
+    np.add.at(votes, (against, vote_against), counted)
     label = votes.argmax(axis=1)
+    dissent = np.flatnonzero((counted > 0) & ((label[along] != vote_along) | (label[against] != vote_against)))
     total = votes.sum(axis=1)
     voted = total > 0
     agreement = float((votes.max(axis=1)[voted] / total[voted]).min()) if voted.any() else 1.0
     for p in np.flatnonzero(~voted):
         faces = np.flatnonzero(patch == p)
         label[p] = np.bincount(fallback(faces), minlength=n_components).argmax()
-    return label[patch], agreement
+    return label[patch], agreement, dissent
 
 
 def build_pieces(im: Imprint, mesh: FractureSurface, n_components: int, fallback, resolve: bool = True) -> Pieces:
@@ -186,7 +196,7 @@ def build_pieces(im: Imprint, mesh: FractureSurface, n_components: int, fallback
     (see :func:`label_patches`). With ``resolve``, pieces that cross
     themselves are resolved (:func:`resolve_crossings`).
     """
-    component, agreement = label_patches(im, mesh, n_components, fallback)
+    component, agreement, dissent = label_patches(im, mesh, n_components, fallback)
     n_s = len(mesh.V)
     off = im.to_fracture < 0
     to_u = im.to_fracture.copy()
@@ -202,7 +212,8 @@ def build_pieces(im: Imprint, mesh: FractureSurface, n_components: int, fallback
         keep = ~_cancelling(F, len(V))
         faces.append(F[keep])
         exterior.append(ext[keep])
-    pieces = Pieces(V=V, n_fracture=n_s, faces=faces, exterior=exterior, patch_agreement=agreement)
+    pieces = Pieces(V=V, n_fracture=n_s, faces=faces, exterior=exterior, patch_agreement=agreement,
+                    dissent=im.V[np.unique(im.cut_edges[dissent])])
     return _resolve_pieces(pieces) if resolve else pieces
 
 

@@ -533,7 +533,7 @@ def imprint_boundary(BV: np.ndarray, BF: np.ndarray, mesh: FractureSurface, wher
         return _imprint(BV, BF, mesh, where)
     except InputError as refused:
         BV, BF = np.asarray(BV, np.float64), np.asarray(BF, np.int64)
-        W, G, joined = collapse_short_edges(BV, BF, SHORT_EDGE * _median_edge(BV, BF))
+        W, G, joined = collapse_short_edges(BV, BF, SHORT_EDGE * median_edge(BV, BF))
         if not joined:
             raise
         for f in fields(mesh):
@@ -549,7 +549,7 @@ def _imprint(BV: np.ndarray, BF: np.ndarray, mesh: FractureSurface, where: str) 
     BV = np.asarray(BV, np.float64)
     BF = np.asarray(BF, np.int64)
     exterior = Exterior(BV, BF)
-    h = _median_edge(BV, BF)
+    h = median_edge(BV, BF)
     clip_tangent_triangles(mesh, exterior)
     collapse_short_boundary(mesh, 10 * SNAP * h)
     subdivide_boundary(mesh, exterior, CHORD * h)
@@ -580,7 +580,7 @@ def _imprint(BV: np.ndarray, BF: np.ndarray, mesh: FractureSurface, where: str) 
                    merged_off_b=merged)
 
 
-def _median_edge(BV: np.ndarray, BF: np.ndarray) -> float:
+def median_edge(BV: np.ndarray, BF: np.ndarray) -> float:
     """B's median edge length (each triangle's first edge): the scale of the imprint's tolerances."""
     return float(np.median(np.linalg.norm(BV[BF[:, 1]] - BV[BF[:, 0]], axis=1)))
 

@@ -23,7 +23,7 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-from fracture.errors import JoinError, StageError
+from fracture.errors import JoinError, ResultError, StageError
 from fracture.io import layout
 from fracture.io.atomic import staged_directory
 from fracture.pipeline.config import dump_config
@@ -56,12 +56,13 @@ def _searched(ctx: RunContext) -> bool:
     return bool(search and search.get("replaced_coarse_surface")) and ctx.config.refine.search != "none"
 
 
-def _refine_without_search(ctx: RunContext, refine: Stage, refused: JoinError, manifest: dict,
+def _refine_without_search(ctx: RunContext, refine: Stage, refused: JoinError | ResultError, manifest: dict,
                            notes_from: dict[str, int], out: Path, writer: Executor) -> None:
-    """The searched surface cannot be joined to the object's surface (a later stage raised ``refused``):
-    refine again with the flow alone (``refine.search: none``), which starts from the coarse surface, whose
-    rims lie on B. The first refinement's notes go (its files are replaced, its cache entry stays: it is
-    what that config refines to), and a note says what happened and why."""
+    """No sound pieces can be made of the searched surface (a later stage raised ``refused``: it cannot be
+    joined to the object's surface, or a piece would not close or would cross itself): refine again with the
+    flow alone (``refine.search: none``), from the coarse surface. The first refinement's notes go (its
+    files are replaced, its cache entry stays: it is what that config refines to), and a note says what
+    happened and why."""
     first = manifest["stages"]["refine"]
     if isinstance(first.get("cache"), Future):  # its entry copies the files about to be replaced
         first["cache"] = _stored(first["cache"].result())
@@ -72,15 +73,16 @@ def _refine_without_search(ctx: RunContext, refine: Stage, refused: JoinError, m
         del ctx.keys[name]  # the cache keys of the refinement and of the stages after it are made again
     cfg = ctx.config
     ctx.config = cfg.model_copy(update={"refine": cfg.refine.model_copy(update={"search": "none"})})
-    ctx.say("refine: the global search's surface cannot be joined to the object's surface; refining again "
-            "with the flow alone")
+    ctx.say("refine: no sound pieces can be made of the global search's surface; refining again with the flow "
+            "alone")
     t0 = time.perf_counter()
     ctx.tell("stage", name="refine")
     info = _run_stage(ctx, refine, keep_products=True, out=out, writer=writer)
     manifest["stages"]["refine"] = {"seconds": round(first["seconds"] + time.perf_counter() - t0, 4), **info,
                                     "without_search": True}
-    ctx.notes.append(f"refine: the global search's surface was refused: {refused.problem}; refined again with the "
-                     "flow alone (refine.search: none), from the coarse surface")
+    why = refused.problem if isinstance(refused, JoinError) else str(refused).removeprefix("animate: ")
+    ctx.notes.append(f"refine: the global search's surface was refused: {why}; refined again with the flow alone "
+                     "(refine.search: none), from the coarse surface")
 
 
 def _sha256(path: Path) -> str:
@@ -228,7 +230,7 @@ def run(cfg: Config, out: str | Path, until: str | None = None, force: bool = Fa
             log.info("%s: started", stage.name)
             try:
                 info = _run_stage(ctx, stage, keep_products=stage is not stages[-1], out=Path(out), writer=writer)
-            except JoinError as refused:
+            except (JoinError, ResultError) as refused:
                 if not _searched(ctx):
                     raise
                 _refine_without_search(ctx, next(s for s in chosen if s.name == "refine"), refused, manifest,

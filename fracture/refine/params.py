@@ -37,8 +37,8 @@ class RefineParams(Section):
     search: Literal["graphcut", "none"] = choice(
         "none", "graphcut: before the flow, the band around the coarse surface is searched for the surface of least "
         "integral of psi by a minimum cut (fracture/refine/search.py), and the flow polishes it (polish_stages; its "
-        "effect per scene: benchmarks/README.md; a searched surface that cannot be joined to the object's surface "
-        "is refined again without the search, with a note); none: the flow alone, coarse to fine")
+        "effect per scene: benchmarks/README.md; a searched surface of which no sound pieces can be made is "
+        "refined again without the search, with a note); none: the flow alone, coarse to fine")
     band: float = number(14.0, 1.0, 200.0, "the search moves the surface at most this far from the coarse one (grid "
                          "cells; docs/design-measurements.md measures 10 to 16)")
     core: float = number(0.4, 0.0, 1.0, "the search leaves each piece the grid nodes farther from the coarse surface "

@@ -35,7 +35,10 @@ import igl
 import numpy as np
 
 from fracture.io import layout
-from fracture.pieces.imprint import imprint_boundary
+from fracture.mesh.exterior import Exterior
+from fracture.mesh.topology import closed_oriented
+from fracture.pieces.holes import close_holes, holes_at
+from fracture.pieces.imprint import imprint_boundary, median_edge
 from fracture.io.obj import ObjFrames
 from fracture.pieces.assembly import build_pieces
 from fracture.pieces.checks import EarlyGap, hausdorff_to_b, piece_checks, verify_pieces
@@ -49,9 +52,12 @@ def animate_stage(ctx: RunContext) -> None:
     cf = ctx.products.coarse
     BV, BF = ctx.products.exterior
     opts = ctx.config.animate
-    mesh = copy.deepcopy(ctx.products.refined)
     with ctx.bar(cf.n_frames + 3, "animate") as bar:
-        im = imprint_boundary(BV, BF, mesh, where="animate")
+        mesh, im, pieces, holes = _pieces(ctx, BV, BF)
+        if holes:
+            ctx.notes.append(f"animate: {holes} small {'holes' if holes > 1 else 'hole'} of the refined surface where it "
+                             "touched the object's surface (rims that cut it inconsistently) closed, so that the "
+                             "pieces close")
         if im.merged_off_b:
             ctx.notes.append(f"animate: {im.merged_off_b} boundary {'vertices' if im.merged_off_b > 1 else 'vertex'} of the "
                              "refined surface that collisions had kept off the object's surface merged into a "
@@ -61,13 +67,6 @@ def animate_stage(ctx: RunContext) -> None:
                              f"shorter than a tenth of its typical edge (slivers and bumps of the import's contour) were "
                              f"collapsed ({im.joined_b} vertices joined), and then they could")
         bar.update()
-
-        def fallback(faces):  # patches without a cut: the coarse exterior's label
-            centroids = im.V[im.F[faces]].mean(axis=1)
-            _, f, _ = igl.point_mesh_squared_distance(centroids, cf.exterior_V, cf.exterior_F)
-            return cf.exterior_component[f]
-
-        pieces = build_pieces(im, mesh, cf.n_components, fallback)
         transfer = build_transfer(cf, pieces, mesh.tree_matrix())
         bar.update()
         checks = piece_checks(pieces, BV, BF, opts.check_samples, np.random.default_rng(ctx.config.seed))
@@ -113,6 +112,34 @@ def animate_stage(ctx: RunContext) -> None:
                       frames_written=transfer.n_frames if opts.obj_frames else 0)
     ctx.stats["animate"] = {**checks, "boundary_vertices_merged_off_b": im.merged_off_b,
                             "exterior_vertices_joined": im.joined_b}
+
+
+def _pieces(ctx: RunContext, BV: np.ndarray, BF: np.ndarray):
+    """The refined surface (a copy) imprinted on B, and the pieces: if a piece is not closed because a small
+    hole of the surface cuts B inconsistently (:mod:`fracture.pieces.holes`), made again with those holes
+    closed. Returns the surface, the imprint, the pieces and how many holes were closed."""
+    cf = ctx.products.coarse
+
+    def fallback(im):
+        def label(faces):  # patches without a cut: the coarse exterior's label
+            centroids = im.V[im.F[faces]].mean(axis=1)
+            _, f, _ = igl.point_mesh_squared_distance(centroids, cf.exterior_V, cf.exterior_F)
+            return cf.exterior_component[f]
+        return label
+
+    mesh = copy.deepcopy(ctx.products.refined)
+    im = imprint_boundary(BV, BF, mesh, where="animate")
+    pieces = build_pieces(im, mesh, cf.n_components, fallback(im))
+    if all(closed_oriented(F) for F in pieces.faces) or not len(pieces.dissent):
+        return mesh, im, pieces, 0
+    B = Exterior(BV, BF)
+    h = median_edge(B.V, B.F)
+    again = copy.deepcopy(ctx.products.refined)
+    holes = close_holes(again, holes_at(again, pieces.dissent, h), B, h)
+    if not holes:
+        return mesh, im, pieces, 0
+    im = imprint_boundary(BV, BF, again, where="animate")
+    return again, im, build_pieces(im, again, cf.n_components, fallback(im)), holes
 
 
 def _save_transfer(ctx: RunContext, tr: Transfer) -> None:
