@@ -175,6 +175,7 @@ def test_a_random_suzanne_runs_where_a_small_hole_of_a_crack_touches_b(corpus, t
     _assert_sound(manifest["stats"]["animate"])
     assert manifest["stats"]["animate"]["overlap_share"] == 0.0
     assert any(n.startswith("animate: 1 small hole of the refined surface") for n in manifest["notes"])
+    assert manifest["stats"]["animate"]["small_holes_closed"] == 1
 
 
 def _assert_sound(animate: dict) -> None:

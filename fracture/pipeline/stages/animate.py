@@ -111,7 +111,7 @@ def animate_stage(ctx: RunContext) -> None:
     ctx.counts.update(pieces=pieces.n_pieces, piece_triangles=int(sum(len(f) for f in pieces.faces)),
                       frames_written=transfer.n_frames if opts.obj_frames else 0)
     ctx.stats["animate"] = {**checks, "boundary_vertices_merged_off_b": im.merged_off_b,
-                            "exterior_vertices_joined": im.joined_b}
+                            "exterior_vertices_joined": im.joined_b, "small_holes_closed": holes}
 
 
 def _pieces(ctx: RunContext, BV: np.ndarray, BF: np.ndarray):
