@@ -67,3 +67,18 @@ def test_a_hole_between_other_pieces_on_each_side_is_left_open():
     on_rim = np.flatnonzero(((mesh.F == a) & (np.roll(mesh.F, -1, axis=1) == b)).any(axis=1))
     mesh.sides[on_rim] = [0, 2]  # the triangle on one rim edge separates another pair of pieces
     assert close_holes(mesh, loops, B, 0.25) == 0 and len(boundary_loops(mesh.F, len(mesh.V))) == 2
+
+
+def test_the_whole_rim_of_a_small_sheet_is_no_hole():
+    """A small sheet of its own (two triangles, 0.2 around) near the disagreeing cuts keeps its rim: capping
+    it would lay a second layer on it."""
+    mesh, centre, _ = _sheet_with_a_hole()
+    n = len(mesh.V)
+    square = np.array([[0.2, 0.2, 0.5], [0.25, 0.2, 0.5], [0.25, 0.25, 0.5], [0.2, 0.25, 0.5]])
+    mesh.V = np.concatenate([mesh.V, square])
+    mesh.label = np.arange(len(mesh.V))
+    mesh.F = np.concatenate([mesh.F, [[n, n + 1, n + 2], [n, n + 2, n + 3]]])
+    mesh.sides = np.concatenate([mesh.sides, [[2, 5], [2, 5]]])
+    assert len(boundary_loops(mesh.F, len(mesh.V))) == 3
+    assert holes_at(mesh, square, 0.25) == []
+    assert [len(loop) for loop in holes_at(mesh, np.r_[square, centre[None]], 0.25)] == [6]

@@ -366,6 +366,18 @@ def test_a_searched_surface_that_makes_no_sound_pieces_is_refined_again_without_
         pm = json.loads((plain / "manifest.json").read_text())
         same = {k: v for k, v in pm["files"].items() if k != "config.yaml"}
         assert {k: v for k, v in m["files"].items() if k != "config.yaml"} == same
+        assert m["counts"] == pm["counts"]
+        if cache is None:
+            continue
+        # the cache keeps what each config refines to: the searched surface under the search's key, the flow
+        # alone's under its own, with its files and counts; runs that reuse them are the same runs
+        for k, config in enumerate([searched, load_config(small_config, ["refine.search=none", "refine.iterations=3"])]):
+            refused.clear()
+            again = runner.run(config, tmp_path / f"again_{k}", progress=False, cache=cache)
+            am = json.loads((again / "manifest.json").read_text())
+            assert am["stages"]["refine"]["cache"] == "reused"
+            assert {k: v for k, v in am["files"].items() if k != "config.yaml"} == same
+            assert am["counts"] == pm["counts"] and bool(refused) == (k == 0)
     # a surface the search did not make is refused as it is: one line, nothing written
     refused.clear()
     with pytest.raises(JoinError if why == JOIN else ResultError, match="cross"):

@@ -19,6 +19,8 @@ and only these holes, with their sides, are closed here.
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
 
 from fracture.mesh.edges import edge_table, row_edges
 from fracture.mesh.exterior import Exterior
@@ -64,11 +66,21 @@ def boundary_loops(F: np.ndarray, n: int) -> list[np.ndarray]:
 
 def holes_at(mesh: FractureSurface, points: np.ndarray, h: float) -> list[np.ndarray]:
     """The simple boundary loops of ``mesh`` at most :data:`MOST_AROUND` ``h`` around that come within
-    ``h / 2`` of one of ``points`` (where disagreeing cut edges end)."""
+    ``h / 2`` of one of ``points`` (where disagreeing cut edges end) and are not all of the boundary of
+    their part of the surface (the whole rim of a small sheet is no hole)."""
     if not len(points):
         return []
+    n = len(mesh.V)
+    edges = np.concatenate([mesh.F[:, [0, 1]], mesh.F[:, [1, 2]]])
+    part = connected_components(sp.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n)),
+                                directed=False)[1]
+    loops = boundary_loops(mesh.F, n)
+    rim_of_part = np.bincount(part[np.concatenate([loop[:, 0] for loop in loops])], minlength=part.max() + 1) \
+        if loops else np.zeros(part.max() + 1, np.int64)
     found = []
-    for loop in boundary_loops(mesh.F, len(mesh.V)):
+    for loop in loops:
+        if rim_of_part[part[loop[0, 0]]] == len(loop):
+            continue  # the only boundary of its part: a small sheet's rim
         P = mesh.V[loop[:, 0]]
         around = np.linalg.norm(mesh.V[loop[:, 1]] - P, axis=1).sum()
         if around > MOST_AROUND * h:
@@ -115,4 +127,6 @@ def _inside(B: Exterior, P: np.ndarray, depth: float) -> np.ndarray:
     along B's normal there by ``depth``."""
     d2, tri, Q = B.closest(P)
     deep = B.inside(P) & (d2 >= depth * depth)
-    return np.where(deep[:, None], P, Q - depth * B.normals[tri])
+    moved = np.where(deep[:, None], P, Q - depth * B.normals[tri])
+    # beside a sharp edge of B one face's normal can lead outside: such a point stays where it was
+    return np.where(B.inside(moved)[:, None], moved, P)

@@ -17,6 +17,7 @@ import logging
 import platform
 import time
 from concurrent.futures import Executor, Future, ThreadPoolExecutor
+from dataclasses import dataclass
 from datetime import datetime, timezone
 from functools import lru_cache
 from importlib import metadata
@@ -56,18 +57,37 @@ def _searched(ctx: RunContext) -> bool:
     return bool(search and search.get("replaced_coarse_surface")) and ctx.config.refine.search != "none"
 
 
+@dataclass(frozen=True)
+class _Before:
+    """What a run's context held when a stage began: its notes and files (how many), counts and statistics."""
+
+    notes: int
+    files: int
+    counts: dict
+    stats: dict
+
+    @classmethod
+    def of(cls, ctx: RunContext) -> "_Before":
+        return cls(len(ctx.notes), len(ctx.files), dict(ctx.counts), dict(ctx.stats))
+
+
 def _refine_without_search(ctx: RunContext, refine: Stage, refused: JoinError | ResultError, manifest: dict,
-                           notes_from: dict[str, int], out: Path, writer: Executor) -> None:
+                           before: _Before, out: Path, writer: Executor) -> None:
     """No sound pieces can be made of the searched surface (a later stage raised ``refused``: it cannot be
     joined to the object's surface, or a piece would not close or would cross itself): refine again with the
-    flow alone (``refine.search: none``), from the coarse surface. The first refinement's notes go (its
-    files are replaced, its cache entry stays: it is what that config refines to), and a note says what
-    happened and why."""
+    flow alone (``refine.search: none``), from the coarse surface. The context goes back to what it held
+    before the first refinement (``before``: its notes, files, counts and statistics, and the cache keys
+    from it on), so that the second refinement's cache entry holds its own files and counts; the first
+    one's entry stays (it is what that config refines to). A note says what happened and why."""
     first = manifest["stages"]["refine"]
     if isinstance(first.get("cache"), Future):  # its entry copies the files about to be replaced
         first["cache"] = _stored(first["cache"].result())
     ctx.wait_for_files()
-    del ctx.notes[notes_from["refine"]:]
+    for rel in ctx.files[before.files:]:
+        (ctx.dir / rel).unlink(missing_ok=True)
+    del ctx.files[before.files:]
+    del ctx.notes[before.notes:]
+    ctx.counts, ctx.stats = dict(before.counts), dict(before.stats)
     names = list(ctx.keys)
     for name in names[names.index("refine"):] if "refine" in names else ():
         del ctx.keys[name]  # the cache keys of the refinement and of the stages after it are made again
@@ -75,14 +95,14 @@ def _refine_without_search(ctx: RunContext, refine: Stage, refused: JoinError | 
     ctx.config = cfg.model_copy(update={"refine": cfg.refine.model_copy(update={"search": "none"})})
     ctx.say("refine: no sound pieces can be made of the global search's surface; refining again with the flow "
             "alone")
+    why = refused.problem if isinstance(refused, JoinError) else str(refused).removeprefix("animate: ")
+    ctx.notes.append(f"refine: the global search's surface was refused: {why}; refined again with the flow alone "
+                     "(refine.search: none), from the coarse surface")
     t0 = time.perf_counter()
     ctx.tell("stage", name="refine")
     info = _run_stage(ctx, refine, keep_products=True, out=out, writer=writer)
     manifest["stages"]["refine"] = {"seconds": round(first["seconds"] + time.perf_counter() - t0, 4), **info,
                                     "without_search": True}
-    why = refused.problem if isinstance(refused, JoinError) else str(refused).removeprefix("animate: ")
-    ctx.notes.append(f"refine: the global search's surface was refused: {why}; refined again with the flow alone "
-                     "(refine.search: none), from the coarse surface")
 
 
 def _sha256(path: Path) -> str:
@@ -222,10 +242,10 @@ def run(cfg: Config, out: str | Path, until: str | None = None, force: bool = Fa
     with staged_directory(out, force) as staging, ThreadPoolExecutor(1, "fracref-writer") as writer:
         ctx = RunContext(config=cfg, dir=staging, progress=progress, listener=listener, cache=cache, writer=writer)
         ctx.path(layout.CONFIG).write_text(dump_config(cfg), encoding="utf-8")
-        notes_from: dict[str, int] = {}  # where each stage's notes begin
+        before: dict[str, _Before] = {}  # what the context held when each stage began
         for stage in chosen:
             t0 = time.perf_counter()
-            notes_from[stage.name] = len(ctx.notes)
+            before[stage.name] = _Before.of(ctx)
             ctx.tell("stage", name=stage.name)
             log.info("%s: started", stage.name)
             try:
@@ -233,10 +253,11 @@ def run(cfg: Config, out: str | Path, until: str | None = None, force: bool = Fa
             except (JoinError, ResultError) as refused:
                 if not _searched(ctx):
                     raise
+                failed = time.perf_counter() - t0
                 _refine_without_search(ctx, next(s for s in chosen if s.name == "refine"), refused, manifest,
-                                       notes_from, Path(out), writer)
-                t0 = time.perf_counter()
-                notes_from[stage.name] = len(ctx.notes)
+                                       before["refine"], Path(out), writer)
+                t0 = time.perf_counter() - failed  # the stage's seconds: both tries
+                before[stage.name] = _Before.of(ctx)
                 ctx.tell("stage", name=stage.name)
                 info = _run_stage(ctx, stage, keep_products=stage is not stages[-1], out=Path(out), writer=writer)
             manifest["stages"][stage.name] = {"seconds": round(time.perf_counter() - t0, 4), **info}

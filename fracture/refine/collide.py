@@ -534,14 +534,15 @@ def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, eta: float, t
     # a later round (or, with ``moving``, the first) tests only the triangle pairs with a vertex in ``on``
     every = moving is None
     on = np.zeros(n, bool) if every else _marked(n, moving)
-    active = None if every else np.flatnonzero(_touching(F, on))
-    if active is not None and _FEW_ACTIVE * len(active) < len(F):
+    # with ``moving``, no round tests a pair without a moving vertex: two triangles at rest cannot collide
+    if every:
+        overlapping = hashgrid.pairs(grid)
+    elif _FEW_ACTIVE * (active := np.flatnonzero(_touching(F, on))).size < len(F):
         # a few vertices move (the boundary settling onto B): the pairs of the triangles on them alone,
-        # a look-up each (two triangles at rest cannot collide, so neither the first round nor a later
-        # one tests a pair without a moving vertex)
+        # a look-up each
         overlapping = hashgrid.pairs_with(grid, lo, hi, active)
     else:
-        overlapping = hashgrid.pairs(grid)
+        overlapping = _pairs_touching(F, hashgrid.pairs(grid), on)
     rep = represented_features(F, n, np.ascontiguousarray(table.eid, np.int64))
     B = path_boxes(X0, X1)
     todo = overlapping
@@ -549,8 +550,6 @@ def stop_collisions(X0: np.ndarray, X1: np.ndarray, F: np.ndarray, eta: float, t
     sure = unsure
     if every or 4 * len(moving) > n:  # the first round tests the full step of many vertices: certify the fans
         sure = certified_fans(X0, X1, F, closed if closed is not None else closed_vertices(F, n, table))
-    if not every:
-        todo = _pairs_touching(F, overlapping, on)
     first = None
     for _ in range(max_rounds):
         stop = np.zeros(n, bool)

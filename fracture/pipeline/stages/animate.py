@@ -34,6 +34,7 @@ import copy
 import igl
 import numpy as np
 
+from fracture.errors import JoinError
 from fracture.io import layout
 from fracture.mesh.exterior import Exterior
 from fracture.mesh.topology import closed_oriented
@@ -138,8 +139,11 @@ def _pieces(ctx: RunContext, BV: np.ndarray, BF: np.ndarray):
     holes = close_holes(again, holes_at(again, pieces.dissent, h), B, h)
     if not holes:
         return mesh, im, pieces, 0
-    im = imprint_boundary(BV, BF, again, where="animate")
-    return again, im, build_pieces(im, again, cf.n_components, fallback(im)), holes
+    try:
+        closed = imprint_boundary(BV, BF, again, where="animate")
+    except JoinError:  # the first refusal stands: its pieces do not close
+        return mesh, im, pieces, 0
+    return again, closed, build_pieces(closed, again, cf.n_components, fallback(closed)), holes
 
 
 def _save_transfer(ctx: RunContext, tr: Transfer) -> None:
