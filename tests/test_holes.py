@@ -8,8 +8,9 @@ import numpy as np
 from fracture.mesh.exterior import Exterior
 from fracture.mesh.fracture_surface import FractureSurface
 from fracture.mesh.primitives import box, sheet
-from fracture.mesh.topology import unique_edges
-from fracture.pieces.holes import INSET, boundary_loops, close_holes, holes_at
+from fracture.mesh.edges import row_edges
+from fracture.mesh.topology import simple_boundary_loops as boundary_loops, unique_edges
+from fracture.pieces.holes import INSET, close_holes, holes_at
 
 
 def _sheet_with_a_hole(sides=(2, 5)):
@@ -38,7 +39,7 @@ def test_a_small_hole_is_closed_inside_b_with_its_sides():
     h = 0.25
     loops = holes_at(mesh, centre[None], h)
     assert len(loops) == 1 and len(loops[0]) == 6
-    ring = loops[0][:, 0].copy()
+    ring = row_edges(mesh.F, loops[0])[:, 0]
     n, m = len(mesh.V), len(mesh.F)
     assert close_holes(mesh, loops, B, h) == 1
     assert len(mesh.V) == n + 1 and len(mesh.F) == m + 6
@@ -63,7 +64,7 @@ def test_a_small_hole_is_closed_inside_b_with_its_sides():
 def test_a_hole_between_other_pieces_on_each_side_is_left_open():
     mesh, centre, B = _sheet_with_a_hole(sides=(0, 1))
     loops = holes_at(mesh, centre[None], 0.25)
-    a, b = loops[0][0]
+    a, b = row_edges(mesh.F, loops[0])[0]
     on_rim = np.flatnonzero(((mesh.F == a) & (np.roll(mesh.F, -1, axis=1) == b)).any(axis=1))
     mesh.sides[on_rim] = [0, 2]  # the triangle on one rim edge separates another pair of pieces
     assert close_holes(mesh, loops, B, 0.25) == 0 and len(boundary_loops(mesh.F, len(mesh.V))) == 2

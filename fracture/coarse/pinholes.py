@@ -25,12 +25,11 @@ from __future__ import annotations
 
 import igl
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse import csgraph
 
 from fracture.coarse.surface import flood_fill_patches
 from fracture.mesh.intersect import self_intersections
-from fracture.mesh.topology import closed_oriented, unique_edges
+from fracture.mesh.edges import row_edges
+from fracture.mesh.topology import closed_oriented, simple_boundary_loops, unique_edges
 
 # A closed boundary curve of a sheet smaller than this (grid cells, its box's diagonal) is a pinhole.
 PINHOLE = 0.1
@@ -39,20 +38,7 @@ PINHOLE = 0.1
 def _loops(FF: np.ndarray, n: int) -> list[np.ndarray]:
     """Vertex sets of the closed boundary curves of the sheets (edges of one fracture triangle) that are
     simple cycles."""
-    e, c = unique_edges(FF)
-    b = e[c == 1]
-    if not len(b):
-        return []
-    A = sp.coo_matrix((np.ones(len(b)), (b[:, 0], b[:, 1])), shape=(n, n))
-    _, label = csgraph.connected_components(A, directed=False)
-    degree = np.bincount(b.ravel(), minlength=n)
-    used = np.unique(b)
-    out = []
-    for comp in np.unique(label[used]):
-        vs = used[label[used] == comp]
-        if (degree[vs] == 2).all():
-            out.append(vs)
-    return out
+    return [np.unique(row_edges(FF, rows)) for rows in simple_boundary_loops(FF, n)]
 
 
 def _pieces_close(FF, sides, BF, bpiece, pieces) -> bool:

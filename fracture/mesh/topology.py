@@ -89,6 +89,26 @@ def boundary_edges(F: np.ndarray) -> np.ndarray:
     return np.where((directed_edge_face(F, E) >= 0)[:, None], E, E[:, ::-1])
 
 
+def simple_boundary_loops(F: np.ndarray, n: int) -> list[np.ndarray]:
+    """The boundary curves of ``F`` (edges of one triangle) that are simple closed loops (every vertex on
+    two of their edges), each as its directed triangle edges (rows ``3 f + k``: ``F[f, k] -> F[f, k + 1]``),
+    in the order of the curves' connected components. Non-manifold sheets are welcome: a curve through a
+    junction vertex with more boundary edges is left out."""
+    rows = edge_table(F, n).boundary_rows
+    if not len(rows):
+        return []
+    E = row_edges(F, rows)
+    _, label = connected_components(coo_matrix((np.ones(len(E)), (E[:, 0], E[:, 1])), shape=(n, n)), directed=False)
+    degree = np.bincount(E.ravel(), minlength=n)
+    comp = label[E[:, 0]]
+    # a component of degree-2 vertices only: as many edges as vertices
+    bad = np.zeros(label.max() + 1, bool)
+    bad[label[E.ravel()[degree[E.ravel()] != 2]]] = True
+    order = np.argsort(comp, kind="stable")
+    starts = np.r_[0, np.flatnonzero(np.diff(comp[order])) + 1, len(order)]
+    return [rows[order[a:b]] for a, b in zip(starts[:-1], starts[1:]) if not bad[comp[order[a]]]]
+
+
 def scatter_add(index: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
     """Sum rows of ``values (k, d)`` into ``n`` bins (one bincount per column: much faster than ``np.add.at``)."""
     return np.stack([np.bincount(index, values[:, c], minlength=n) for c in range(values.shape[1])], 1)
