@@ -198,6 +198,37 @@ def test_bad_sequences_are_rejected_with_their_place(tmp_path, case, frames, edi
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
 
 
+def _pieces_reversed(lines):
+    """The frame's objects written in the reverse order, each with its vertices (indices renumbered)."""
+    starts = [i for i, l in enumerate(lines) if l.startswith("o ")] + [len(lines)]
+    blocks = [lines[a:b] for a, b in zip(starts, starts[1:])]
+    out, base, first = [], 0, 1
+    firsts = []
+    for b in blocks:
+        firsts.append(first)
+        first += sum(l.startswith("v ") for l in b)
+    for b, f0 in reversed(list(zip(blocks, firsts))):
+        for l in b:
+            out.append("f " + " ".join(str(int(i) - f0 + 1 + base) for i in l.split()[1:]) if l.startswith("f ") else l)
+        base += sum(l.startswith("v ") for l in b)
+    return out
+
+
+def test_pieces_written_in_another_order_are_matched_by_name(tmp_path, imported):
+    d = _copy_sample(tmp_path)
+    for t in (2, 17, 40):
+        _edit(d / f"frame_{t:04d}.obj", _pieces_reversed)
+    frames = read_sequence(d)
+    original = read_sequence(SAMPLE)
+    for t in (1, 16, 39):
+        assert frames[t].names == original[t].names
+        assert np.array_equal(frames[t].V, original[t].V)
+        assert all(np.array_equal(a, b) for pa, pb in zip(frames[t].polygons, original[t].polygons)
+                   for a, b in zip(pa, pb))
+    cf, _ = load_coarse_sequence(d)
+    assert np.allclose(cf.animation.deform(5, 39, cf.V[:4]), imported[0].animation.deform(5, 39, cf.V[:4]))
+
+
 def test_a_narrow_slit_between_pieces_is_filled_and_noted(tmp_path):
     d = _copy_sample(tmp_path)
     # move one corner piece away from its neighbours along the cube's diagonal

@@ -64,7 +64,32 @@ def _args():
                     help="instead of the named cases, N random ones (object, cells, seed and pose drawn "
                          "with --random-seed): inputs the corpus has not seen")
     ap.add_argument("--random-seed", type=int, default=0)
-    return ap.parse_args(argv)
+    # settings artists change from the ones above (every case made with them)
+    ap.add_argument("--margin", type=float, default=0.0,
+                    help="Cell Fracture's margin: a gap of this size (before --scale) between the pieces")
+    ap.add_argument("--noise", type=float, default=0.0, help="Cell Fracture's source noise (0-1)")
+    ap.add_argument("--recursion", type=int, default=0,
+                    help="Cell Fracture's recursion: fracture every piece again this many times (3 cells each)")
+    ap.add_argument("--scale", type=float, default=1.0,
+                    help="the whole scene this many times larger (other units: 100 for centimetres)")
+    ap.add_argument("--stretch", default="1,1,1", help="the object scaled by x,y,z before it is fractured "
+                    "(a plank: 3,0.4,0.25)")
+    ap.add_argument("--offset", default="0,0,0", help="the whole scene moved by x,y,z (after --scale)")
+    args = ap.parse_args(argv)
+    args.stretch, args.offset = _vector(ap, "--stretch", args.stretch), _vector(ap, "--offset", args.offset)
+    if args.scale <= 0.0 or min(args.stretch) <= 0.0 or args.margin < 0.0:
+        ap.error("--scale and --stretch must be positive, --margin not negative")
+    return args
+
+
+def _vector(ap, flag: str, text: str) -> tuple:
+    try:
+        v = tuple(float(x) for x in text.split(","))
+    except ValueError:
+        v = ()
+    if len(v) != 3:
+        ap.error(f"{flag}: expected three numbers x,y,z, got {text!r}")
+    return v
 
 
 def random_cases(n: int, seed: int) -> dict:
@@ -122,20 +147,31 @@ def _seed_points(obj, cells: int, seed: int):
     return seeds
 
 
-def build(spec: tuple, frames: int):
-    """The object of ``spec`` (an entry of :data:`CASES`) fractured, its pieces posed as rigid bodies."""
+def build(spec: tuple, frames: int, settings=None):
+    """The object of ``spec`` (an entry of :data:`CASES`) fractured, its pieces posed as rigid bodies;
+    ``settings`` (the command line's) the margin, noise, recursion, scale, stretch and offset."""
     kind, cells, seed, rot, height = spec
+    margin, noise, recursion = (0.0, 0.0, 0) if settings is None else (settings.margin, settings.noise,
+                                                                       settings.recursion)
+    scale, stretch, offset = (1.0, (1.0, 1.0, 1.0), (0.0, 0.0, 0.0)) if settings is None else (
+        settings.scale, settings.stretch, settings.offset)
     _clear()
     scene = bpy.context.scene
     scene.frame_start, scene.frame_end = 1, frames
     obj = _primitive(kind)
     obj.name = "source"
+    if stretch != (1.0, 1.0, 1.0):
+        obj.scale = stretch
+        bpy.ops.object.transform_apply(location=False, rotation=False, scale=True)
     seeds = _seed_points(obj, cells, seed)
     bpy.ops.object.select_all(action="DESELECT")
     obj.select_set(True)
     bpy.context.view_layer.objects.active = obj
-    bpy.ops.object.add_fracture_cell_objects(source={"VERT_CHILD"}, source_limit=cells, source_noise=0.0,
-                                             margin=0.0, use_recenter=True, use_remove_original=True,
+    # the recursion's pieces have no child points: they are cut at points of their own vertices
+    source = {"VERT_CHILD", "VERT_OWN"} if recursion else {"VERT_CHILD"}
+    bpy.ops.object.add_fracture_cell_objects(source=source, source_limit=cells, source_noise=noise,
+                                             margin=margin, recursion=recursion, recursion_source_limit=3,
+                                             use_recenter=True, use_remove_original=True,
                                              collection_name="", use_smooth_faces=False)
     bpy.data.objects.remove(seeds)
     if obj.name in scene.objects:  # the add-on leaves the original behind when its seeds are a child
@@ -143,9 +179,10 @@ def build(spec: tuple, frames: int):
     pieces = sorted((o for o in scene.objects if o.type == "MESH"), key=lambda o: o.name)
     # pose the whole object: rotate about the origin, lift
     R = Euler([math.radians(a) for a in rot]).to_matrix().to_4x4()
-    T = Matrix.Translation((0.0, 0.0, height))
+    T = Matrix.Translation(Vector(offset) + Vector((0.0, 0.0, height * scale)))
+    S = Matrix.Scale(scale, 4)
     for o in pieces:
-        o.matrix_world = T @ R @ o.matrix_world
+        o.matrix_world = T @ S @ R @ o.matrix_world
     bpy.ops.object.select_all(action="DESELECT")
     for o in pieces:
         o.select_set(True)
@@ -165,11 +202,13 @@ def build(spec: tuple, frames: int):
     return pieces
 
 
-def build_with_ground(spec: tuple, frames: int):
-    """The fractured object's pieces as active rigid bodies over a passive ground plane at z = 0."""
-    pieces = build(spec, frames)
+def build_with_ground(spec: tuple, frames: int, settings=None):
+    """The fractured object's pieces as active rigid bodies over a passive ground plane at z = 0 (moved
+    and scaled with the scene by ``settings``)."""
+    pieces = build(spec, frames, settings)
     scene = bpy.context.scene
-    bpy.ops.mesh.primitive_plane_add(size=40.0, location=(0.0, 0.0, 0.0))
+    scale, offset = (1.0, (0.0, 0.0, 0.0)) if settings is None else (settings.scale, settings.offset)
+    bpy.ops.mesh.primitive_plane_add(size=40.0 * scale, location=offset)
     ground = bpy.context.active_object
     ground.name = "ground"
     bpy.ops.rigidbody.object_add(type="PASSIVE")
@@ -240,7 +279,7 @@ def main():
     cases = random_cases(args.random, args.random_seed) if args.random else CASES
     names = sorted(cases) if args.random else args.case or sorted(CASES)
     for case in names:
-        pieces, ground = build_with_ground(cases[case], args.frames)
+        pieces, ground = build_with_ground(cases[case], args.frames, args)
         out = args.out / case
         scene = bpy.context.scene
         for sub in formats:
@@ -269,6 +308,8 @@ def main():
         (out / "case.json").write_text(json.dumps({
             "case": case, "object": kind, "cells": cells, "pieces": len(pieces), "seed": seed,
             "rotation_degrees": rot, "height": height, "frames": args.frames,
+            "margin": args.margin, "noise": args.noise, "recursion": args.recursion, "scale": args.scale,
+            "stretch": args.stretch, "offset": args.offset,
             "blender": bpy.app.version_string,
             "formats": {k: v for k, v in {
                 "sample": "Z up, world coordinates, n-gons", "blender_obj": "Blender's OBJ exporter defaults: Y up, "

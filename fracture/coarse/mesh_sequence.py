@@ -249,8 +249,8 @@ def read_sequence(directory: str | Path, pattern: str = "*.obj") -> list[MeshFra
             raise InputError(f"{where}: piece {missing[0]!r} of the rest pose ({rest.path.name}) is missing")
         if extra:
             raise InputError(f"{where}: piece {extra[0]!r} is not in the rest pose ({rest.path.name})")
-        if frame.names != rest.names:
-            raise InputError(f"{where}: pieces are in a different order than in the rest pose ({rest.path.name})")
+        if frame.names != rest.names:  # the same pieces, written in another order: matched by name
+            frame = _in_rest_order(frame, rest, where)
         if len(frame.V) != len(rest.V):
             raise InputError(f"{where}: {len(frame.V)} vertices, but the rest pose ({rest.path.name}) has {len(rest.V)}")
         for p, name in enumerate(rest.names):
@@ -260,6 +260,31 @@ def read_sequence(directory: str | Path, pattern: str = "*.obj") -> list[MeshFra
                 raise InputError(f"{where}: piece {name!r} has different faces than in the rest pose ({rest.path.name})")
         frames.append(frame)
     return frames
+
+
+def _in_rest_order(frame: MeshFrame, rest: MeshFrame, where: str) -> MeshFrame:
+    """``frame``, whose pieces are those of ``rest`` in another order, with its pieces and vertices put in
+    ``rest``'s order: each piece's vertices (ascending) take the places of the rest pose's vertices of the
+    piece of that name (ascending), the vertices no piece uses the places left, in order."""
+    where_in = {name: p for p, name in enumerate(frame.names)}
+    if len(frame.V) != len(rest.V):
+        raise InputError(f"{where}: {len(frame.V)} vertices, but the rest pose ({rest.path.name}) has {len(rest.V)}")
+    to_rest = np.full(len(frame.V), -1, np.int64)
+    polygons = []
+    for p, name in enumerate(rest.names):
+        q = where_in[name]
+        mine, theirs = frame.piece_vertices(q), rest.piece_vertices(p)
+        if len(mine) != len(theirs) or (to_rest[mine] >= 0).any():
+            raise InputError(f"{where}: piece {name!r} has {len(mine)} vertices, but {len(theirs)} in the rest pose "
+                             f"({rest.path.name})" if len(mine) != len(theirs) else
+                             f"{where}: piece {name!r} shares vertices with another piece (expected its own)")
+        to_rest[mine] = theirs
+        polygons.append([to_rest[f] for f in frame.polygons[q]])
+    free = np.setdiff1d(np.arange(len(rest.V)), to_rest[to_rest >= 0])
+    to_rest[to_rest < 0] = free
+    V = np.empty_like(frame.V)
+    V[to_rest] = frame.V
+    return MeshFrame(frame.path, list(rest.names), V, polygons, frame.face_piece)
 
 
 def _compact(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
