@@ -145,6 +145,8 @@ def test_set_overrides(tmp_path, small_config):
     for bad, words in [("psi.stress_weight", "expected key.path=value"),
                        ("psi.stress_weight=-2", "--set psi.stress_weight=-2: psi.stress_weight: got -2"),
                        ("psi.typo=1", "psi.typo: unknown key"),
+                       ("typo.key=1", "--set typo.key=1: typo: unknown key"),
+                       ("psi.typo.key=1", "--set psi.typo.key=1: psi.typo: unknown key"),
                        ("strength.layers[3].weight=1", "no such list item"),
                        ("a..b=1", "expected key.path=value")]:
         with pytest.raises(ConfigError) as err:

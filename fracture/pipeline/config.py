@@ -161,6 +161,7 @@ def _apply_override(merged: _Merged, text: str) -> None:
         else:
             if isinstance(tok, str) and tok not in node:
                 node[tok] = {}
+                merged.origins[path] = source  # a key the override made: an error about it names the override
             node = node[tok]
 
 
