@@ -263,7 +263,7 @@ def main() -> None:
         from viewer.media import frame_counts
 
         # the animation at its own frame rate in a 5 fps video, the last frame held 0.6 s (3 frames)
-        result["frames"] = sum(frame_counts(v.run.n_frames, 1 / v.run.config["animate"]["fps"], 5)) + 3
+        result["frames"] = sum(frame_counts(v.run.n_frames, v.run.seconds_per_frame, 5)) + 3
     elif scenario == "navigate":
         result.update(navigate(app, v, out))
     elif scenario == "views":

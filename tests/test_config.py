@@ -157,6 +157,10 @@ def test_set_overrides(tmp_path, small_config):
 def test_parse_override_tokens():
     assert parse_override("strength.layers[1].axis=z") == (["strength", "layers", 1, "axis"], "z")
     assert parse_override("grid.resolution=[1, 2, 3]")[1] == [1, 2, 3]
+    # words that are not YAML (a star starts an alias) are taken as they are; a broken list is refused
+    assert parse_override("input.glob=*.ply") == (["input", "glob"], "*.ply")
+    with pytest.raises(ConfigError, match="cannot parse the value"):
+        parse_override("grid.resolution=[1, 2")
 
 
 def test_dumped_config_is_plain_yaml(small_config):

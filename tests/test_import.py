@@ -311,6 +311,17 @@ def test_a_missing_duplicate_or_unnumbered_frame_is_named(tmp_path, drop, rename
         assert w in str(err.value), str(err.value)
 
 
+def test_the_frame_numbers_of_the_files_are_kept(tmp_path):
+    """A sequence numbered from 10 every other frame: the coarse fracture says so, for the outputs."""
+    d = tmp_path / "seq"
+    d.mkdir()
+    for t, path in enumerate(sorted(SAMPLE.glob("*.obj"))[:6]):
+        shutil.copy(path, d / f"shot{10 + 2 * t}.obj")
+    cf, _ = load_coarse_sequence(d)
+    assert (cf.source.first_frame, cf.source.frame_step, cf.source.fps, cf.source.meters_per_unit) == (
+        10, 2, None, None)
+
+
 def test_frames_exported_every_other_frame_are_accepted(tmp_path):
     d = _renamed_sample(tmp_path, lambda t: f"frame{2 * t - 1}.obj")
     assert len(read_sequence(d)) == 40

@@ -257,23 +257,31 @@ def test_fracref_export_refuses_what_is_not_a_finished_run(tmp_path, capsys):
 
 # -- USD input ------------------------------------------------------------------------------------
 
-def _write_points_usd(path, frames, names, up="Z"):
-    """A Houdini-style USD: one mesh per piece, its points time-sampled per frame, no transforms."""
+def _write_points_usd(path, frames, names, up="Z", left_handed=False, start=1, fps=None, meters_per_unit=None,
+                      scale=1.0):
+    """A Houdini-style USD: one mesh per piece, its points time-sampled per frame, no transforms; with
+    ``left_handed`` its faces wound the other way and said to be (Houdini's default orientation)."""
     from pxr import Usd, UsdGeom, Vt
 
     stage = Usd.Stage.CreateNew(str(path))
     UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y if up == "Y" else UsdGeom.Tokens.z)
-    stage.SetStartTimeCode(1)
-    stage.SetEndTimeCode(len(frames))
+    if meters_per_unit is not None:
+        UsdGeom.SetStageMetersPerUnit(stage, meters_per_unit)
+    if fps is not None:
+        stage.SetTimeCodesPerSecond(fps)
+    stage.SetStartTimeCode(start)
+    stage.SetEndTimeCode(start + len(frames) - 1)
     for p, name in enumerate(names):
         mesh = UsdGeom.Mesh.Define(stage, f"/geo/{name.replace('.', '_')}")
-        polys = frames[0].polygons[p]
+        polys = [f[::-1] for f in frames[0].polygons[p]] if left_handed else frames[0].polygons[p]
         used = np.unique(np.concatenate(polys))
         local = {v: i for i, v in enumerate(used.tolist())}
         mesh.CreateFaceVertexCountsAttr(Vt.IntArray([len(f) for f in polys]))
         mesh.CreateFaceVertexIndicesAttr(Vt.IntArray([local[v] for f in polys for v in f.tolist()]))
-        for t, fr in enumerate(frames, start=1):
-            mesh.GetPointsAttr().Set(Vt.Vec3fArray.FromNumpy(fr.V[used].astype(np.float32)), t)
+        if left_handed:
+            mesh.CreateOrientationAttr(UsdGeom.Tokens.leftHanded)
+        for t, fr in enumerate(frames, start=start):
+            mesh.GetPointsAttr().Set(Vt.Vec3fArray.FromNumpy((scale * fr.V[used]).astype(np.float32)), t)
     stage.GetRootLayer().Save()
 
 
@@ -284,8 +292,10 @@ def test_a_usd_of_time_sampled_points_imports_as_its_obj_frames_do(tmp_path):
 
     frames = read_sequence(SAMPLE)
     _write_points_usd(tmp_path / "anim.usda", frames, frames[0].names)
-    got, up = read_usd_frames(tmp_path / "anim.usda")
+    usd = read_usd_frames(tmp_path / "anim.usda")
+    got, up = usd.frames, usd.up_axis
     assert up == "z" and len(got) == len(frames)
+    assert [f.time for f in got] == list(range(1, len(frames) + 1)) and usd.fps == 24.0
     assert [n.replace("_", ".") for n in got[0].names] == [n.replace("_", ".") for n in frames[0].names]
     for t in (0, 20, len(frames) - 1):
         for p in range(len(frames[0].names)):
@@ -294,6 +304,77 @@ def test_a_usd_of_time_sampled_points_imports_as_its_obj_frames_do(tmp_path):
             np.testing.assert_allclose(np.sort(a, axis=0), np.sort(b, axis=0), atol=1e-5)
     cf, _ = coarse_from_frames(got)
     assert cf.n_components == 8 and cf.n_frames == 40 and cf.fit_residual.max() < 1e-4
+
+
+def test_left_handed_meshes_import_as_the_same_pieces(tmp_path):
+    """Houdini writes its meshes leftHanded (faces clockwise seen from outside): the import turns them, so
+    the pieces are the same as those of the right-handed file (left as they were, every piece would be
+    inside out, its winding number -1 inside)."""
+    from conftest import SAMPLE
+    from fracture.coarse.mesh_sequence import coarse_from_frames, read_sequence
+    from fracture.coarse.usd_input import read_usd_frames
+
+    frames = read_sequence(SAMPLE)[:3]
+    _write_points_usd(tmp_path / "right.usda", frames, frames[0].names)
+    _write_points_usd(tmp_path / "left.usda", frames, frames[0].names, left_handed=True)
+    right, left = (read_usd_frames(tmp_path / f"{k}.usda").frames for k in ("right", "left"))
+    for a, b in zip(right[0].polygons, left[0].polygons):
+        assert all(np.array_equal(x, y) for x, y in zip(a, b))
+    cf, _ = coarse_from_frames(left)
+    assert cf.n_components == 8 and len(cf.F) == len(coarse_from_frames(right)[0].F)
+
+
+def test_a_usd_in_centimetres_at_30_fps_from_frame_1001_comes_back_so(tmp_path):
+    """The run's USD keeps the input's unit, frame rate and time codes (a studio's shot starts at 1001, its
+    stage in centimetres): a DCC that reads it puts the pieces where the input's were, at its frames; the
+    manifest says so, and `fracref export` writes the same."""
+    from pxr import Usd, UsdGeom
+
+    from conftest import SAMPLE
+    from fracture.coarse.mesh_sequence import read_sequence
+    from fracture.pipeline import runner
+    from fracture.pipeline.config import load_config
+    from fracture.pipeline.export import export_run
+
+    frames = read_sequence(SAMPLE)[:12]
+    usd = tmp_path / "shot.usda"
+    _write_points_usd(usd, frames, frames[0].names, start=1001, fps=30.0, meters_per_unit=0.01, scale=100.0)
+    cfg_path = tmp_path / "c.yaml"
+    cfg_path.write_text(f"input: {{kind: usd, usd: {usd}}}\ngrid: {{resolution: 24}}\n")
+    cfg = load_config(cfg_path, ["refine.max_triangles=3000", "refine.iterations=2", "animate.check_samples=1000"])
+    out = runner.run(cfg, tmp_path / "run", progress=False)
+    coarse = json.loads((out / "manifest.json").read_text())["stats"]["coarse"]
+    assert (coarse["first_frame"], coarse["frame_step"], coarse["fps"], coarse["meters_per_unit"]) == (
+        1001, 1, 30, 0.01)
+    for path in (out / "animation/pieces.usdc", export_run(out, out=tmp_path / "again.usda")):
+        stage = Usd.Stage.Open(str(path))
+        assert UsdGeom.GetStageMetersPerUnit(stage) == 0.01 and stage.GetTimeCodesPerSecond() == 30
+        assert (stage.GetStartTimeCode(), stage.GetEndTimeCode()) == (1001, 1012)
+        # a piece at the last time code is where the input's was, in the input's unit (within 5 % of the
+        # object's 2 m: its cut faces are refined)
+        name = frames[0].names[3]
+        vids = frames[0].piece_vertices(3)
+        P = _stage_positions(stage, f"/Fracture/{prim_name(name, set())}", 1012)
+        lo, hi = P.min(axis=0), P.max(axis=0)
+        np.testing.assert_allclose(lo, 100.0 * frames[11].V[vids].min(axis=0), atol=10.0)
+        np.testing.assert_allclose(hi, 100.0 * frames[11].V[vids].max(axis=0), atol=10.0)
+    # a frame rate in the config wins over the input's
+    cfg24 = load_config(cfg_path, ["refine.max_triangles=3000", "refine.iterations=2", "animate.check_samples=1000",
+                                   "animate.fps=24"])
+    out24 = runner.run(cfg24, tmp_path / "run24", progress=False)
+    assert Usd.Stage.Open(str(out24 / "animation/pieces.usdc")).GetTimeCodesPerSecond() == 24
+
+
+def test_frames_written_at_a_step_keep_their_time_codes(tmp_path):
+    from pxr import Usd
+
+    faces, frames = _two_tetras_falling(4)
+    out = write_pieces_usd(tmp_path / "p.usda", ["a", "b"], faces, [np.ones(4, bool)] * 2, frames,
+                           start_frame=10, frame_step=2)
+    stage = Usd.Stage.Open(str(out))
+    assert (stage.GetStartTimeCode(), stage.GetEndTimeCode()) == (10, 16)
+    for k, t in enumerate((10, 12, 14, 16)):
+        np.testing.assert_allclose(_stage_positions(stage, "/Fracture/a", t), frames[k][0], atol=1e-6)
 
 
 @pytest.mark.slow

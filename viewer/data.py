@@ -101,6 +101,17 @@ class RunData:
         return str(self.manifest.get("stats", {}).get("coarse", {}).get("up_axis", "z"))
 
     @property
+    def seconds_per_frame(self) -> float:
+        """How long one frame of the run's animation lasts: as its USD file plays it (the input's frame step over
+        the frame rate, :func:`fracture.io.usd.usd_timing`)."""
+        from fracture.io.usd import usd_timing
+
+        coarse = self.manifest.get("stats", {}).get("coarse", {})
+        timing = usd_timing((self.config.get("animate") or {}).get("fps"),
+                            **{k: coarse.get(k) for k in ("first_frame", "frame_step", "fps", "meters_per_unit")})
+        return timing["frame_step"] / timing["fps"]
+
+    @property
     def name(self) -> str:
         return str(self.manifest.get("name", self.dir.name))
 

@@ -152,7 +152,7 @@ class Exports:
             n = len(self.w.run.iterations) if what == "iterations" else self.w.run.n_frames
             # the animation at its own frame rate; iterations at the chosen seconds per image
             seconds = (float(self.w.side.export_seconds.double_value) if what == "iterations"
-                       else 1.0 / float(self.w.run.config.get("animate", {}).get("fps", 24.0)))
+                       else self.w.run.seconds_per_frame)
             counts = frame_counts(n, seconds, fps)
             counts[-1] += round(float(self.w.side.export_hold.double_value) * fps)
             path = Path(path) if path else numbered(self.w.run.dir / "renders", f"window_{what}", ".mp4")

@@ -317,7 +317,7 @@ def _render_one(run: RunData, what: str, view: View, renderer: Renderer, out: Pa
                                width, height, timing, 0.25, len(run.iterations), quiet)
     if what == "animation":
         return _write_sequence(animation_images(run, view, renderer, cameras.get("animation")), out, "animation", width, height, timing,
-                               1.0 / float(run.config.get("animate", {}).get("fps", 24.0)), run.n_frames, quiet)
+                               run.seconds_per_frame, run.n_frames, quiet)
     # turntable: every video frame a new camera, the pieces still
     n = max(2, round(turntable_seconds * timing.fps))
     pieces = run.pieces_at(view.frame)

@@ -14,7 +14,7 @@ same vertices in the same order and the same faces.
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -41,6 +41,8 @@ class MeshFrame:
         ``polygons[p]`` are the faces of piece ``p``.
     face_piece : (m,) int or None
         For a PLY (which has no objects): each face's piece, in file order.
+    time : float or None
+        The frame's number in the input (its file's number, a USD time code); None: not known.
     """
 
     path: Path
@@ -48,6 +50,7 @@ class MeshFrame:
     V: np.ndarray
     polygons: list[list[np.ndarray]]
     face_piece: np.ndarray | None = None  # PLY: each face's piece, in file order (found once per sequence)
+    time: float | None = None
 
     def piece_vertices(self, p: int) -> np.ndarray:
         """Indices of the vertices used by piece ``p`` (sorted)."""
@@ -188,6 +191,11 @@ def read_frame(path: str | Path, rest: MeshFrame | None = None) -> MeshFrame:
     return frame
 
 
+def frame_number(path: Path) -> int:
+    """The frame number in a frame file's name: its last run of digits (``frame_0012.obj``, ``frame12.obj``)."""
+    return int(re.findall(r"\d+", path.stem)[-1])
+
+
 def frame_paths(directory: Path, pattern: str) -> list[Path]:
     """The frame files of ``directory`` matching ``pattern``, ordered by their frame numbers.
 
@@ -205,7 +213,7 @@ def frame_paths(directory: Path, pattern: str) -> list[Path]:
         if not digits:
             raise InputError(f"{p}: no frame number in the file name (expected e.g. frame_0001{p.suffix} or "
                              f"frame1{p.suffix}, as Blender writes them)")
-        numbered.append((int(digits[-1]), p.name, p))
+        numbered.append((frame_number(p), p.name, p))
     numbered.sort()
     numbers = [n for n, _, _ in numbered]
     for (a, na, _), (b, nb, _) in zip(numbered, numbered[1:]):
@@ -240,8 +248,10 @@ def read_sequence(directory: str | Path, pattern: str = "*.obj") -> list[MeshFra
     paths = frame_paths(directory, pattern)
     frames = [read_frame(paths[0])]
     rest = frames[0]
+    rest.time = float(frame_number(paths[0]))
     for number, path in enumerate(paths[1:], 2):
         frame = read_frame(path, rest)
+        frame.time = float(frame_number(path))
         where = f"{path} (frame {number})"
         missing = [n for n in rest.names if n not in frame.names]
         extra = [n for n in frame.names if n not in rest.names]
@@ -284,7 +294,7 @@ def _in_rest_order(frame: MeshFrame, rest: MeshFrame, where: str) -> MeshFrame:
     to_rest[to_rest < 0] = free
     V = np.empty_like(frame.V)
     V[to_rest] = frame.V
-    return MeshFrame(frame.path, list(rest.names), V, polygons, frame.face_piece)
+    return MeshFrame(frame.path, list(rest.names), V, polygons, frame.face_piece, frame.time)
 
 
 def _compact(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -375,4 +385,13 @@ def coarse_from_frames(frames: list[MeshFrame], lattice: int = 2, separation: fl
     cf = make_coarse(BV, BF, shared.exterior_piece, V, F, shared.sides, names, animation, separation,
                      fit_residual=residual, notes=notes)
     cf.up_axis = up_axis
+    cf.source = replace(cf.source, **_numbering(frames))
     return cf, {"rigid_residual": rigid, "tiling_cells": shared.cells}
+
+
+def _numbering(frames: list[MeshFrame]) -> dict:
+    """The input's number of its first frame and the step between its frames (both 1 when it did not say)."""
+    if frames[0].time is None:
+        return {}
+    step = frames[1].time - frames[0].time if len(frames) > 1 and frames[1].time is not None else 1.0
+    return {"first_frame": float(frames[0].time), "frame_step": float(step)}

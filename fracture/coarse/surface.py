@@ -160,6 +160,29 @@ def separation_times(V: np.ndarray, F: np.ndarray, sides: np.ndarray, animation:
     return face_time, vertex_time
 
 
+@dataclass(frozen=True)
+class SourceFrames:
+    """How the input numbered its frames and measured space, so that the outputs it goes back to keep them
+    (a USD file's time codes, frame rate and unit; the numbers in a sequence's file names).
+
+    Attributes
+    ----------
+    first_frame : float
+        The number (time code) of the input's first frame.
+    frame_step : float
+        Between the numbers of consecutive frames (2: the input kept every other frame).
+    fps : float or None
+        Frames (time codes) per second the input records; None: it does not say.
+    meters_per_unit : float or None
+        The input's unit of length in metres; None: it does not say.
+    """
+
+    first_frame: float = 1.0
+    frame_step: float = 1.0
+    fps: float | None = None
+    meters_per_unit: float | None = None
+
+
 @dataclass
 class CoarseFracture:
     """Everything the refinement and the animation consume, in material space.
@@ -188,6 +211,8 @@ class CoarseFracture:
         What was repaired or assumed on import.
     up_axis : str
         The axis pointing up in the input ("x", "y" or "z"), for the outputs' up axis.
+    source : SourceFrames
+        The input's frame numbers, frame rate and unit, for the outputs.
     """
 
     exterior_V: np.ndarray
@@ -204,6 +229,7 @@ class CoarseFracture:
     fit_residual: np.ndarray
     notes: list[str] = field(default_factory=list)
     up_axis: str = "z"
+    source: SourceFrames = field(default_factory=SourceFrames)
 
     @property
     def n_components(self) -> int:

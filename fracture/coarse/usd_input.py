@@ -2,15 +2,18 @@
 
 Every ``Mesh`` prim is a piece; its points in world space at each frame are its points there
 (time-sampled or not) under its transforms there (time-sampled or not): Blender writes rest
-points and time-sampled transforms, Houdini often time-sampled points. The frames are the stage's
-integer time codes from its start to its end. The result is the list of
-:class:`~fracture.coarse.mesh_sequence.MeshFrame` that a folder of OBJ frames gives, so the same import
-follows (:func:`fracture.coarse.mesh_sequence.coarse_from_frames`); the stage's up axis is returned with it.
+points and time-sampled transforms, Houdini often time-sampled points. A mesh whose
+``orientation`` is ``leftHanded`` (Houdini's default: its faces wind clockwise seen from outside)
+has its faces turned. The frames are the stage's integer time codes from its start to its end.
+The result holds the list of :class:`~fracture.coarse.mesh_sequence.MeshFrame` that a folder of OBJ
+frames gives, so the same import follows (:func:`fracture.coarse.mesh_sequence.coarse_from_frames`),
+with what the outputs keep of the stage: its up axis, time codes per second and ``metersPerUnit``.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -26,8 +29,17 @@ def _piece_name(prim) -> str:
     return prim.GetName()
 
 
-def read_usd_frames(path: str | Path) -> tuple[list[MeshFrame], str]:
-    """The frames of a USD animation and its up axis ("y" or "z").
+class UsdAnimation(NamedTuple):
+    """What a USD file gives the import."""
+
+    frames: list[MeshFrame]  # each with its time code
+    up_axis: str  # "y" or "z"
+    fps: float  # the stage's time codes per second
+    meters_per_unit: float  # the stage's metersPerUnit (USD's own default, 0.01, where it says none)
+
+
+def read_usd_frames(path: str | Path) -> UsdAnimation:
+    """The frames of a USD animation, its up axis, frame rate and unit.
 
     Raises
     ------
@@ -67,6 +79,10 @@ def read_usd_frames(path: str | Path) -> tuple[list[MeshFrame], str]:
         idx = np.asarray(mesh.GetFaceVertexIndicesAttr().Get(), np.int64)
         if counts.size == 0 or counts.sum() != idx.size or (counts < 3).any():
             raise InputError(f"{path}: piece {name!r} ({p.GetPath()}) has no faces or inconsistent face counts")
+        if mesh.GetOrientationAttr().Get() == UsdGeom.Tokens.leftHanded:  # each face's corners reversed
+            ends = np.cumsum(counts)
+            k = np.arange(idx.size) - np.repeat(ends - counts, counts)  # corner k of its face
+            idx = idx[np.repeat(ends, counts) - 1 - k]
         topology.append((counts, idx))
     cache = UsdGeom.XformCache()
     frames = []
@@ -87,11 +103,12 @@ def read_usd_frames(path: str | Path) -> tuple[list[MeshFrame], str]:
             splits = np.split(idx + offset, np.cumsum(counts)[:-1])
             polys.append(splits)
             offset += len(P)
-        frames.append(MeshFrame(path, list(names), np.concatenate(V), polys))
+        frames.append(MeshFrame(path, list(names), np.concatenate(V), polys,
+                                time=None if t.IsDefault() else float(t.GetValue())))
     rest = frames[0]
     for t, frame in zip(times[1:], frames[1:]):
         if len(frame.V) != len(rest.V):
             raise InputError(f"{path}: frame {t.GetValue():g} has {len(frame.V)} points, the first has "
                              f"{len(rest.V)}: a piece's points change in number")
     up = "y" if UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.y else "z"
-    return frames, up
+    return UsdAnimation(frames, up, float(stage.GetTimeCodesPerSecond()), float(UsdGeom.GetStageMetersPerUnit(stage)))

@@ -68,10 +68,21 @@ def rigid_motion(X: np.ndarray, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray, 
     return R, T, float(np.sqrt(((X @ R.T + T - Y) ** 2).sum(axis=1).max(initial=0.0)))
 
 
+def usd_timing(configured_fps: float | None, first_frame: float | None = None, frame_step: float | None = None,
+               fps: float | None = None, meters_per_unit: float | None = None) -> dict:
+    """:func:`write_pieces_usd`'s clock and unit for an animation the input numbered from ``first_frame`` every
+    ``frame_step`` at ``fps`` in ``meters_per_unit`` (None: the input did not say): the frame rate configured,
+    else the input's, else 24; a unit of a metre where the input gave none."""
+    return dict(start_frame=1.0 if first_frame is None else float(first_frame),
+                frame_step=1.0 if frame_step is None else float(frame_step),
+                fps=float(configured_fps or fps or 24.0),
+                meters_per_unit=1.0 if meters_per_unit is None else float(meters_per_unit))
+
+
 def write_pieces_usd(path: str | Path, names: Sequence[str], faces: Sequence[np.ndarray],
                      exterior: Sequence[np.ndarray], frames: Iterable[Sequence[np.ndarray]], *,
                      rest: Sequence[np.ndarray] | None = None, size: float | None = None,
-                     start_frame: int = 1, fps: float = 24.0, up_axis: str = "Z",
+                     start_frame: float = 1, frame_step: float = 1, fps: float = 24.0, up_axis: str = "Z",
                      meters_per_unit: float = 1.0) -> Path:
     """Write the pieces and their animation to ``path`` (``.usd``, ``.usdc`` or ``.usda``).
 
@@ -84,6 +95,9 @@ def write_pieces_usd(path: str | Path, names: Sequence[str], faces: Sequence[np.
     rest : per piece, its material-space points (the mesh's own points, which each frame's rigid
         motion moves); without it every frame's points are written.
     size : the scene's size, for the rigid test (default: the first frame's box diagonal).
+    start_frame, frame_step : the time code of the first frame and between frames (as the input numbered them).
+    fps : time codes per second.
+    meters_per_unit : the unit of the points, in metres.
 
     Returns the path written.
     """
@@ -151,11 +165,14 @@ def write_pieces_usd(path: str | Path, names: Sequence[str], faces: Sequence[np.
             UsdGeom.Subset.SetFamilyType(mesh, UsdShade.Tokens.materialBind, UsdGeom.Tokens.partition)
             meshes.append(mesh)
 
-        t = start_frame - 1
+        if not frame_step > 0:
+            raise ValueError(f"frame_step must be positive, got {frame_step}")
+        t = before = None
         deformed = [False] * len(meshes)  # the piece's points at the frame before are not its rest points
-        for t, X in enumerate(frames, start=start_frame):
+        for k, X in enumerate(frames):
+            before, t = t, start_frame + k * frame_step
             if len(X) != len(meshes):
-                raise ValueError(f"frame {t}: {len(X)} point arrays for {len(meshes)} pieces")
+                raise ValueError(f"frame {t:g}: {len(X)} point arrays for {len(meshes)} pieces")
             if size is None:
                 every = np.concatenate([np.asarray(P) for P in X])
                 size = float(np.linalg.norm(every.max(axis=0) - every.min(axis=0))) if len(every) else 1.0
@@ -172,15 +189,15 @@ def write_pieces_usd(path: str | Path, names: Sequence[str], faces: Sequence[np.
                         mesh.GetPointsAttr().Set(vec3f(rest[c]), t)
                         mesh.GetExtentAttr().Set(extent(np.asarray(rest[c])), t)
                 else:
-                    if not deformed[c] and rest is not None and t > start_frame:
+                    if not deformed[c] and rest is not None and before is not None:
                         # the rest points until the frame before (a first sample would be held back to the start)
-                        mesh.GetPointsAttr().Set(vec3f(rest[c]), t - 1)
-                        mesh.GetExtentAttr().Set(extent(np.asarray(rest[c])), t - 1)
+                        mesh.GetPointsAttr().Set(vec3f(rest[c]), before)
+                        mesh.GetExtentAttr().Set(extent(np.asarray(rest[c])), before)
                     mesh.GetPointsAttr().Set(vec3f(P), t)
                     mesh.GetExtentAttr().Set(extent(P), t)
                 deformed[c] = not rigid
                 moves[c].Set(M, t)
-        if t < start_frame:
+        if t is None:
             raise ValueError("no frames to write")
         stage.SetStartTimeCode(start_frame)
         stage.SetEndTimeCode(t)

@@ -138,7 +138,11 @@ def parse_override(text: str) -> tuple[list[str | int], Any]:
     try:
         value = yaml.safe_load(raw) if raw.strip() else None
     except yaml.YAMLError:
-        raise ConfigError(SET_SOURCE, key, f"cannot parse the value {raw!r} as YAML") from None
+        # not YAML (a glob such as *.ply: a star starts an alias): the words as they are; the schema then says
+        # whether a string may go there
+        if raw.lstrip().startswith(("[", "{")):  # a list or mapping that does not parse is a mistake, not words
+            raise ConfigError(SET_SOURCE, key, f"cannot parse the value {raw!r} as YAML") from None
+        value = raw
     return tokens, value
 
 

@@ -3,7 +3,8 @@
 Reads the run directory (``coarse/components.json`` for the piece names,
 ``pieces/piece_NNN.ply`` for their triangles and exterior flags,
 ``animation/transfer.npz`` for the frames, ``config.yaml`` for the frame
-rate, ``manifest.json`` for the up axis) and writes one file. The run itself writes the USD file already
+rate, ``manifest.json`` for the up axis and the input's frame numbers, frame rate and unit) and writes one
+file. The run itself writes the USD file already
 (``animate.usd``); this exports it again elsewhere, or for a run made without it.
 """
 
@@ -36,7 +37,7 @@ def export_run(run: str | Path, fmt: str = "usd", out: str | Path | None = None)
     """
     from fracture.io.ply import read_ply
     from fracture.pieces.transfer import frame_points, load_transfer, rest_points
-    from fracture.io.usd import write_pieces_usd
+    from fracture.io.usd import usd_timing, write_pieces_usd
 
     run = Path(run)
     if fmt not in FORMATS:
@@ -58,13 +59,14 @@ def export_run(run: str | Path, fmt: str = "usd", out: str | Path | None = None)
         faces.append(F)
         exterior.append(np.asarray(face_data["exterior"]).astype(bool))
     cfg = yaml.safe_load(_need(run, layout.CONFIG).read_text())
-    fps = float(cfg.get("animate", {}).get("fps", 24.0))
-    manifest = json.loads(_need(run, layout.MANIFEST).read_text())
-    up = manifest.get("stats", {}).get("coarse", {}).get("up_axis", "z")
+    fps = (cfg.get("animate") or {}).get("fps")
+    coarse = json.loads(_need(run, layout.MANIFEST).read_text()).get("stats", {}).get("coarse", {})
+    up = coarse.get("up_axis", "z")
+    timing = usd_timing(fps, **{k: coarse.get(k) for k in ("first_frame", "frame_step", "fps", "meters_per_unit")})
     out = Path(out) if out is not None else run / layout.USD
     if out.suffix not in (".usd", ".usdc", ".usda"):
         raise InputError(f"export: {out}: a USD file name ends in .usd, .usdc or .usda")
     if not out.parent.is_dir():
         raise InputError(f"export: {out.parent} is not a directory")
     return write_pieces_usd(out, names, faces, exterior, frame_points(transfer), rest=rest_points(transfer),
-                            size=transfer.size, fps=fps, up_axis="Y" if up == "y" else "Z")
+                            size=transfer.size, up_axis="Y" if up == "y" else "Z", **timing)

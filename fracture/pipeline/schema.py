@@ -105,7 +105,8 @@ class AnimateSection(Section):
     ply_frames: bool = flag(False, "also write frames/frame_NNNN.ply (all pieces, face property piece)")
     usd: bool = flag(True, "write animation/pieces.usdc: one mesh per piece, points per frame, interior and exterior "
                      "materials (Blender: File > Import > Universal Scene Description)")
-    fps: float = number(24.0, 0.1, 1000.0, "frame rate recorded in the USD file")
+    fps: float | None = number(None, 0.1, 1000.0, "frame rate recorded in the USD file; null: the input's (a USD "
+                               "file's time codes per second), else 24")
     check_samples: int = integer(20000, 1000, 10_000_000, "random points at which the pieces' winding numbers are "
                                  "checked (their volumes, no overlap); every run checks its pieces")
 

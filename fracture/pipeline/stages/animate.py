@@ -30,6 +30,7 @@ largest gap between copies of a vertex before its fracture time; and
 from __future__ import annotations
 
 import copy
+from dataclasses import asdict
 
 import igl
 import numpy as np
@@ -46,7 +47,7 @@ from fracture.pieces.checks import EarlyGap, hausdorff_to_b, piece_checks, verif
 from fracture.io.ply import write_ply
 from fracture.pipeline.context import RunContext
 from fracture.pieces.transfer import Transfer, build_transfer, frame_points, rest_points, transfer_arrays
-from fracture.io.usd import write_pieces_usd
+from fracture.io.usd import usd_timing, write_pieces_usd
 
 
 def animate_stage(ctx: RunContext) -> None:
@@ -104,8 +105,8 @@ def animate_stage(ctx: RunContext) -> None:
         if opts.usd:
             write_pieces_usd(ctx.path(layout.USD), cf.names,
                              [F for _, _, F in local], pieces.exterior, frame_points(transfer),
-                             rest=rest_points(transfer), size=transfer.size, fps=opts.fps,
-                             up_axis="Y" if cf.up_axis == "y" else "Z")
+                             rest=rest_points(transfer), size=transfer.size,
+                             up_axis="Y" if cf.up_axis == "y" else "Z", **usd_timing(opts.fps, **asdict(cf.source)))
 
     ctx.products.pieces = pieces
     ctx.products.transfer = transfer

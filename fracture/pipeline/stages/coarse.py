@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Mapping
 
 import numpy as np
@@ -113,9 +114,10 @@ def coarse_stage(ctx: RunContext) -> None:
             from fracture.coarse.mesh_sequence import coarse_from_frames
             from fracture.coarse.usd_input import read_usd_frames
 
-            frames, stage_up = read_usd_frames(inp.usd)
-            up = stage_up if inp.up_axis == "auto" else inp.up_axis
-            cf, extra = coarse_from_frames(frames, inp.lattice, inp.separation, up)
+            usd = read_usd_frames(inp.usd)
+            up = usd.up_axis if inp.up_axis == "auto" else inp.up_axis
+            cf, extra = coarse_from_frames(usd.frames, inp.lattice, inp.separation, up)
+            cf.source = replace(cf.source, fps=usd.fps, meters_per_unit=usd.meters_per_unit)
         elif inp.kind == "scene":
             from fracture.coarse.scenes import build_scene
 
@@ -140,6 +142,11 @@ def coarse_stage(ctx: RunContext) -> None:
         "virtual_triangles": int(cf.virtual.sum()),
         "first_separation_frame": int(cf.face_fracture_time.min()) + 1 if separated.any() else None,
         "up_axis": cf.up_axis,
+        # the input's frame numbers, frame rate and unit, which the outputs keep (null: the input did not say)
+        "first_frame": cf.source.first_frame,
+        "frame_step": cf.source.frame_step,
+        "fps": cf.source.fps,
+        "meters_per_unit": cf.source.meters_per_unit,
     }
     if "rigid_residual" in extra:
         ctx.stats["coarse"]["rigid_fit_residual_max"] = float(extra["rigid_residual"].max())
