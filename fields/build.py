@@ -7,7 +7,7 @@ from typing import Callable
 
 import numpy as np
 
-from fields.grid import Grid, grid_shape_for_box
+from fields.grid import Grid, grid_shape_for_box, thinnest_extent
 from fields.pyramid import StrengthPyramid
 from fields.grain import Grain
 from fields.strength import grain_of, strength_field
@@ -57,9 +57,16 @@ def padded_bounds(V: np.ndarray, padding: float) -> tuple[np.ndarray, np.ndarray
     return lo - pad, hi + pad
 
 
-def grid_for(exterior_V: np.ndarray, resolution, padding: float) -> Grid:
-    """The grid :func:`build_fields` samples on: the object's padded box at ``resolution``."""
+def grid_for(exterior_V: np.ndarray, resolution, padding: float, min_across: int = 0) -> Grid:
+    """The grid :func:`build_fields` samples on: the object's padded box at ``resolution``; with one number,
+    cubic cells small enough for ``min_across`` nodes across the object's thinnest extent (along its principal
+    axes: a plank's thickness, turned any way) and, beyond that, ``resolution`` nodes along the box's longest
+    axis."""
     lo, hi = padded_bounds(exterior_V, padding)
+    if np.ndim(resolution) == 0 and min_across > 1:
+        thin = thinnest_extent(exterior_V)
+        h = min(float((hi - lo).max()) / (int(resolution) - 1), thin / (min_across - 1) if thin > 0 else np.inf)
+        return Grid.from_bounds(lo, hi, tuple(int(max(4, round(e / h) + 1)) for e in hi - lo))
     return Grid.from_bounds(lo, hi, grid_shape_for_box(lo, hi, resolution))
 
 
@@ -80,6 +87,7 @@ def build_fields(
     *,
     resolution,
     padding: float,
+    min_across: int = 0,
     layers: list[dict],
     seed: int,
     normalize: bool = True,
@@ -104,6 +112,9 @@ def build_fields(
         The coarse fracture surface (the stress estimate's source).
     resolution : int or (3,) int
         See :func:`fields.grid.grid_shape_for_box`.
+    min_across : int
+        With one ``resolution`` number, at least this many nodes across the object's thinnest extent
+        (:func:`grid_for`).
     padding : float
         Grid margin around the object, relative to its largest extent.
     layers, seed, normalize
@@ -132,7 +143,7 @@ def build_fields(
     """
     step = step or (lambda name: None)
     obj_lo, obj_hi = exterior_V.min(axis=0), exterior_V.max(axis=0)
-    grid = grid_for(exterior_V, resolution, padding)
+    grid = grid_for(exterior_V, resolution, padding, min_across)
     X = grid.points()
 
     if zeta is None:

@@ -75,6 +75,13 @@ class Grid:
         return cls(np.asarray(d["origin"], np.float64), np.asarray(d["spacing"], np.float64), tuple(d["shape"]))
 
 
+def thinnest_extent(V: np.ndarray) -> float:
+    """The extent of the points ``V`` along their least principal axis: a plank's thickness, turned any way."""
+    X = np.asarray(V, np.float64) - np.mean(V, axis=0)
+    axis = np.linalg.eigh(X.T @ X)[1][:, 0]  # eigenvalues ascending: the direction of least spread
+    return float(np.ptp(X @ axis))
+
+
 def grid_shape_for_box(lo, hi, resolution) -> tuple[int, int, int]:
     """Node counts for a box.
 

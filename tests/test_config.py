@@ -46,7 +46,7 @@ def test_defaults_fill_everything_and_experiment_overrides(tmp_path, slab_meshes
         grid: {resolution: [10, 11, 12]}
         input: {exterior: slab.obj}
         """))
-    assert cfg.tree()["grid"] == {"resolution": [10, 11, 12], "padding": 0.1, "max_memory_gb": 8.0}
+    assert cfg.tree()["grid"] == {"resolution": [10, 11, 12], "padding": 0.1, "min_across": 8, "max_memory_gb": 8.0}
     assert cfg.psi.stress_weight == 2.0 and cfg.psi.strength_weight == 1.0
     assert cfg.pyramid.levels == 5
     assert cfg.input.exterior == str(slab_meshes[0].resolve())
@@ -78,7 +78,7 @@ def _error(tmp_path, text, overrides=()):
 
 @pytest.mark.parametrize("text, key, words", [
     ("grdi: {resolution: 5}\n", "grdi", "unknown key"),
-    ("grid: {resolutoin: 5}\n", "grid.resolutoin", "unknown key; expected one of: max_memory_gb, padding, resolution"),
+    ("grid: {resolutoin: 5}\n", "grid.resolutoin", "unknown key; expected one of: max_memory_gb, min_across, padding, resolution"),
     ("grid: {resolution: fifty}\n", "grid.resolution", "got 'fifty' (str), expected an integer or a list of 3 integers"),
     ("grid: {resolution: [10, 10]}\n", "grid.resolution", "expected an integer or a list of 3 integers"),
     ("grid: {resolution: 2}\n", "grid.resolution", "in [4, 1024]"),

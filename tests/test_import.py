@@ -11,7 +11,7 @@ import pytest
 from conftest import SAMPLE, mesh_area as area
 from fracture.pipeline import runner
 from fracture.coarse.surface import special_edges
-from fracture.mesh.topology import fan, signed_volume, unique_edges
+from fracture.mesh.topology import closed_oriented, fan, signed_volume, unique_edges
 from fracture.pipeline.config import load_config
 from fracture.errors import InputError
 from fracture.coarse.mesh_sequence import load_coarse_sequence, read_sequence
@@ -227,6 +227,36 @@ def test_pieces_written_in_another_order_are_matched_by_name(tmp_path, imported)
                    for a, b in zip(pa, pb))
     cf, _ = load_coarse_sequence(d)
     assert np.allclose(cf.animation.deform(5, 39, cf.V[:4]), imported[0].animation.deform(5, 39, cf.V[:4]))
+
+
+def _plank_of_boxes(cuts, size, turn):
+    """Boxes side by side along x (cut at ``cuts``) that tile a plank of ``size``, turned by ``turn``: one vertex
+    array, per box six outward quads."""
+    from scipy.spatial.transform import Rotation
+
+    xs = [0.0, *cuts, size[0]]
+    quads = np.array([[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]])[:, ::-1]
+    V, polygons = [], []
+    for a, b in zip(xs, xs[1:]):
+        corners = np.array([[x, y, z] for x in (a, b) for y in (0.0, size[1]) for z in (0.0, size[2])])
+        polygons.append([q + 8 * len(polygons) for q in quads])
+        V.append(corners)
+    return Rotation.from_euler("xyz", turn, degrees=True).apply(np.concatenate(V)), polygons
+
+
+def test_a_thin_plank_turned_any_way_keeps_every_piece():
+    """A plank 40 times longer than thick, turned: the import's grid takes enough cells across its thickness
+    (at 32 along its length it had less than one, and lost pieces); every piece is kept and B is its box."""
+    from fields.grid import thinnest_extent
+    from fracture.coarse.tiling import label_tiling
+
+    size = (6.0, 0.8, 0.15)
+    V, polygons = _plank_of_boxes([1.5, 1.7, 4.0], size, (25.0, 40.0, 10.0))
+    assert thinnest_extent(V) == pytest.approx(0.15)
+    t = label_tiling(V, polygons, ["a", "b", "c", "d"])
+    assert list(t.kept) == [0, 1, 2, 3] and not t.notes
+    assert closed_oriented(t.exterior_F)
+    assert signed_volume(t.V, t.exterior_F) == pytest.approx(np.prod(size), rel=0.02)
 
 
 def test_a_narrow_slit_between_pieces_is_filled_and_noted(tmp_path):

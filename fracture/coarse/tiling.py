@@ -37,6 +37,7 @@ import igl
 import numpy as np
 from scipy import ndimage
 
+from fields.grid import thinnest_extent
 from fracture.coarse.pinholes import PINHOLE, close_pinholes
 from fracture.mesh.multilabel import contour_labels
 from fracture.mesh.sheets import coarsen_sheets
@@ -44,8 +45,13 @@ from fracture.errors import InputError
 from fracture.tolerances import tol
 from fracture.mesh.topology import closed_oriented, fan
 
-# Cells along the object's largest extent.
+# Cells along the object's largest extent, at least ...
 DEFAULT_CELLS = 32
+# ... and enough for this many across its thinnest extent (along its principal axes: a plank's thickness; at 32
+# along its length a plank 40 times longer than thick had less than a cell across, and lost pieces), ...
+_ACROSS = 8
+# ... up to this many along the largest extent.
+_MOST_CELLS = 256
 # Two pieces may overlap by this much on average (grid cells): Cell Fracture's pieces overlap by about
 # 1e-4 of the size (up to 0.08 cells measured), a piece moved by 1/40 of the size by 0.4 cells.
 _OVERLAP = 0.2
@@ -200,12 +206,16 @@ def label_tiling(V: np.ndarray, polygons: list[list[np.ndarray]], names: list[st
     source : str
         File the rest pose came from, for messages.
     cells : int
-        Grid cells along the object's largest extent (doubled while B is not a manifold).
+        Grid cells along the object's largest extent, at least (more for a thin object: :data:`_ACROSS`;
+        doubled once if a piece holds no node).
     """
     where = f"{source}: " if source else ""
     V = np.asarray(V, np.float64)
     pieces = _piece_triangles(V, polygons)
     lo, hi = V.min(axis=0), V.max(axis=0)
+    used = np.unique(np.concatenate([np.concatenate(p) for p in polygons]))
+    across = _ACROSS * float((hi - lo).max()) / max(thinnest_extent(V[used]), 1e-12)
+    cells = max(cells, min(_MOST_CELLS, int(np.ceil(across))))
     for n in (cells, 2 * cells):  # a piece thinner than a cell everywhere: try once at half the cell size
         h = float((hi - lo).max()) / n
         origin = lo - 1.5 * h

@@ -69,27 +69,40 @@ def _mixed_tets(label: np.ndarray) -> np.ndarray:
     return np.ravel_multi_index(tuple(np.moveaxis(node, -1, 0)), shape).reshape(-1, 4)
 
 
-def _key(ids: np.ndarray, n: int) -> np.ndarray:
-    """One integer per sorted tuple of node ids (pairs or triples)."""
-    ids = np.sort(ids, axis=-1)
-    out = ids[..., 0].astype(np.int64)
-    for c in range(1, ids.shape[-1]):
-        out = out * n + ids[..., c]
-    return out
+class _FaceKeys:
+    """One integer per face of a tetrahedron of the grid (three nodes of one cube): its least node id times
+    256 and the two others' offsets from it, each one of the 13 positive differences of two corners of a
+    cube, as codes. (The ids themselves, ``(a n + b) n + c``, overflow 64 bits beyond two million nodes: a
+    thin plank's grid.)"""
+
+    def __init__(self, shape):
+        d = np.array(list(np.ndindex(3, 3, 3))) - 1
+        step = d @ np.array([shape[1] * shape[2], shape[2], 1])
+        self.offsets = np.unique(step[step > 0])
+
+    def encode(self, ids: np.ndarray) -> np.ndarray:
+        ids = np.sort(ids, axis=-1).astype(np.int64)
+        code = np.searchsorted(self.offsets, ids[:, 1:] - ids[:, :1])
+        return ids[:, 0] * 256 + code[:, 0] * 16 + code[:, 1]
+
+    def decode(self, keys: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        a = keys // 256
+        return a, a + self.offsets[(keys // 16) % 16], a + self.offsets[keys % 16]
 
 
 _PAIRS = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]
 _FACES = [(0, 1, 2), (0, 1, 3), (0, 2, 3), (1, 2, 3)]
 
 
-def _interfaces(tets: np.ndarray, lab: np.ndarray, n_nodes: int):
+def _interfaces(tets: np.ndarray, lab: np.ndarray, n_nodes: int, faces: _FaceKeys):
     """The points of the interfaces inside every tetrahedron (Wu and Sullivan's multi-material marching
     tetrahedra), each tagged with the interface it lies on.
 
     Between two labels A < B of a tetrahedron the interface polygon has the points of its edges whose
     ends carry A and B, of its faces that carry A, B and a third label, and its own point when it carries
     four labels (3 or 4 points). Returns, per tagged point: the tetrahedron, A, B, the point's kind
-    (0 edge, 1 face, 2 tetrahedron) and key (sorted node ids, or the tetrahedron).
+    (0 edge, 1 face, 2 tetrahedron) and key (the sorted node ids of an edge, ``faces``' key of a face, or the
+    tetrahedron).
     """
     L = lab[tets]  # (t, 4)
     t_all = np.arange(len(tets))
@@ -104,7 +117,7 @@ def _interfaces(tets: np.ndarray, lab: np.ndarray, n_nodes: int):
         la = L[:, list(f)]
         ls = np.sort(la, axis=1)
         sel = (ls[:, 0] != ls[:, 1]) & (ls[:, 1] != ls[:, 2])
-        key = _key(tets[sel][:, list(f)], n_nodes)
+        key = faces.encode(tets[sel][:, list(f)])
         for x, y in ((0, 1), (0, 2), (1, 2)):
             rec.append((t_all[sel], ls[sel, x], ls[sel, y], np.ones(sel.sum(), np.int64), key))
     Ls = np.sort(L, axis=1)
@@ -124,7 +137,7 @@ def _mean_preferring(P: np.ndarray, groups: np.ndarray, prefer: np.ndarray) -> n
     return np.einsum("gk,gki->gi", w, P[groups]) / w.sum(axis=1)[:, None]
 
 
-def _positions(crossing, nodes, lab, edge_keys, face_keys, tet_ids, tets, n_nodes):
+def _positions(crossing, nodes, lab, edge_keys, face_keys, tet_ids, tets, n_nodes, faces: _FaceKeys):
     """Points of the edges (``crossing``, kept :data:`_NODE_GAP` from the nodes), faces and tetrahedra
     (the mean of their edges' crossings, of those on B where they have some: :func:`_mean_preferring`)."""
     u, v = edge_keys // n_nodes, edge_keys % n_nodes
@@ -137,7 +150,7 @@ def _positions(crossing, nodes, lab, edge_keys, face_keys, tet_ids, tets, n_node
     def edge(x, y):  # the crossing ids of edges x - y (edge_keys is sorted)
         return np.searchsorted(edge_keys, np.minimum(x, y) * n_nodes + np.maximum(x, y))
 
-    a, b, c = face_keys // (n_nodes * n_nodes), (face_keys // n_nodes) % n_nodes, face_keys % n_nodes
+    a, b, c = faces.decode(face_keys)
     Fg = np.stack([edge(a, b), edge(a, c), edge(b, c)], 1)
     # a tetrahedron with four labels: its six edges all cross
     T = tets[tet_ids]
@@ -173,11 +186,12 @@ def contour_labels(label: np.ndarray, origin, spacing, crossing, pieces_only: bo
     if not len(tets):
         none = np.zeros((0, 3), np.int64)
         return LabelContour(np.zeros((0, 3)), none, np.zeros((0, 2), np.int64), none, np.zeros(0, np.int64))
-    tet, A, B, kind, val = _interfaces(tets, lab, n_nodes)
+    faces = _FaceKeys(shape)
+    tet, A, B, kind, val = _interfaces(tets, lab, n_nodes, faces)
     edge_keys, face_keys, tet_ids = (np.unique(val[kind == k]) for k in range(3))
     grid = np.stack(np.unravel_index(np.arange(n_nodes), shape), 1)
     nodes = np.asarray(origin, np.float64) + grid * np.asarray(spacing, np.float64)
-    PE, PF, PT = _positions(crossing, nodes, lab, edge_keys, face_keys, tet_ids, tets, n_nodes)
+    PE, PF, PT = _positions(crossing, nodes, lab, edge_keys, face_keys, tet_ids, tets, n_nodes, faces)
     X = np.concatenate([PE, PF, PT])
     index = np.empty(len(val), np.int64)
     start = 0
@@ -187,7 +201,7 @@ def contour_labels(label: np.ndarray, origin, spacing, crossing, pieces_only: bo
         start += len(table)
     # the points' places before they were moved onto the surfaces, for the order around each polygon
     eu, ev = edge_keys // n_nodes, edge_keys % n_nodes
-    fa, fb, fc = face_keys // (n_nodes * n_nodes), (face_keys // n_nodes) % n_nodes, face_keys % n_nodes
+    fa, fb, fc = faces.decode(face_keys)
     X0 = np.concatenate([0.5 * (nodes[eu] + nodes[ev]), (nodes[fa] + nodes[fb] + nodes[fc]) / 3,
                          nodes[tets[tet_ids]].mean(axis=1)])
 

@@ -50,8 +50,8 @@ def _simplify_sheet(X: np.ndarray, FF: np.ndarray, cell: float | None) -> tuple[
             g = -1 - len(fresh)
             fresh.append(p)
         ids[i] = g
-    if not np.isin(used[rim], ids).all():
-        raise AssertionError("sheet simplification moved a boundary vertex")
+    if not np.isin(used[rim], ids).all():  # the collapse moved a rim vertex (pymeshlab on a sheet a few cells
+        return None  # wide: a thin plank's cut): the sheet keeps its triangles, which meet B and the others
     return np.asarray(fresh, np.float64).reshape(-1, 3), ids[FD]
 
 

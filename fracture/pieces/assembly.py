@@ -209,7 +209,7 @@ def build_pieces(im: Imprint, mesh: FractureSurface, n_components: int, fallback
         back = mesh.F[mesh.sides[:, 1] == c][:, ::-1]
         F = np.concatenate([fb, front, back])
         ext = np.r_[np.ones(len(fb), bool), np.zeros(len(front) + len(back), bool)]
-        keep = ~_cancelling(F, len(V))
+        keep = ~_cancelling(F)
         faces.append(F[keep])
         exterior.append(ext[keep])
     pieces = Pieces(V=V, n_fracture=n_s, faces=faces, exterior=exterior, patch_agreement=agreement,
@@ -348,15 +348,16 @@ def resolve_crossings(V: np.ndarray, F: np.ndarray, exterior: np.ndarray, volume
     return FC, ext, source, P, parents, weights, ~np.asarray(exterior, bool)[birth]
 
 
-def _cancelling(F: np.ndarray, n: int) -> np.ndarray:
+def _cancelling(F: np.ndarray) -> np.ndarray:
     """Triangles that come in pairs on the same corners with opposite orientations (a fin of no volume).
 
     A fracture triangle lying on B (its corners all on the cut) meets B's
     triangle there face to face; the two bound nothing and both go.
     """
     S = np.sort(F, axis=1)
-    key = (S[:, 0] * n + S[:, 1]) * n + S[:, 2]
-    _, inv, count = np.unique(key, return_inverse=True, return_counts=True)
+    # by rows: one integer per triple of ids, (a n + b) n + c, overflows 64 bits beyond two million vertices
+    _, inv, count = np.unique(S, axis=0, return_inverse=True, return_counts=True)
+    inv = inv.ravel()
     twin = np.flatnonzero(count[inv] == 2)
     out = np.zeros(len(F), bool)
     if len(twin):

@@ -53,6 +53,9 @@ class GridSection(Section):
     """The field grid."""
 
     resolution: Int3 = int3(50, 4, 1024, "nodes along the longest axis, or [nx, ny, nz] (e.g. [150, 50, 10])")
+    min_across: int = integer(8, 0, 1024, "with one resolution number: at least this many nodes across the object's "
+                              "thinnest extent (along its principal axes: a plank's thickness); the cells shrink for "
+                              "them (0: off)")
     padding: float = number(0.05, 0.0, 1.0, "grid margin around the object, relative to its largest extent")
     max_memory_gb: float = number(8.0, 0.01, 1e5, "refuse a grid whose fields would need more memory than this (GB)")
 

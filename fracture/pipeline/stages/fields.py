@@ -27,6 +27,7 @@ def fields_from_config(cfg: Config, BV: np.ndarray, SV: np.ndarray, SF: np.ndarr
         BV, SV, SF,
         resolution=c.grid.resolution,
         padding=c.grid.padding,
+        min_across=c.grid.min_across,
         layers=c.strength.layers,
         seed=c.seed,
         normalize=c.strength.normalize,
@@ -45,14 +46,17 @@ def fields_from_config(cfg: Config, BV: np.ndarray, SV: np.ndarray, SF: np.ndarr
 def check_grid_memory(cfg: Config, BV: np.ndarray) -> None:
     """Refuse, before allocating, a grid whose fields need more than ``grid.max_memory_gb``."""
     c = cfg
-    grid = grid_for(BV, c.grid.resolution, c.grid.padding)
+    grid = grid_for(BV, c.grid.resolution, c.grid.padding, c.grid.min_across)
     need = fields_memory(grid.size, c.pyramid.levels) / 1e9
     if need > c.grid.max_memory_gb:
         shape = "x".join(str(n) for n in grid.shape)
-        raise ConfigError("config", "grid.resolution",
-                          f"{c.grid.resolution} gives a {shape} grid ({grid.size:,} nodes) whose fields need "
-                          f"about {need:.1f} GB, more than grid.max_memory_gb ({c.grid.max_memory_gb:g} GB); "
-                          "expected a lower resolution, or raise the limit if this machine has the memory")
+        thin = grid.size > grid_for(BV, c.grid.resolution, c.grid.padding).size  # min_across made the cells
+        raise ConfigError("config", "grid.min_across" if thin else "grid.resolution",
+                          f"{c.grid.min_across if thin else c.grid.resolution} gives a {shape} grid ({grid.size:,} "
+                          f"nodes) whose fields need about {need:.1f} GB, more than grid.max_memory_gb "
+                          f"({c.grid.max_memory_gb:g} GB); expected " + (
+                              "fewer nodes across the object's thinnest extent" if thin else "a lower resolution")
+                          + ", or raise the limit if this machine has the memory")
 
 
 def fields_stage(ctx: RunContext) -> None:
@@ -101,7 +105,7 @@ def known_key(ctx: RunContext, name: str) -> str:
 def grid_inputs(cfg: dict) -> tuple:
     """What of a config's tree (``Config.tree()``) the field grid is made of, beside the coarse stage's
     exterior (``fields.build.grid_for``): for the keys of what is kept per grid."""
-    return cfg["grid"]["resolution"], cfg["grid"]["padding"]
+    return cfg["grid"]["resolution"], cfg["grid"]["padding"], cfg["grid"]["min_across"]
 
 
 def cached_parts(ctx: RunContext) -> dict:
