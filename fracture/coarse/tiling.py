@@ -12,8 +12,11 @@ somewhere. This module does not match faces; it labels space and contours the la
    largest there, or 0 outside the object: a node is inside when the pieces'
    winding numbers sum to more than 1/2, so a node in a slit between two
    pieces (each about 1/2) is inside and an overlap goes to one of them.
-   Nodes of slits a closing by one cell fills, within a quarter cell of two
-   pieces, take the nearer piece. Two pieces overlapping by more than a fifth
+   Nodes of slits between two pieces take the nearer piece: slits up to half
+   again as wide as the pieces' usual slit (Cell Fracture's margin leaves one
+   width between every two neighbours), at least a quarter cell and at most a
+   cell; B spans their mouths and the cracks run in their middles (their
+   edges' crossings are found with the slits closed). Two pieces overlapping by more than a fifth
    of a cell on average are refused (a moved piece); a piece with no node is
    left out, with a note.
 2. **Multi-material marching tetrahedra** (:mod:`fracture.mesh.multilabel`):
@@ -32,6 +35,7 @@ somewhere. This module does not match faces; it labels space and contours the la
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import igl
 import numpy as np
@@ -57,6 +61,9 @@ _MOST_CELLS = 256
 _OVERLAP = 0.2
 # ... over at least this many grid nodes (a node or two inside two small pieces is noise).
 _OVERLAP_NODES = 10
+# A point lies in a slit between two pieces when its distances to its closest points on them add up to at most
+# this many times their distance apart (within a tenth of the slit's width of the segment between them).
+_BRIDGE = 1.02
 # Bisection steps for an edge's crossing (its place to 2^-this of a cell).
 _BISECTIONS = 12
 
@@ -103,10 +110,28 @@ def _piece_triangles(V: np.ndarray, polygons: list[list[np.ndarray]]) -> list[tu
     return out
 
 
-def _labels(pieces, nodes: np.ndarray, shape, h: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Label of every node (0 outside, p + 1 in piece p), the nodes that were filled (module notes), the
-    nodes inside two pieces or more as pairs ``(k, 2)`` of the two most inside pieces, and the filled
-    nodes as pairs of the two pieces nearest them."""
+class _Labels(NamedTuple):
+    """What :func:`_labels` finds on the grid."""
+
+    label: np.ndarray  # every node's: 0 outside, p + 1 in piece p
+    filled: np.ndarray  # the nodes of slits that were filled (module notes)
+    overlap: np.ndarray  # the nodes inside two pieces or more, as pairs (k, 2) of the two most inside pieces
+    gaps: np.ndarray  # the filled nodes as pairs of the two pieces nearest them
+    by_slit: np.ndarray  # the nodes whose edges are bisected with the slits closed (:func:`_winding_crossing`)
+    slit: float  # the widest slit that is closed
+
+
+def _labels(pieces, nodes: np.ndarray, shape, h: float) -> _Labels:
+    """The label of every node, and the slits between the pieces that are closed (module notes).
+
+    A slit is closed where it is narrower than the pieces' slits are for the most part (Cell Fracture's
+    margin leaves one width between every two neighbours) by half again, between a quarter cell and a cell:
+    a slit node within that of two different pieces is filled (it takes the nearer) if a closing by one cell
+    fills it (left open, one beside a wall was a bubble of B inside the object) or if it lies between the
+    two (at a slit's mouth the closing leaves the node whose neighbour above is outside, and B dipped into
+    every crack there). Where the pieces keep apart (their usual slit is wider than a sixth of a cell), the
+    nodes by a slit (filled, or within a cell of two pieces, inside or out) have their edges bisected with
+    the slits closed; pieces that touch (a margin of 0) are contoured as they are."""
     W = np.zeros((len(pieces), len(nodes)))
     for p, (PV, PF) in enumerate(pieces):
         lo, hi = PV.min(axis=0), PV.max(axis=0)
@@ -117,29 +142,56 @@ def _labels(pieces, nodes: np.ndarray, shape, h: float) -> tuple[np.ndarray, np.
     top2 = np.sort(np.argsort(-W[:, in_two], axis=0)[:2].T, axis=1)
     inside = (W.sum(axis=0) > 0.5).reshape(shape)
     label = np.where(inside.ravel(), W.argmax(axis=0) + 1, 0).reshape(shape)
-    # fill slits between pieces: nodes that a closing by one cell fills and that lie within a quarter
-    # cell of two different pieces; they take the nearer piece
     closed = ndimage.binary_closing(inside, structure=ndimage.generate_binary_structure(3, 1), border_value=0)
-    filled = closed & ~inside
+    # the nodes of the cubes that the contour cuts (another label among their 26 neighbours): their edges
+    # are the contour's
+    mixed = ndimage.maximum_filter(label, size=3) != ndimage.minimum_filter(label, size=3)
+    filled = np.zeros_like(inside)
+    by_slit = np.zeros_like(inside)
     gaps = np.zeros((0, 2), np.int64)
-    if filled.any() and len(pieces) > 1:
-        at = np.flatnonzero(filled.ravel())
-        D = np.stack([igl.point_mesh_squared_distance(nodes[at], PV, PF)[0] for PV, PF in pieces])
+    widest = 0.25 * h
+    if mixed.any() and len(pieces) > 1:
+        at = np.flatnonzero(mixed.ravel())
+        X = nodes[at]
+        D = np.full((len(pieces), len(at)), np.inf)
+        C = np.zeros((len(pieces), len(at), 3))
+        for p, (PV, PF) in enumerate(pieces):  # the pieces within a cell only
+            near = np.flatnonzero(np.all((X >= PV.min(axis=0) - h) & (X <= PV.max(axis=0) + h), axis=1))
+            if len(near):
+                D[p, near], _, C[p, near] = igl.point_mesh_squared_distance(X[near], PV, PF)
         two = np.argsort(D, axis=0)[:2]
-        d2 = np.take_along_axis(D, two, axis=0)
-        slit = d2[1] < (0.25 * h) ** 2
-        filled.ravel()[at[~slit]] = False
+        rows = np.arange(len(at))
+        d = np.sqrt(np.maximum(D[two, rows], 0.0))
+        apart = np.linalg.norm(C[two[0], rows] - C[two[1], rows], axis=1)
+        # an outside node in a slit, a tenth of its width or more from either wall (a node on a piece's outer
+        # face beside a seam where two pieces touch lies on the segment to the other piece too)
+        out = ~inside.ravel()[at]
+        between = out & (d[1] < h) & (d.sum(axis=0) <= _BRIDGE * apart) & (d[0] >= 0.1 * apart)
+        if between.any():  # the pieces' usual slit, half again
+            widest = float(np.clip(1.5 * np.median(apart[between]), 0.25 * h, h))
+        slit = out & (d[1] < widest) & (closed.ravel()[at] | (between & (apart < widest)))
+        filled.ravel()[at[slit]] = True
+        if widest > 0.25 * h:  # the pieces keep apart (a margin): their slits are closed in the contour too
+            by_slit.ravel()[at[slit | (d[1] < h)]] = True
         label.ravel()[at[slit]] = two[0, slit] + 1
         gaps = np.sort(two[:, slit].T, axis=1)
-    else:
-        filled[:] = False
-    return label, filled, top2, gaps
+    return _Labels(label, filled, top2, gaps, by_slit, widest)
 
 
-def _winding_crossing(pieces, h: float):
+def _winding_crossing(pieces, h: float, by_slit: np.ndarray | None = None, origin: np.ndarray | None = None,
+                      widest: float = 0.0):
     """The crossing of a grid edge for :func:`~fracture.mesh.multilabel.contour_labels`: where the edge
     leaves the piece at its inside end, i.e. where that piece's winding number stops exceeding the
-    other end's piece's (or the pieces' sum stops exceeding 1/2, toward the outside), by bisection."""
+    other end's piece's (or the pieces' sum stops exceeding 1/2, toward the outside), by bisection.
+
+    An edge with an end by a slit (``by_slit``, on the grid at ``origin``: :func:`_labels`) is bisected
+    with the slits narrower than ``widest`` closed: a point in no piece lies in a slit when it lies between
+    its closest points on its two nearest pieces, and in a piece rather than another where it is nearer to
+    it (:func:`_in_closed_slit`). So B spans a slit's mouth at the level of the pieces' outer faces and the
+    crack runs in the slit's middle: winding numbers are 0 across a slit, and an edge from outside through
+    a slit's mouth to the piece beyond put B on the slit's far wall, a groove along every crack whose
+    creases crossed the refined cracks' traces when Cell Fracture's margin left slits a fifth of a cell wide.
+    """
     boxes = [(PV.min(axis=0) - 2 * h, PV.max(axis=0) + 2 * h) for PV, _ in pieces]
 
     def crossing(U, W, la, lb):
@@ -148,6 +200,11 @@ def _winding_crossing(pieces, h: float):
         owner = np.where(inner_u, la, lb) - 1
         other = np.where(inner_u, lb, la) - 1  # -1: outside
         n = len(P0)
+        slit = np.zeros(n, bool)
+        if by_slit is not None and by_slit.any():
+            for P in (U, W):
+                ijk = np.rint((P - origin) / h).astype(np.int64)
+                slit |= by_slit[tuple(ijk.T)]
         lo, hi = np.zeros(n), np.ones(n)
         for _ in range(_BISECTIONS):
             mid = 0.5 * (lo + hi)
@@ -162,11 +219,31 @@ def _winding_crossing(pieces, h: float):
                 w_in[near[owner[near] == p]] = w[owner[near] == p]
                 w_out[near[other[near] == p]] = w[other[near] == p]
             inside = np.where(other >= 0, w_in > w_out, total > 0.5)
+            at = np.flatnonzero(slit & (np.maximum(w_in, w_out) < 0.5) & (total < 0.5))  # in no piece
+            if len(at):
+                inside[at] = _in_closed_slit(pieces, X[at], owner[at], other[at], widest)
             lo, hi = np.where(inside, mid, lo), np.where(inside, hi, mid)
         t = 0.5 * (lo + hi)
         return np.where(inner_u, t, 1.0 - t)
 
     return crossing
+
+
+def _in_closed_slit(pieces, X: np.ndarray, owner: np.ndarray, other: np.ndarray, widest: float) -> np.ndarray:
+    """For points ``X`` in no piece on edges by a slit, whether they lie on ``owner``'s side with the slits
+    closed: toward the outside (``other`` -1), within a slit (:data:`_BRIDGE`) narrower than ``widest``;
+    toward another piece, nearer to the owner than to it."""
+    D = np.full((len(pieces), len(X)), np.inf)
+    C = np.zeros((len(pieces), len(X), 3))
+    for p, (PV, PF) in enumerate(pieces):
+        D[p], _, C[p] = igl.point_mesh_squared_distance(X, PV, PF)
+    rows = np.arange(len(X))
+    two = np.argsort(D, axis=0)[:2]
+    d = np.sqrt(np.maximum(D[two, rows], 0.0))
+    apart = np.linalg.norm(C[two[0], rows] - C[two[1], rows], axis=1)
+    bridged = (d.sum(axis=0) <= _BRIDGE * apart) & (apart < widest)
+    nearer = D[owner, rows] < np.where(other >= 0, D[np.maximum(other, 0), rows], np.inf)
+    return np.where(other >= 0, nearer, bridged)
 
 
 def _check_tiling(label, overlap, gaps, names, h, where) -> str | None:
@@ -221,7 +298,8 @@ def label_tiling(V: np.ndarray, polygons: list[list[np.ndarray]], names: list[st
         origin = lo - 1.5 * h
         shape = tuple(int(s) for s in np.ceil((hi - lo) / h).astype(int) + 4)
         grid = np.stack(np.meshgrid(*[np.arange(s) for s in shape], indexing="ij"), -1).reshape(-1, 3)
-        label, filled, overlap, gaps = _labels(pieces, origin + grid * h, shape, h)
+        found = _labels(pieces, origin + grid * h, shape, h)
+        label, filled, overlap, gaps = found.label, found.filled, found.overlap, found.gaps
         present = np.bincount(label.ravel(), minlength=len(pieces) + 1)[1:] > 0
         if present.all():
             break
@@ -241,7 +319,8 @@ def label_tiling(V: np.ndarray, polygons: list[list[np.ndarray]], names: list[st
     if len(kept) < len(pieces):
         notes.append("left out pieces thinner than a grid cell ({:.3g}) everywhere: {}".format(
             h, ", ".join(repr(names[p]) for p in np.flatnonzero(~present))))
-    c = contour_labels(label, origin, np.full(3, h), _winding_crossing(pieces, h))
+    c = contour_labels(label, origin, np.full(3, h), _winding_crossing(pieces, h, found.by_slit, origin,
+                                                                      found.slit))
     X, FF, sides, BF, bpiece = c.V, c.fracture_F, c.sides, c.exterior_F, c.exterior_piece
     X, FF, sides = coarsen_sheets(X, FF, sides)
     X, FF, sides, BF, bpiece, pinholes = close_pinholes(X, FF, sides, BF, bpiece, h)
