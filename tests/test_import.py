@@ -308,6 +308,31 @@ def test_slits_left_by_cell_fractures_margin_are_closed_flush_with_the_surface()
     assert np.median(off) <= m and off.max() <= 0.15
 
 
+def test_the_rounding_of_the_files_is_found():
+    from fracture.coarse.mesh_sequence import coordinate_quantum
+
+    V = np.random.default_rng(0).random((500, 3)) * 0.03
+    assert coordinate_quantum(np.round(V, 6)) == 1e-6  # a text file's %.6f
+    assert coordinate_quantum(np.round(V, 6).astype(np.float32).astype(float)) == 1e-6  # ... read as singles
+    assert coordinate_quantum(V) == 0.0  # exact doubles
+    far = (V + 1000.0).astype(np.float32).astype(float)  # singles far from the origin (a USD's points)
+    assert coordinate_quantum(far) == np.spacing(np.float32(1000.03))
+
+
+def test_a_small_object_written_with_six_decimals_moves_rigidly(tmp_path):
+    """The sample a hundred times smaller (3.5 cm across), written with Blender's 6 decimals: the rounding is
+    5e-7, more than the rigid test's 1e-5 of the diagonal, and every piece was fitted with a lattice."""
+    d = tmp_path / "small"
+    d.mkdir()
+    for path in sorted(SAMPLE.glob("*.obj"))[:10]:
+        lines = [f"v {' '.join(f'{0.01 * float(x):.6f}' for x in l.split()[1:4])}" if l.startswith("v ") else l
+                 for l in path.read_text().splitlines()]
+        (d / path.name).write_text("\n".join(lines) + "\n")
+    cf, extra = load_coarse_sequence(d)
+    assert not any("do not move rigidly" in n for n in cf.notes), cf.notes
+    assert extra["rigid_residual"].max() < 5e-6
+
+
 def test_a_narrow_slit_between_pieces_is_filled_and_noted(tmp_path):
     d = _copy_sample(tmp_path)
     # move one corner piece away from its neighbours along the cube's diagonal

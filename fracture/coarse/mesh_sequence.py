@@ -302,6 +302,26 @@ def _compact(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return V[used], inverse.reshape(F.shape)
 
 
+def coordinate_quantum(V: np.ndarray) -> float:
+    """The step the coordinates ``V`` were rounded to as they were written: ``10^-d`` for the fewest decimals
+    ``d`` (up to 9) that write them all (a text file's ``%.6f``), at least the spacing of single-precision
+    numbers at their largest magnitude when they are all such numbers (a binary PLY, USD's points); 0 when
+    they are neither (exact doubles)."""
+    V = np.asarray(V, np.float64).ravel()
+    if not len(V):
+        return 0.0
+    single = bool(np.array_equal(V, V.astype(np.float32)))
+    spacing = float(np.spacing(np.float32(np.abs(V).max()))) if single else 0.0
+    for d in range(10):  # a written decimal read back carries the double's (or the single's) own error only
+        step = 10.0 ** -d
+        if step <= 2.0 * spacing:
+            break
+        scaled = V / step
+        if np.abs(scaled - np.rint(scaled)).max() <= 1e-3 + spacing / step:
+            return step
+    return spacing
+
+
 def up_axis_of(frames: list[MeshFrame]) -> str | None:
     """The up axis of an animation of falling pieces: the axis along which their centroids moved most,
     provided they moved down it by more than 1 % of the object's size; None when they did not."""
@@ -364,16 +384,21 @@ def coarse_from_frames(frames: list[MeshFrame], lattice: int = 2, separation: fl
     nodes = np.empty((n_frames, n_pieces, lattice, lattice, lattice, 3))
     residual = np.zeros((n_pieces, n_frames))
     rigid = np.zeros((n_pieces, n_frames))
+    # a rigid motion of points the file rounded is rigid to within the rounding: each coordinate of the rest
+    # pose and of the frame off by half a step, a point by sqrt(3) / 2 of it, the fit's largest error by twice
+    # that (a small object written with 6 decimals: every piece was fitted with a lattice)
+    quantum = max(coordinate_quantum(frame.V) for frame in frames)
+    rigid_tolerance = max(tol.rigid_fit * diag, np.sqrt(3.0) * quantum)
     for p, source in enumerate(shared.kept.tolist()):
         vids = rest.piece_vertices(source)
         X = rest.V[vids]
         lo[p], hi[p] = lattice_box(X)
         for t, frame in enumerate(frames):
             nodes[t, p], residual[p, t], rigid[p, t] = fit_lattice(
-                X, frame.V[vids], lo[p], hi[p], lattice, rigid_tolerance=tol.rigid_fit * diag)
+                X, frame.V[vids], lo[p], hi[p], lattice, rigid_tolerance=rigid_tolerance)
     animation = CoarseAnimation(lo, hi, nodes)
     notes = list(shared.notes)
-    deforming = np.flatnonzero(rigid.max(axis=1) > tol.rigid_fit * diag)
+    deforming = np.flatnonzero(rigid.max(axis=1) > rigid_tolerance)
     if len(deforming):
         notes.append(f"pieces that do not move rigidly, fitted with a {lattice}^3 lattice: "
                      + ", ".join(names[p] for p in deforming))
