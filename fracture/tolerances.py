@@ -19,6 +19,10 @@ tol = SimpleNamespace(
 # as rigid; files round to 6 decimals.
 tol.rigid_fit = 1e-5
 
+# A decimal written to a file and read back lies within this fraction of its last digit of a whole number of
+# them (the double's, or the single's, own error only): the file was written with that many decimals.
+tol.decimal = 1e-3
+
 # Repairs that move points by less than this (relative to the diagonal: the
 # files' rounding) are not worth a note in the manifest.
 tol.report = 1e-5

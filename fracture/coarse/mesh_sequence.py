@@ -317,7 +317,7 @@ def coordinate_quantum(V: np.ndarray) -> float:
         if step <= 2.0 * spacing:
             break
         scaled = V / step
-        if np.abs(scaled - np.rint(scaled)).max() <= 1e-3 + spacing / step:
+        if np.abs(scaled - np.rint(scaled)).max() <= tol.decimal + spacing / step:
             return step
     return spacing
 

@@ -291,7 +291,7 @@ def label_tiling(V: np.ndarray, polygons: list[list[np.ndarray]], names: list[st
     pieces = _piece_triangles(V, polygons)
     lo, hi = V.min(axis=0), V.max(axis=0)
     used = np.unique(np.concatenate([np.concatenate(p) for p in polygons]))
-    across = _ACROSS * float((hi - lo).max()) / max(thinnest_extent(V[used]), 1e-12)
+    across = _ACROSS * float((hi - lo).max()) / max(thinnest_extent(V[used]), tol.zero)
     cells = max(cells, min(_MOST_CELLS, int(np.ceil(across))))
     for n in (cells, 2 * cells):  # a piece thinner than a cell everywhere: try once at half the cell size
         h = float((hi - lo).max()) / n
