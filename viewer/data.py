@@ -103,12 +103,10 @@ class RunData:
     @property
     def seconds_per_frame(self) -> float:
         """How long one frame of the run's animation lasts: as its USD file plays it (the input's frame step over
-        the frame rate, :func:`fracture.io.usd.usd_timing`)."""
-        from fracture.io.usd import usd_timing
+        the frame rate, :func:`fracture.io.usd.run_usd_timing`)."""
+        from fracture.io.usd import run_usd_timing
 
-        coarse = self.manifest.get("stats", {}).get("coarse", {})
-        timing = usd_timing((self.config.get("animate") or {}).get("fps"),
-                            **{k: coarse.get(k) for k in ("first_frame", "frame_step", "fps", "meters_per_unit")})
+        timing = run_usd_timing(self.config, self.manifest)
         return timing["frame_step"] / timing["fps"]
 
     @property

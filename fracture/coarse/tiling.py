@@ -118,7 +118,7 @@ class _Labels(NamedTuple):
     overlap: np.ndarray  # the nodes inside two pieces or more, as pairs (k, 2) of the two most inside pieces
     gaps: np.ndarray  # the filled nodes as pairs of the two pieces nearest them
     by_slit: np.ndarray  # the nodes whose edges are bisected with the slits closed (:func:`_winding_crossing`)
-    slit: float  # the widest slit that is closed
+    widest: float  # the widest slit that is closed
 
 
 def _labels(pieces, nodes: np.ndarray, shape, h: float) -> _Labels:
@@ -152,21 +152,11 @@ def _labels(pieces, nodes: np.ndarray, shape, h: float) -> _Labels:
     widest = 0.25 * h
     if mixed.any() and len(pieces) > 1:
         at = np.flatnonzero(mixed.ravel())
-        X = nodes[at]
-        D = np.full((len(pieces), len(at)), np.inf)
-        C = np.zeros((len(pieces), len(at), 3))
-        for p, (PV, PF) in enumerate(pieces):  # the pieces within a cell only
-            near = np.flatnonzero(np.all((X >= PV.min(axis=0) - h) & (X <= PV.max(axis=0) + h), axis=1))
-            if len(near):
-                D[p, near], _, C[p, near] = igl.point_mesh_squared_distance(X[near], PV, PF)
-        two = np.argsort(D, axis=0)[:2]
-        rows = np.arange(len(at))
-        d = np.sqrt(np.maximum(D[two, rows], 0.0))
-        apart = np.linalg.norm(C[two[0], rows] - C[two[1], rows], axis=1)
+        two, d, apart, _ = _two_nearest(pieces, nodes[at], h)
         # an outside node in a slit, a tenth of its width or more from either wall (a node on a piece's outer
         # face beside a seam where two pieces touch lies on the segment to the other piece too)
         out = ~inside.ravel()[at]
-        between = out & (d[1] < h) & (d.sum(axis=0) <= _BRIDGE * apart) & (d[0] >= 0.1 * apart)
+        between = out & (d[1] < h) & _between(d, apart) & (d[0] >= 0.1 * apart)
         if between.any():  # the pieces' usual slit, half again
             widest = float(np.clip(1.5 * np.median(apart[between]), 0.25 * h, h))
         slit = out & (d[1] < widest) & (closed.ravel()[at] | (between & (apart < widest)))
@@ -221,7 +211,7 @@ def _winding_crossing(pieces, h: float, by_slit: np.ndarray | None = None, origi
             inside = np.where(other >= 0, w_in > w_out, total > 0.5)
             at = np.flatnonzero(slit & (np.maximum(w_in, w_out) < 0.5) & (total < 0.5))  # in no piece
             if len(at):
-                inside[at] = _in_closed_slit(pieces, X[at], owner[at], other[at], widest)
+                inside[at] = _in_closed_slit(pieces, X[at], owner[at], other[at], widest, h)
             lo, hi = np.where(inside, mid, lo), np.where(inside, hi, mid)
         t = 0.5 * (lo + hi)
         return np.where(inner_u, t, 1.0 - t)
@@ -229,19 +219,35 @@ def _winding_crossing(pieces, h: float, by_slit: np.ndarray | None = None, origi
     return crossing
 
 
-def _in_closed_slit(pieces, X: np.ndarray, owner: np.ndarray, other: np.ndarray, widest: float) -> np.ndarray:
-    """For points ``X`` in no piece on edges by a slit, whether they lie on ``owner``'s side with the slits
-    closed: toward the outside (``other`` -1), within a slit (:data:`_BRIDGE`) narrower than ``widest``;
-    toward another piece, nearer to the owner than to it."""
+def _two_nearest(pieces, X: np.ndarray, reach: float):
+    """Per point of ``X``, its two nearest pieces (``(2, k)``), its distances to them, how far apart its
+    closest points on them are, and its squared distance to every piece (inf beyond ``reach`` of its box)."""
     D = np.full((len(pieces), len(X)), np.inf)
     C = np.zeros((len(pieces), len(X), 3))
     for p, (PV, PF) in enumerate(pieces):
-        D[p], _, C[p] = igl.point_mesh_squared_distance(X, PV, PF)
+        near = np.flatnonzero(np.all((X >= PV.min(axis=0) - reach) & (X <= PV.max(axis=0) + reach), axis=1))
+        if len(near):
+            D[p, near], _, C[p, near] = igl.point_mesh_squared_distance(X[near], PV, PF)
     rows = np.arange(len(X))
     two = np.argsort(D, axis=0)[:2]
     d = np.sqrt(np.maximum(D[two, rows], 0.0))
-    apart = np.linalg.norm(C[two[0], rows] - C[two[1], rows], axis=1)
-    bridged = (d.sum(axis=0) <= _BRIDGE * apart) & (apart < widest)
+    return two, d, np.linalg.norm(C[two[0], rows] - C[two[1], rows], axis=1), D
+
+
+def _between(d: np.ndarray, apart: np.ndarray) -> np.ndarray:
+    """Points on the segment between their closest points on two pieces (:data:`_BRIDGE`)."""
+    return d.sum(axis=0) <= _BRIDGE * apart
+
+
+def _in_closed_slit(pieces, X: np.ndarray, owner: np.ndarray, other: np.ndarray, widest: float, h: float
+                    ) -> np.ndarray:
+    """For points ``X`` in no piece on edges by a slit, whether they lie on ``owner``'s side with the slits
+    closed: toward the outside (``other`` -1), within a slit (:func:`_between`) narrower than ``widest``;
+    toward another piece, nearer to the owner than to it (the pieces within two cells ``h`` of a point are
+    asked: an end of its edge, a diagonal of a cell at most, lies in the owner)."""
+    _, d, apart, D = _two_nearest(pieces, X, 2.0 * h)
+    rows = np.arange(len(X))
+    bridged = _between(d, apart) & (apart < widest)
     nearer = D[owner, rows] < np.where(other >= 0, D[np.maximum(other, 0), rows], np.inf)
     return np.where(other >= 0, nearer, bridged)
 
@@ -320,7 +326,7 @@ def label_tiling(V: np.ndarray, polygons: list[list[np.ndarray]], names: list[st
         notes.append("left out pieces thinner than a grid cell ({:.3g}) everywhere: {}".format(
             h, ", ".join(repr(names[p]) for p in np.flatnonzero(~present))))
     c = contour_labels(label, origin, np.full(3, h), _winding_crossing(pieces, h, found.by_slit, origin,
-                                                                      found.slit))
+                                                                      found.widest))
     X, FF, sides, BF, bpiece = c.V, c.fracture_F, c.sides, c.exterior_F, c.exterior_piece
     X, FF, sides = coarsen_sheets(X, FF, sides)
     X, FF, sides, BF, bpiece, pinholes = close_pinholes(X, FF, sides, BF, bpiece, h)

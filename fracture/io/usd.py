@@ -79,6 +79,14 @@ def usd_timing(configured_fps: float | None, first_frame: float | None = None, f
                 meters_per_unit=1.0 if meters_per_unit is None else float(meters_per_unit))
 
 
+def run_usd_timing(config: dict, manifest: dict) -> dict:
+    """:func:`usd_timing` of a finished run: its config's ``animate.fps`` and its manifest's
+    ``stats.coarse`` (the input's frame numbers, frame rate and unit; older runs say none)."""
+    coarse = manifest.get("stats", {}).get("coarse", {})
+    return usd_timing((config.get("animate") or {}).get("fps"),
+                      **{k: coarse.get(k) for k in ("first_frame", "frame_step", "fps", "meters_per_unit")})
+
+
 def write_pieces_usd(path: str | Path, names: Sequence[str], faces: Sequence[np.ndarray],
                      exterior: Sequence[np.ndarray], frames: Iterable[Sequence[np.ndarray]], *,
                      rest: Sequence[np.ndarray] | None = None, size: float | None = None,

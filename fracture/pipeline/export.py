@@ -37,7 +37,7 @@ def export_run(run: str | Path, fmt: str = "usd", out: str | Path | None = None)
     """
     from fracture.io.ply import read_ply
     from fracture.pieces.transfer import frame_points, load_transfer, rest_points
-    from fracture.io.usd import usd_timing, write_pieces_usd
+    from fracture.io.usd import run_usd_timing, write_pieces_usd
 
     run = Path(run)
     if fmt not in FORMATS:
@@ -58,11 +58,9 @@ def export_run(run: str | Path, fmt: str = "usd", out: str | Path | None = None)
                              f"expected {transfer.offsets[c + 1] - transfer.offsets[c]}, with a face property exterior)")
         faces.append(F)
         exterior.append(np.asarray(face_data["exterior"]).astype(bool))
-    cfg = yaml.safe_load(_need(run, layout.CONFIG).read_text())
-    fps = (cfg.get("animate") or {}).get("fps")
-    coarse = json.loads(_need(run, layout.MANIFEST).read_text()).get("stats", {}).get("coarse", {})
-    up = coarse.get("up_axis", "z")
-    timing = usd_timing(fps, **{k: coarse.get(k) for k in ("first_frame", "frame_step", "fps", "meters_per_unit")})
+    manifest = json.loads(_need(run, layout.MANIFEST).read_text())
+    up = manifest.get("stats", {}).get("coarse", {}).get("up_axis", "z")
+    timing = run_usd_timing(yaml.safe_load(_need(run, layout.CONFIG).read_text()), manifest)
     out = Path(out) if out is not None else run / layout.USD
     if out.suffix not in (".usd", ".usdc", ".usda"):
         raise InputError(f"export: {out}: a USD file name ends in .usd, .usdc or .usda")
