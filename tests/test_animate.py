@@ -156,6 +156,47 @@ def test_short_edges_of_b_are_collapsed_and_its_solid_kept():
     assert none == 0 and V2 is BV and F2 is BF
 
 
+
+def test_short_rim_edges_beside_a_refused_trace_are_collapsed_and_the_rest_of_the_rim_kept(monkeypatch):
+    """Two boundary edges of the slanted cut split into short stretches (a rim that doubles back on itself
+    near a crease of B leaves such stretches, and on a Blender cube with a margin of 0.02 the traces there
+    were walked into each other), one on the top face and one on the bottom, and the trace of an edge
+    beside the top one refused while a short edge is near it: the short edges within reach of the refused
+    trace are collapsed, the bottom ones kept, B is cut again and the pieces close with their volumes."""
+    from fracture.errors import InputError
+    from fracture.mesh.topology import boundary_edges
+    import fracture.pieces.imprint as imprint
+
+    BV, BF, mesh = slanted_cut()
+    h = imprint.median_edge(BV, BF)
+    E = boundary_edges(mesh.F)
+
+    def stretch(z):  # an edge of the rim on the face z, split at its middle and again just after
+        a, b = next(e for e in E.tolist() if (mesh.V[e, 2] == z).all() and 0.2 < mesh.V[e, 1].min() < 0.6)
+        m = mesh.split_edges([[a, b]], [0.5])[0]
+        return a, m, mesh.split_edges([[m, b]], [0.05])[0]
+
+    top, bottom = stretch(1.0), stretch(0.0)
+    refused = (top[0], top[1])
+    embed, refusals = imprint._embed, []
+
+    def refuse_while_short(BV, BF, E, *rest):
+        length = np.linalg.norm(mesh.V[E[:, 1]] - mesh.V[E[:, 0]], axis=1)
+        near = np.linalg.norm(mesh.V[E].mean(axis=1) - mesh.V[list(refused)].mean(axis=0), axis=1) < 2 * h
+        if (near & (length < imprint.RIM_EDGE * h)).any():
+            refusals.append(1)
+            raise imprint._TraceFailed(InputError("animate: two of its cracks cross"), refused)
+        return embed(BV, BF, E, *rest)
+
+    monkeypatch.setattr(imprint, "_embed", refuse_while_short)
+    im = imprint_boundary(BV, BF, mesh)
+    assert im.rim_collapsed >= 1 and im.merged_off_b == 0 and len(refusals) == 3  # one per order, then embedded
+    assert top[2] not in mesh.F and bottom[2] in mesh.F  # the bottom's short edge is beyond reach
+    pieces = build_pieces(im, mesh, 2, lambda faces: np.zeros(len(faces), np.int64))
+    volumes = [mesh_checks(V, F) for _, V, F in pieces.parts]
+    assert all(v["closed_oriented"] for v in volumes)
+    assert [v["volume"] for v in volumes] == pytest.approx([0.42, 0.58], abs=1e-12)
+
 def test_s_is_imprinted_again_on_b_without_its_short_edges_when_it_cannot_be_as_b_is(monkeypatch):
     """When S cannot be imprinted on B as it is (on random Blender PLY exports two cracks' traces crossed
     over bumps of B a few hundredths of a cell across), B's short edges are collapsed and S, as it was

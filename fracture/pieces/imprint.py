@@ -55,13 +55,18 @@ HAIRPIN = 10.0
 BRIDGE_DEPTH = 0.2
 
 # A boundary vertex of S farther from B than this fraction of B's median edge is off B (a collision of the
-# refinement kept it there); a trace from one that cannot be embedded is repaired (_merge_off_b) at most
-# _REPAIRS times.
+# refinement kept it there); a trace that cannot be embedded is repaired at most _REPAIRS times (_merge_off_b
+# from such a vertex, else _simplify_rim_near).
 OFF_B = 1e-3
 _REPAIRS = 4
 
 # B's edges shorter than this fraction of its median edge are collapsed when S cannot be imprinted as B is.
 SHORT_EDGE = 0.1
+
+# Where the trace of a boundary edge of S cannot be embedded and neither end is off B, S's boundary edges
+# shorter than RIM_EDGE of B's median edge within RIM_REACH of it are collapsed (_simplify_rim_near).
+RIM_EDGE = 0.2
+RIM_REACH = 2.0
 
 # What a user can change when S cannot be imprinted (said after each such refusal).
 _RETRY = "; a different seed or refine.max_triangles gives other refined cracks there"
@@ -88,6 +93,9 @@ class Imprint:
     joined_b : int
         B's vertices that went where its short edges were collapsed before S could be imprinted (0: B as
         it was given).
+    rim_collapsed : int
+        Short boundary edges of S collapsed beside traces that could not be embedded
+        (:func:`_simplify_rim_near`).
     """
 
     V: np.ndarray
@@ -98,6 +106,7 @@ class Imprint:
     origin: np.ndarray
     merged_off_b: int = 0
     joined_b: int = 0
+    rim_collapsed: int = 0
 
 
 class _Surface:
@@ -425,8 +434,10 @@ def _chords_would_cross(mesh: FractureSurface, count: np.ndarray, ears: np.ndarr
         bad[np.searchsorted(ears, f[crossing])] = True
 
 
-def collapse_short_boundary(mesh: FractureSurface, length: float) -> int:
-    """Merge the ends of boundary edges shorter than ``length`` (the triangle on the edge goes away).
+def collapse_short_boundary(mesh: FractureSurface, length: float, near: tuple[np.ndarray, float] | None = None
+                            ) -> int:
+    """Merge the ends of boundary edges shorter than ``length`` (the triangle on the edge goes away); with
+    ``near = (point, reach)`` only those whose midpoints lie within ``reach`` of ``point``, shortest first.
 
     Two boundary vertices a hair apart cannot both be inserted into B without
     slivers that cross each other. An edge is collapsed only when its ends
@@ -434,7 +445,13 @@ def collapse_short_boundary(mesh: FractureSurface, length: float) -> int:
     condition), which keeps the surface's topology. Returns the collapses.
     """
     E = row_edges(mesh.F, edge_table(mesh.F, len(mesh.V)).boundary_rows)
-    short = np.flatnonzero(np.linalg.norm(mesh.V[E[:, 1]] - mesh.V[E[:, 0]], axis=1) < length)
+    length_of = np.linalg.norm(mesh.V[E[:, 1]] - mesh.V[E[:, 0]], axis=1)
+    short = np.flatnonzero(length_of < length)
+    if near is not None:
+        point, reach = near
+        mid = 0.5 * (mesh.V[E[short, 0]] + mesh.V[E[short, 1]])
+        short = short[np.linalg.norm(mid - point, axis=1) <= reach]
+        short = short[np.argsort(length_of[short], kind="stable")]
     merged = np.arange(len(mesh.V))  # where each vertex went
     done = 0
     for i in short.tolist():
@@ -519,8 +536,10 @@ def imprint_boundary(BV: np.ndarray, BF: np.ndarray, mesh: FractureSurface, wher
     distance to it plus :data:`SNAP` of a B triangle). New vertices of
     ``mesh`` are recorded in its barycentric tree. Where a trace cannot be
     embedded from a boundary vertex off B, that vertex is merged into its
-    neighbour and the boundary embedded again (:func:`_merge_off_b`, at most
-    :data:`_REPAIRS` times; the result says how many). If S still cannot be
+    neighbour and the boundary embedded again (:func:`_merge_off_b`); where
+    both ends are on B, S's short boundary edges near it are collapsed
+    (:func:`_simplify_rim_near`); at most :data:`_REPAIRS` repairs, the
+    result says how many of each. If S still cannot be
     imprinted, B's edges shorter than :data:`SHORT_EDGE` of its median edge
     (bumps of a few hundredths of a cell that the contour leaves at B's
     creases, over which two cracks' traces crossed on random Blender
@@ -554,7 +573,7 @@ def _imprint(BV: np.ndarray, BF: np.ndarray, mesh: FractureSurface, where: str) 
     collapse_short_boundary(mesh, 10 * SNAP * h)
     subdivide_boundary(mesh, exterior, CHORD * h)
     split_bridge_edges(mesh, exterior)
-    merged = 0
+    merged = collapsed = repairs = 0
     while True:
         rows = edge_table(mesh.F, len(mesh.V)).boundary_rows
         sface, E = rows // 3, row_edges(mesh.F, rows)  # edges as directed in their triangle
@@ -565,11 +584,18 @@ def _imprint(BV: np.ndarray, BF: np.ndarray, mesh: FractureSurface, where: str) 
             surf, to_b, chains = _embed_in_some_order(BV, BF, E, verts, f0, closest, length, where)
             break
         except _TraceFailed as failed:
+            if repairs == _REPAIRS:
+                raise failed.error from None
             off = np.zeros(len(mesh.V))
             off[verts] = np.sqrt(d2)
-            if merged == _REPAIRS or not _merge_off_b(mesh, failed.edge, off, OFF_B * h):
-                raise failed.error from None
-            merged += 1
+            if _merge_off_b(mesh, failed.edge, off, OFF_B * h):
+                merged += 1
+            else:
+                done = _simplify_rim_near(mesh, failed.edge, h)
+                if not done:
+                    raise failed.error from None
+                collapsed += done
+            repairs += 1
     # S's boundary vertices take their positions on B
     mesh.V[verts] = np.array([surf.V[to_b[v]] for v in verts.tolist()])
 
@@ -577,7 +603,7 @@ def _imprint(BV: np.ndarray, BF: np.ndarray, mesh: FractureSurface, where: str) 
     cut_edges, cut_faces, to_fracture = _split_fracture_edges(mesh, E, sface, chains, BV_cut, to_b)
     return Imprint(V=BV_cut, F=np.array(surf.F, np.int64), to_fracture=to_fracture,
                    cut_edges=cut_edges, cut_faces=cut_faces, origin=np.array(surf.origin, np.int64),
-                   merged_off_b=merged)
+                   merged_off_b=merged, rim_collapsed=collapsed)
 
 
 def median_edge(BV: np.ndarray, BF: np.ndarray) -> float:
@@ -641,6 +667,19 @@ def _merge_off_b(mesh: FractureSurface, edge: tuple[int, int], off: np.ndarray, 
         return False
     gone, kept = (a, b) if off[a] >= off[b] else (b, a)
     return _collapse(mesh, kept, gone)
+
+
+def _simplify_rim_near(mesh: FractureSurface, edge: tuple[int, int], h: float) -> int:
+    """Collapse S's boundary edges shorter than :data:`RIM_EDGE` of ``h`` (B's median edge) within
+    :data:`RIM_REACH` of ``h`` of the boundary ``edge`` whose trace could not be embedded; how many.
+
+    Where the refined rim doubles back on itself on B (a zigzag a few thousandths of a cell long, or two
+    stretches of one rim running side by side a hundredth of a cell apart, left by collisions at a crease
+    of B), the traces of its edges are walked into each other. Coarser there, the rim is a single curve
+    again: on Blender Cell Fracture exports with a margin of 0.02 and on a plank-shaped torus the pieces
+    then closed, and the rest of the rim keeps its resolution."""
+    point = mesh.V[list(edge)].mean(axis=0)
+    return collapse_short_boundary(mesh, RIM_EDGE * h, near=(point, RIM_REACH * h))
 
 
 def _collapse(mesh: FractureSurface, kept: int, gone: int) -> bool:

@@ -64,6 +64,10 @@ def animate_stage(ctx: RunContext) -> None:
             ctx.notes.append(f"animate: {im.merged_off_b} boundary {'vertices' if im.merged_off_b > 1 else 'vertex'} of the "
                              "refined surface that collisions had kept off the object's surface merged into a "
                              "neighbour, so that the cracks could be cut into it")
+        if im.rim_collapsed:
+            ctx.notes.append(f"animate: {im.rim_collapsed} short {'edges' if im.rim_collapsed > 1 else 'edge'} of the "
+                             "refined surface's boundary collapsed where its cracks could not be cut into the object's "
+                             "surface as they were (a boundary that doubles back on itself there)")
         if im.joined_b:
             ctx.notes.append(f"animate: the cracks could not be cut into the object's surface as it was; its edges "
                              f"shorter than a tenth of its typical edge (slivers and bumps of the import's contour) were "
@@ -113,7 +117,8 @@ def animate_stage(ctx: RunContext) -> None:
     ctx.counts.update(pieces=pieces.n_pieces, piece_triangles=int(sum(len(f) for f in pieces.faces)),
                       frames_written=transfer.n_frames if opts.obj_frames else 0)
     ctx.stats["animate"] = {**checks, "boundary_vertices_merged_off_b": im.merged_off_b,
-                            "exterior_vertices_joined": im.joined_b, "small_holes_closed": holes}
+                            "exterior_vertices_joined": im.joined_b,
+                            "boundary_edges_collapsed": im.rim_collapsed, "small_holes_closed": holes}
 
 
 def _pieces(ctx: RunContext, BV: np.ndarray, BF: np.ndarray):
