@@ -10,7 +10,7 @@ import pytest
 
 from conftest import SAMPLE, mesh_area as area
 from fracture.pipeline import runner
-from fracture.coarse.surface import special_edges
+from fracture.coarse.surface import SourceFrames, special_edges
 from fracture.mesh.topology import closed_oriented, fan, signed_volume, unique_edges
 from fracture.pipeline.config import load_config
 from fracture.errors import InputError
@@ -424,6 +424,10 @@ def test_the_frame_numbers_of_the_files_are_kept(tmp_path):
     cf, _ = load_coarse_sequence(d)
     assert (cf.source.first_frame, cf.source.frame_step, cf.source.fps, cf.source.meters_per_unit) == (
         10, 2, None, None)
+    assert cf.source.file_numbers(3) == [10, 12, 14]  # the output frames' files are numbered so
+    # numbers that are not whole (USD time codes half a frame apart) or below 0: the files from 1
+    assert SourceFrames(first_frame=1.0, frame_step=0.5).file_numbers(3) == [1, 2, 3]
+    assert SourceFrames(first_frame=-2.0).file_numbers(2) == [1, 2]
 
 
 def test_frames_exported_every_other_frame_are_accepted(tmp_path):

@@ -341,11 +341,14 @@ def test_a_usd_in_centimetres_at_30_fps_from_frame_1001_comes_back_so(tmp_path):
     _write_points_usd(usd, frames, frames[0].names, start=1001, fps=30.0, meters_per_unit=0.01, scale=100.0)
     cfg_path = tmp_path / "c.yaml"
     cfg_path.write_text(f"input: {{kind: usd, usd: {usd}}}\ngrid: {{resolution: 24}}\n")
-    cfg = load_config(cfg_path, ["refine.max_triangles=3000", "refine.iterations=2", "animate.check_samples=1000"])
+    cfg = load_config(cfg_path, ["refine.max_triangles=3000", "refine.iterations=2", "animate.check_samples=1000",
+                                 "animate.obj_frames=true"])
     out = runner.run(cfg, tmp_path / "run", progress=False)
     coarse = json.loads((out / "manifest.json").read_text())["stats"]["coarse"]
     assert (coarse["first_frame"], coarse["frame_step"], coarse["fps"], coarse["meters_per_unit"]) == (
         1001, 1, 30, 0.01)
+    # the OBJ frames carry the shot's numbers too
+    assert sorted(p.name for p in (out / "frames").glob("*.obj")) == [f"frame_{k}.obj" for k in range(1001, 1013)]
     for path in (out / "animation/pieces.usdc", export_run(out, out=tmp_path / "again.usda")):
         stage = Usd.Stage.Open(str(path))
         assert UsdGeom.GetStageMetersPerUnit(stage) == 0.01 and stage.GetTimeCodesPerSecond() == 30

@@ -182,6 +182,14 @@ class SourceFrames:
     fps: float | None = None
     meters_per_unit: float | None = None
 
+    def file_numbers(self, n_frames: int) -> list[int]:
+        """The numbers of ``n_frames`` frames' files: the input's (a shot from 1001 gives frame_1001 on),
+        or 1, 2, ... where the input's are not whole non-negative numbers (USD time codes 0.5 apart)."""
+        numbers = self.first_frame + self.frame_step * np.arange(n_frames)
+        if len(numbers) and (numbers.min() >= 0) and np.all(numbers == np.round(numbers)):
+            return [int(k) for k in numbers]
+        return list(range(1, n_frames + 1))
+
 
 @dataclass
 class CoarseFracture:

@@ -54,9 +54,10 @@ def piece(c: int) -> str:
     return f"pieces/piece_{c:03d}.ply"
 
 
-def frame(t: int) -> str:
-    """All pieces at frame ``t`` (counted from 0; the file from 1)."""
-    return f"frames/frame_{t + 1:04d}.ply"
+def frame(number: int, suffix: str = ".ply") -> str:
+    """All pieces at the frame numbered ``number`` as the input numbers it
+    (:meth:`fracture.coarse.surface.SourceFrames.file_numbers`)."""
+    return f"frames/frame_{number:04d}{suffix}"
 
 
 def read_manifest(run: str | Path) -> dict:

@@ -5,7 +5,8 @@ Outputs:
 * ``pieces/piece_NNN.ply``: each piece in material space (vertex property
   ``fracture_time``, the frame from which it moves with its own piece;
   face property ``exterior``, 1 on B);
-* ``frames/frame_NNNN.obj`` (frames numbered from 1, as in Blender): every
+* ``frames/frame_NNNN.obj`` (frames numbered as the input's: a sequence's
+  file numbers, a USD file's time codes; from 1 where those are not whole): every
   piece as an object named like the coarse piece, ready for Blender's OBJ
   import; with ``animate.ply_frames`` also ``frames/frame_NNNN.ply`` (all
   pieces, face property ``piece``);
@@ -94,16 +95,17 @@ def animate_stage(ctx: RunContext) -> None:
             all_F = np.concatenate([F + transfer.offsets[c] for c, (_, _, F) in enumerate(local)])
             piece_of = np.repeat(np.arange(pieces.n_pieces, dtype=np.int32), [len(F) for _, _, F in local])
         gap = EarlyGap(transfer)
+        numbers = cf.source.file_numbers(transfer.n_frames)
         for t in range(transfer.n_frames):
             X = transfer.positions(t)
             if t == 0:
                 checks["hausdorff_first_frame_relative"] = hausdorff_to_b(pieces, transfer, X, BV, BF)
             gap.add(t, X)
             if opts.obj_frames:
-                writer.write(ctx.path(f"frames/frame_{t + 1:04d}.obj"),
-                             [transfer.piece(X, c) for c in range(pieces.n_pieces)], header=f"frame {t + 1}")
+                writer.write(ctx.path(layout.frame(numbers[t], ".obj")),
+                             [transfer.piece(X, c) for c in range(pieces.n_pieces)], header=f"frame {numbers[t]}")
             if opts.ply_frames:
-                write_ply(ctx.path(layout.frame(t)), X, all_F, face_data={"piece": piece_of})
+                write_ply(ctx.path(layout.frame(numbers[t])), X, all_F, face_data={"piece": piece_of})
             bar.update()
         checks["early_gap_max"] = gap.worst
         if opts.usd:
