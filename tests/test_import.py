@@ -269,6 +269,29 @@ def test_a_thin_plank_turned_any_way_keeps_every_piece():
     assert signed_volume(t.V, t.exterior_F) == pytest.approx(np.prod(size), rel=0.02)
 
 
+
+def test_a_ground_and_a_ball_exported_with_the_pieces_are_left_out():
+    """A Blender scene exported whole: the fractured plank's four pieces, a ground slab below it and a ball (a
+    box) thrown at it. Both touch no piece: they are left out with a note, and the import is the one
+    of the pieces alone (the ground's 20 m made the grid's cells 20 times coarser, and it became a piece)."""
+    from fracture.coarse.tiling import label_tiling
+
+    size = (6.0, 0.8, 0.5)
+    V, polygons = _plank_of_boxes([1.5, 1.7, 4.0], size, (0.0, 0.0, 0.0))
+    alone = label_tiling(V, polygons, ["a", "b", "c", "d"])
+    ground, _ = _plank_of_boxes([], (20.0, 20.0, 0.2), (0.0, 0.0, 0.0))
+    ball, _ = _plank_of_boxes([], (0.3, 0.3, 0.3), (0.0, 0.0, 0.0))
+    extra = [ground + (-7.0, -10.0, -1.2), ball + (3.0, 2.0, 0.1)]  # 1 and 1.2 from the plank
+    X = np.concatenate([V, *extra])
+    P = polygons + [[q + len(V) + 8 * k for q in polygons[0]] for k in range(2)]  # the first box's quads
+    t = label_tiling(X, P, ["a", "b", "c", "d", "Ground", "Ball"])
+    assert list(t.kept) == [0, 1, 2, 3]
+    assert t.notes[0].startswith("left out pieces that touch no other piece") and "'Ground', 'Ball'" in t.notes[0]
+    assert t.notes[1:] == alone.notes and t.cells == alone.cells
+    np.testing.assert_array_equal(t.exterior_F, alone.exterior_F)
+    np.testing.assert_array_equal(t.sides, alone.sides)
+    assert signed_volume(t.V, t.exterior_F) == pytest.approx(np.prod(size), rel=0.02)
+
 def test_slits_left_by_cell_fractures_margin_are_closed_flush_with_the_surface():
     """Cell Fracture's margin shrinks every piece from its neighbours: eight boxes tiling a cube of side 2 leave
     slits 0.02 wide (a third of a cell of the import's grid), turned. The import closes them: B is the cube, without a

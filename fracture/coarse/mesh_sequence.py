@@ -322,10 +322,11 @@ def coordinate_quantum(V: np.ndarray) -> float:
     return spacing
 
 
-def up_axis_of(frames: list[MeshFrame]) -> str | None:
-    """The up axis of an animation of falling pieces: the axis along which their centroids moved most,
-    provided they moved down it by more than 1 % of the object's size; None when they did not."""
-    first, last = frames[0].V, frames[-1].V
+def up_axis_of(frames: list[MeshFrame], vids: np.ndarray | None = None) -> str | None:
+    """The up axis of an animation of falling pieces (their vertices ``vids``, default all): the axis along
+    which their centroids moved most, provided they moved down it by more than 1 % of the object's size;
+    None when they did not."""
+    first, last = (frames[0].V, frames[-1].V) if vids is None else (frames[0].V[vids], frames[-1].V[vids])
     d = (last - first).mean(axis=0)
     size = diagonal(first)
     k = int(np.argmax(np.abs(d)))
@@ -373,9 +374,10 @@ def coarse_from_frames(frames: list[MeshFrame], lattice: int = 2, separation: fl
     from fracture.coarse.tiling import label_tiling
 
     rest = frames[0]
-    diag = diagonal(rest.V)
     shared = label_tiling(rest.V, rest.polygons, rest.names, source=str(rest.path))
     names = [rest.names[p] for p in shared.kept]
+    object_vids = np.concatenate([rest.piece_vertices(p) for p in shared.kept])
+    diag = diagonal(rest.V[object_vids])
     V, F = _compact(shared.V, shared.fracture_F)
     BV, BF = _compact(shared.V, shared.exterior_F)
 
@@ -403,7 +405,7 @@ def coarse_from_frames(frames: list[MeshFrame], lattice: int = 2, separation: fl
         notes.append(f"pieces that do not move rigidly, fitted with a {lattice}^3 lattice: "
                      + ", ".join(names[p] for p in deforming))
     if up_axis == "auto":
-        found = up_axis_of(frames)
+        found = up_axis_of(frames, object_vids)
         if found is None:
             notes.append("the pieces do not fall: the up axis is taken to be z")
         up_axis = found or "z"

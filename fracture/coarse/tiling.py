@@ -66,6 +66,11 @@ _OVERLAP_NODES = 10
 _BRIDGE = 1.02
 # Bisection steps for an edge's crossing (its place to 2^-this of a cell).
 _BISECTIONS = 12
+# A piece farther from every other piece than this fraction of the pieces' median box diagonal, and than
+# _APART_SLITS times the pieces' median distance to their nearest, is not part of the fractured object (a
+# ground, a projectile or a collider exported with it): it is left out, with a note.
+_APART = 0.25
+_APART_SLITS = 10.0
 
 
 @dataclass
@@ -85,7 +90,8 @@ class LabelTiling:
     exterior_piece : (k,) int
         The piece each B triangle belongs to.
     kept : (pieces,) int
-        The input pieces that take part (all but those thinner than a cell); pieces are numbered in this order.
+        The input pieces that take part (all but those thinner than a cell and those apart from the others:
+        :func:`apart_from_the_rest`); pieces are numbered in this order.
     cells : int
         Cells along the largest extent of the grid that was used.
     notes : list of str
@@ -99,6 +105,35 @@ class LabelTiling:
     kept: np.ndarray
     cells: int
     notes: list = field(default_factory=list)
+
+
+def apart_from_the_rest(pieces: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
+    """Which pieces ``(V, F)`` lie apart from all the others (:data:`_APART`), ``(len(pieces),)`` bool; none
+    when fewer than two would be left (the pieces then tile nothing, which the tiling says).
+
+    Pieces of one fractured object touch their neighbours (Cell Fracture's margin leaves a slit of a
+    hundredth of a piece or less); a ground below the object, or a ball thrown at it, is a piece a quarter
+    of a piece's size or more from every other (a piece of the object moved a twentieth of its size out of
+    place is still one of its pieces). Two pieces' distance is the least distance of
+    either's vertices to the other's triangles (libigl), asked only of pieces whose boxes come that close."""
+    n = len(pieces)
+    lo = np.array([V.min(axis=0) for V, _ in pieces])
+    hi = np.array([V.max(axis=0) for V, _ in pieces])
+    reach = _APART * float(np.median(np.linalg.norm(hi - lo, axis=1)))
+    nearest = np.full(n, np.inf)
+    for i in range(n):
+        near = np.flatnonzero((lo <= hi[i] + reach).all(axis=1) & (hi >= lo[i] - reach).all(axis=1))
+        for j in near[near > i].tolist():
+            (Vi, Fi), (Vj, Fj) = pieces[i], pieces[j]
+            d2 = min(igl.point_mesh_squared_distance(Vi, Vj, Fj)[0].min(),
+                     igl.point_mesh_squared_distance(Vj, Vi, Fi)[0].min())
+            nearest[i] = min(nearest[i], np.sqrt(d2))
+            nearest[j] = min(nearest[j], np.sqrt(d2))
+    touching = np.isfinite(nearest)
+    if touching.sum() < 2:
+        return np.zeros(n, bool)
+    apart = nearest > max(reach, _APART_SLITS * float(np.median(nearest[touching])))
+    return apart if (~apart).sum() >= 2 else np.zeros(n, bool)
 
 
 def _piece_triangles(V: np.ndarray, polygons: list[list[np.ndarray]]) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -295,9 +330,19 @@ def label_tiling(V: np.ndarray, polygons: list[list[np.ndarray]], names: list[st
     where = f"{source}: " if source else ""
     V = np.asarray(V, np.float64)
     pieces = _piece_triangles(V, polygons)
-    lo, hi = V.min(axis=0), V.max(axis=0)
-    used = np.unique(np.concatenate([np.concatenate(p) for p in polygons]))
-    across = _ACROSS * float((hi - lo).max()) / max(thinnest_extent(V[used]), tol.zero)
+    notes: list[str] = []
+    apart = apart_from_the_rest(pieces)
+    take = np.flatnonzero(~apart)  # the pieces of the object: numbered in this order below
+    if apart.any():
+        notes.append("left out pieces that touch no other piece (a ground, a projectile or a collider exported "
+                     "with the object?): " + ", ".join(repr(names[p]) for p in np.flatnonzero(apart)))
+        pieces, names = [pieces[p] for p in take], [names[p] for p in take]
+        V_used = np.concatenate([PV for PV, _ in pieces])
+        lo, hi = V_used.min(axis=0), V_used.max(axis=0)
+    else:
+        lo, hi = V.min(axis=0), V.max(axis=0)
+        V_used = V[np.unique(np.concatenate([np.concatenate(p) for p in polygons]))]
+    across = _ACROSS * float((hi - lo).max()) / max(thinnest_extent(V_used), tol.zero)
     cells = max(cells, min(_MOST_CELLS, int(np.ceil(across))))
     for n in (cells, 2 * cells):  # a piece thinner than a cell everywhere: try once at half the cell size
         h = float((hi - lo).max()) / n
@@ -309,7 +354,6 @@ def label_tiling(V: np.ndarray, polygons: list[list[np.ndarray]], names: list[st
         present = np.bincount(label.ravel(), minlength=len(pieces) + 1)[1:] > 0
         if present.all():
             break
-    notes: list[str] = []
     for p, (PV, PF) in enumerate(pieces):  # closed: the area vectors of its triangles cancel
         vec = np.cross(PV[PF[:, 1]] - PV[PF[:, 0]], PV[PF[:, 2]] - PV[PF[:, 0]])
         hole = float(np.linalg.norm(vec.sum(axis=0)))
@@ -340,4 +384,4 @@ def label_tiling(V: np.ndarray, polygons: list[list[np.ndarray]], names: list[st
         raise InputError(f"{where}no two pieces touch: nothing to refine (is this a fractured object?)")
     renumber = np.full(len(pieces), -1)
     renumber[kept] = np.arange(len(kept))
-    return LabelTiling(X, FF, renumber[sides], BF, renumber[bpiece], kept, n, notes)
+    return LabelTiling(X, FF, renumber[sides], BF, renumber[bpiece], take[kept], n, notes)
