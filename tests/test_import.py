@@ -270,10 +270,11 @@ def test_a_thin_plank_turned_any_way_keeps_every_piece():
 
 
 
-def test_a_ground_and_a_ball_exported_with_the_pieces_are_left_out():
-    """A Blender scene exported whole: the fractured plank's four pieces, a ground slab below it and a ball (a
-    box) thrown at it. Both touch no piece: they are left out with a note, and the import is the one
-    of the pieces alone (the ground's 20 m made the grid's cells 20 times coarser, and it became a piece)."""
+def test_a_ground_a_ball_and_a_plane_exported_with_the_pieces_are_left_out():
+    """A Blender scene exported whole: the fractured plank's four pieces, a ground slab below it, a ball (a
+    box) thrown at it and a ground plane it rests on. The slab and the ball touch no piece, the plane is
+    flat: all three are left out with notes, and the import is the one of the pieces alone (the slab's 20
+    units made the grid's cells three times coarser, and it became a piece)."""
     from fracture.coarse.tiling import label_tiling
 
     size = (6.0, 0.8, 0.5)
@@ -282,12 +283,15 @@ def test_a_ground_and_a_ball_exported_with_the_pieces_are_left_out():
     ground, _ = _plank_of_boxes([], (20.0, 20.0, 0.2), (0.0, 0.0, 0.0))
     ball, _ = _plank_of_boxes([], (0.3, 0.3, 0.3), (0.0, 0.0, 0.0))
     extra = [ground + (-7.0, -10.0, -1.2), ball + (3.0, 2.0, 0.1)]  # 1 and 1.2 from the plank
-    X = np.concatenate([V, *extra])
+    plane = np.array([[-10.0, -10.0, 0.0], [10.0, -10.0, 0.0], [10.0, 10.0, 0.0], [-10.0, 10.0, 0.0]])  # under it
+    X = np.concatenate([V, *extra, plane])
     P = polygons + [[q + len(V) + 8 * k for q in polygons[0]] for k in range(2)]  # the first box's quads
-    t = label_tiling(X, P, ["a", "b", "c", "d", "Ground", "Ball"])
+    P.append([np.arange(4) + len(X) - 4])
+    t = label_tiling(X, P, ["a", "b", "c", "d", "Ground", "Ball", "Plane"])
     assert list(t.kept) == [0, 1, 2, 3]
-    assert t.notes[0].startswith("left out pieces that touch no other piece") and "'Ground', 'Ball'" in t.notes[0]
-    assert t.notes[1:] == alone.notes and t.cells == alone.cells
+    assert t.notes[0] == "left out flat pieces (a ground plane?): not solids: 'Plane'"
+    assert t.notes[1].startswith("left out pieces that touch no other piece") and "'Ground', 'Ball'" in t.notes[1]
+    assert t.notes[2:] == alone.notes and t.cells == alone.cells
     np.testing.assert_array_equal(t.exterior_F, alone.exterior_F)
     np.testing.assert_array_equal(t.sides, alone.sides)
     assert signed_volume(t.V, t.exterior_F) == pytest.approx(np.prod(size), rel=0.02)

@@ -75,6 +75,8 @@ def _args():
     ap.add_argument("--stretch", default="1,1,1", help="the object scaled by x,y,z before it is fractured "
                     "(a plank: 3,0.4,0.25)")
     ap.add_argument("--offset", default="0,0,0", help="the whole scene moved by x,y,z (after --scale)")
+    ap.add_argument("--with-ground", action="store_true",
+                    help="export the ground plane with the pieces (as a scene exported whole, not its selection)")
     args = ap.parse_args(argv)
     args.stretch, args.offset = _vector(ap, "--stretch", args.stretch), _vector(ap, "--offset", args.offset)
     if args.scale <= 0.0 or min(args.stretch) <= 0.0 or args.margin < 0.0:
@@ -280,6 +282,7 @@ def main():
     names = sorted(cases) if args.random else args.case or sorted(CASES)
     for case in names:
         pieces, ground = build_with_ground(cases[case], args.frames, args)
+        exported = pieces + [ground] if args.with_ground else pieces
         out = args.out / case
         scene = bpy.context.scene
         for sub in formats:
@@ -287,19 +290,19 @@ def main():
         for f in range(1, args.frames + 1):
             scene.frame_set(f)
             if "sample" in formats:
-                write_sample_obj(out / "sample" / f"frame_{f:04d}.obj", pieces, f)
+                write_sample_obj(out / "sample" / f"frame_{f:04d}.obj", exported, f)
             if "ply" in formats:
-                write_ply(out / "ply" / f"frame_{f:04d}.ply", pieces, f)
+                write_ply(out / "ply" / f"frame_{f:04d}.ply", exported, f)
         if "blender_obj" in formats:
             bpy.ops.object.select_all(action="DESELECT")
-            for o in pieces:
+            for o in exported:
                 o.select_set(True)
             scene.frame_set(1)
             bpy.ops.wm.obj_export(filepath=str(out / "blender_obj" / "frame.obj"), export_animation=True,
                                   start_frame=1, end_frame=args.frames, export_selected_objects=True)
         if "usd" in formats:
             bpy.ops.object.select_all(action="DESELECT")
-            for o in pieces:
+            for o in exported:
                 o.select_set(True)
             scene.frame_set(1)
             bpy.ops.wm.usd_export(filepath=str(out / "usd" / f"{case}.usdc"), selected_objects_only=True,
@@ -309,7 +312,7 @@ def main():
             "case": case, "object": kind, "cells": cells, "pieces": len(pieces), "seed": seed,
             "rotation_degrees": rot, "height": height, "frames": args.frames,
             "margin": args.margin, "noise": args.noise, "recursion": args.recursion, "scale": args.scale,
-            "stretch": args.stretch, "offset": args.offset,
+            "stretch": args.stretch, "offset": args.offset, "with_ground": args.with_ground,
             "blender": bpy.app.version_string,
             "formats": {k: v for k, v in {
                 "sample": "Z up, world coordinates, n-gons", "blender_obj": "Blender's OBJ exporter defaults: Y up, "

@@ -71,6 +71,9 @@ _BISECTIONS = 12
 # ground, a projectile or a collider exported with it): it is left out, with a note.
 _APART = 0.25
 _APART_SLITS = 10.0
+# A piece thinner than this fraction of its largest extent along its least principal axis is flat (a ground
+# plane): not a solid, and left out before the grid is laid over the pieces.
+_FLAT = 1e-3
 
 
 @dataclass
@@ -105,6 +108,16 @@ class LabelTiling:
     kept: np.ndarray
     cells: int
     notes: list = field(default_factory=list)
+
+
+def not_of_the_object(pieces: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+    """Which pieces ``(V, F)`` are flat (:data:`_FLAT`: a ground plane) and which of the others lie apart
+    from all the rest (:func:`apart_from_the_rest`), two ``(len(pieces),)`` bool."""
+    flat = np.array([thinnest_extent(V) <= _FLAT * float(np.ptp(V, axis=0).max()) for V, _ in pieces])
+    solid = np.flatnonzero(~flat)
+    apart = np.zeros(len(pieces), bool)
+    apart[solid] = apart_from_the_rest([pieces[p] for p in solid])
+    return flat, apart
 
 
 def apart_from_the_rest(pieces: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
@@ -331,11 +344,17 @@ def label_tiling(V: np.ndarray, polygons: list[list[np.ndarray]], names: list[st
     V = np.asarray(V, np.float64)
     pieces = _piece_triangles(V, polygons)
     notes: list[str] = []
-    apart = apart_from_the_rest(pieces)
-    take = np.flatnonzero(~apart)  # the pieces of the object: numbered in this order below
-    if apart.any():
-        notes.append("left out pieces that touch no other piece (a ground, a projectile or a collider exported "
-                     "with the object?): " + ", ".join(repr(names[p]) for p in np.flatnonzero(apart)))
+    flat, apart = not_of_the_object(pieces)
+    if flat.all():
+        raise InputError(f"{where}every piece is flat ({', '.join(map(repr, names))}): the pieces must be solids "
+                         "that tile the object")
+    take = np.flatnonzero(~flat & ~apart)  # the pieces of the object: numbered in this order below
+    for which, what in ((flat, "flat pieces (a ground plane?): not solids"),
+                        (apart, "pieces that touch no other piece (a ground, a projectile or a collider exported "
+                                "with the object?)")):
+        if which.any():
+            notes.append(f"left out {what}: " + ", ".join(repr(names[p]) for p in np.flatnonzero(which)))
+    if len(take) < len(pieces):
         pieces, names = [pieces[p] for p in take], [names[p] for p in take]
         V_used = np.concatenate([PV for PV, _ in pieces])
         lo, hi = V_used.min(axis=0), V_used.max(axis=0)
