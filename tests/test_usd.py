@@ -285,6 +285,46 @@ def _write_points_usd(path, frames, names, up="Z", left_handed=False, start=1, f
     stage.GetRootLayer().Save()
 
 
+
+def test_instanced_pieces_are_read_through_their_instances(tmp_path):
+    """Pieces written as instanceable references (``/geo/NAME`` an instance moved by its own transform, its
+    mesh ``/Prototypes/pK/mesh`` in a class): each is read through its instance, named by it, at the
+    instance's place in every frame (the meshes were not found: "no Mesh prims")."""
+    from pxr import Gf, Usd, UsdGeom, Vt
+
+    from conftest import SAMPLE
+    from fracture.coarse.mesh_sequence import read_sequence
+    from fracture.coarse.usd_input import read_usd_frames
+
+    rest = read_sequence(SAMPLE)[0]
+    path = tmp_path / "instanced.usda"
+    stage = Usd.Stage.CreateNew(str(path))
+    stage.SetStartTimeCode(1)
+    stage.SetEndTimeCode(3)
+    for k, name in enumerate(rest.names):
+        stage.CreateClassPrim(f"/Prototypes/p{k}")
+        mesh = UsdGeom.Mesh.Define(stage, f"/Prototypes/p{k}/mesh")
+        polys = rest.polygons[k]
+        used = np.unique(np.concatenate(polys))
+        local = {v: i for i, v in enumerate(used.tolist())}
+        mesh.CreateFaceVertexCountsAttr(Vt.IntArray([len(f) for f in polys]))
+        mesh.CreateFaceVertexIndicesAttr(Vt.IntArray([local[v] for f in polys for v in f.tolist()]))
+        mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(rest.V[used].astype(np.float32)))
+        instance = UsdGeom.Xform.Define(stage, f"/geo/{name.replace('.', '_')}")
+        instance.GetPrim().GetReferences().AddInternalReference(f"/Prototypes/p{k}")
+        instance.GetPrim().SetInstanceable(True)
+        move = instance.AddTranslateOp()
+        for t in (1, 2, 3):
+            move.Set(Gf.Vec3d(0.0, 0.0, -0.1 * (t - 1) * k), t)
+    stage.GetRootLayer().Save()
+    got = read_usd_frames(path).frames
+    assert len(got) == 3 and got[0].names == [n.replace(".", "_") for n in rest.names]
+    for t in (0, 2):
+        for k in range(len(rest.names)):
+            X = got[t].V[got[t].piece_vertices(k)]
+            want = rest.V[np.unique(np.concatenate(rest.polygons[k]))] + (0.0, 0.0, -0.1 * t * k)
+            np.testing.assert_allclose(X, want, atol=1e-6)
+
 def test_a_usd_of_time_sampled_points_imports_as_its_obj_frames_do(tmp_path):
     from conftest import SAMPLE
     from fracture.coarse.mesh_sequence import coarse_from_frames, read_sequence

@@ -29,6 +29,16 @@ def _piece_name(prim) -> str:
     return prim.GetName()
 
 
+def _piece_names(prims) -> list[str]:
+    """Every mesh's piece name (:func:`_piece_name`); meshes that share a name (``/geo/NAME/mesh``, as
+    instanced pieces are written) take their parent's, and any still shared, their paths."""
+    names = [_piece_name(p) for p in prims]
+    for other in (lambda p: p.GetParent().GetName(), lambda p: str(p.GetPath()).strip("/")):
+        shared = {n for n in names if names.count(n) > 1}
+        names = [other(p) if n in shared else n for p, n in zip(prims, names)]
+    return names
+
+
 class UsdAnimation(NamedTuple):
     """What a USD file gives the import."""
 
@@ -45,7 +55,8 @@ def read_usd_frames(path: str | Path) -> UsdAnimation:
     ------
     InputError
         The file cannot be opened, holds no mesh, or a piece's faces change
-        between frames, name the file, piece and frame.
+        between frames, name the file, piece and frame. Meshes that share a
+        name are told apart by their parents' names, else their paths.
     """
     from pxr import Tf, Usd, UsdGeom
 
@@ -56,15 +67,11 @@ def read_usd_frames(path: str | Path) -> UsdAnimation:
         stage = Usd.Stage.Open(str(path))
     except Tf.ErrorException as exc:
         raise InputError(f"{path}: cannot open as USD ({str(exc).strip().splitlines()[-1]})") from None
-    meshes = [p for p in stage.Traverse() if p.IsA(UsdGeom.Mesh)]
+    # instanced pieces (instanceable references, as Houdini may write packed fragments) are walked into
+    meshes = [p for p in Usd.PrimRange.Stage(stage, Usd.TraverseInstanceProxies()) if p.IsA(UsdGeom.Mesh)]
     if not meshes:
         raise InputError(f"{path}: no Mesh prims: expected one mesh per piece")
-    names = [_piece_name(p) for p in meshes]
-    seen: set[str] = set()
-    for n, p in zip(names, meshes):
-        if n in seen:
-            raise InputError(f"{path}: two pieces are named {n!r} (at {p.GetPath()}); piece names must differ")
-        seen.add(n)
+    names = _piece_names(meshes)
     if stage.HasAuthoredTimeCodeRange():
         start, end = stage.GetStartTimeCode(), stage.GetEndTimeCode()
         times = [Usd.TimeCode(float(t)) for t in range(int(np.floor(start)), int(np.floor(end)) + 1)]
