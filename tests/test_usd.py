@@ -325,6 +325,46 @@ def test_instanced_pieces_are_read_through_their_instances(tmp_path):
             want = rest.V[np.unique(np.concatenate(rest.polygons[k]))] + (0.0, 0.0, -0.1 * t * k)
             np.testing.assert_allclose(X, want, atol=1e-6)
 
+
+def test_hidden_meshes_guides_and_proxies_are_not_pieces(tmp_path):
+    """A stage exported whole: the object Cell Fracture hid (invisible, where all the pieces are), a proxy of
+    a piece and a guide. None is a piece; the coarse stage says which were left out. Left in, the hidden
+    object overlapped every piece and the run was refused."""
+    from pxr import Usd, UsdGeom, Vt
+
+    from conftest import SAMPLE
+    from fracture.coarse.mesh_sequence import read_sequence
+    from fracture.coarse.usd_input import read_usd_frames
+    from fracture.pipeline import runner
+    from fracture.pipeline.config import load_config
+
+    frames = read_sequence(SAMPLE)[:6]
+    path = tmp_path / "whole.usda"
+    _write_points_usd(path, frames, frames[0].names)
+    stage = Usd.Stage.Open(str(path))
+    lo, hi = frames[0].V.min(axis=0), frames[0].V.max(axis=0)
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    quads = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
+    for where, how in (("/geo/Cube", "invisible"), ("/geo/Cube_proxy", "proxy"), ("/geo/helper", "guide")):
+        mesh = UsdGeom.Mesh.Define(stage, where)
+        mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(corners.astype(np.float32)))
+        mesh.CreateFaceVertexCountsAttr(Vt.IntArray([4] * 6))
+        mesh.CreateFaceVertexIndicesAttr(Vt.IntArray([v for q in quads for v in q]))
+        if how == "invisible":
+            mesh.CreateVisibilityAttr(UsdGeom.Tokens.invisible)
+        else:
+            mesh.CreatePurposeAttr(how)
+    stage.GetRootLayer().Save()
+    usd = read_usd_frames(path)
+    assert usd.frames[0].names == [n.replace(".", "_") for n in frames[0].names]
+    assert usd.hidden == ("/geo/Cube", "/geo/Cube_proxy", "/geo/helper")
+    cfg_path = tmp_path / "c.yaml"
+    cfg_path.write_text(f"input: {{kind: usd, usd: {path}}}\ngrid: {{resolution: 24}}\n")
+    out = runner.run(load_config(cfg_path), tmp_path / "run", until="coarse", progress=False)
+    notes = json.loads((out / "manifest.json").read_text())["notes"]
+    assert notes[0] == "coarse: left out 3 invisible or guide or proxy meshes of the USD file: /geo/Cube, " \
+                       "/geo/Cube_proxy, /geo/helper"
+
 def test_a_usd_of_time_sampled_points_imports_as_its_obj_frames_do(tmp_path):
     from conftest import SAMPLE
     from fracture.coarse.mesh_sequence import coarse_from_frames, read_sequence

@@ -46,6 +46,7 @@ class UsdAnimation(NamedTuple):
     up_axis: str  # "y" or "z"
     fps: float  # the stage's time codes per second
     meters_per_unit: float  # the stage's metersPerUnit (USD's own default, 0.01, where it says none)
+    hidden: tuple[str, ...] = ()  # the paths of meshes left out: invisible, or for guides or proxies only
 
 
 def read_usd_frames(path: str | Path) -> UsdAnimation:
@@ -68,9 +69,16 @@ def read_usd_frames(path: str | Path) -> UsdAnimation:
     except Tf.ErrorException as exc:
         raise InputError(f"{path}: cannot open as USD ({str(exc).strip().splitlines()[-1]})") from None
     # instanced pieces (instanceable references, as Houdini may write packed fragments) are walked into
-    meshes = [p for p in Usd.PrimRange.Stage(stage, Usd.TraverseInstanceProxies()) if p.IsA(UsdGeom.Mesh)]
-    if not meshes:
+    found = [p for p in Usd.PrimRange.Stage(stage, Usd.TraverseInstanceProxies()) if p.IsA(UsdGeom.Mesh)]
+    if not found:
         raise InputError(f"{path}: no Mesh prims: expected one mesh per piece")
+    # what a renderer would not show is not a piece: the object Cell Fracture hid, a proxy or a guide
+    shown = [_shown(p) for p in found]
+    meshes = [p for p, s in zip(found, shown) if s]
+    hidden = tuple(str(p.GetPath()) for p, s in zip(found, shown) if not s)
+    if not meshes:
+        raise InputError(f"{path}: every Mesh prim is invisible or a guide or proxy ({', '.join(hidden[:3])}"
+                         f"{', ...' if len(hidden) > 3 else ''}): expected one visible mesh per piece")
     names = _piece_names(meshes)
     if stage.HasAuthoredTimeCodeRange():
         start, end = stage.GetStartTimeCode(), stage.GetEndTimeCode()
@@ -118,4 +126,15 @@ def read_usd_frames(path: str | Path) -> UsdAnimation:
             raise InputError(f"{path}: frame {t.GetValue():g} has {len(frame.V)} points, the first has "
                              f"{len(rest.V)}: a piece's points change in number")
     up = "y" if UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.y else "z"
-    return UsdAnimation(frames, up, float(stage.GetTimeCodesPerSecond()), float(UsdGeom.GetStageMetersPerUnit(stage)))
+    return UsdAnimation(frames, up, float(stage.GetTimeCodesPerSecond()), float(UsdGeom.GetStageMetersPerUnit(stage)),
+                        hidden)
+
+
+def _shown(prim) -> bool:
+    """Whether a renderer shows ``prim`` at the stage's first time: visible, and of the default or render
+    purpose."""
+    from pxr import Usd, UsdGeom
+
+    seen = UsdGeom.Imageable(prim)
+    return (seen.ComputeVisibility(Usd.TimeCode.EarliestTime()) != UsdGeom.Tokens.invisible
+            and seen.ComputePurpose() in (UsdGeom.Tokens.default_, UsdGeom.Tokens.render))

@@ -118,6 +118,10 @@ def coarse_stage(ctx: RunContext) -> None:
             up = usd.up_axis if inp.up_axis == "auto" else inp.up_axis
             cf, extra = coarse_from_frames(usd.frames, inp.lattice, inp.separation, up)
             cf.source = replace(cf.source, fps=usd.fps, meters_per_unit=usd.meters_per_unit)
+            if usd.hidden:
+                cf.notes.insert(0, f"left out {len(usd.hidden)} invisible or guide or proxy "
+                                   f"mesh{'es' if len(usd.hidden) > 1 else ''} of the USD file: "
+                                   + ", ".join(usd.hidden[:5]) + (", ..." if len(usd.hidden) > 5 else ""))
         elif inp.kind == "scene":
             from fracture.coarse.scenes import build_scene
 
