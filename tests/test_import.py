@@ -296,6 +296,28 @@ def test_a_ground_a_ball_and_a_plane_exported_with_the_pieces_are_left_out():
     np.testing.assert_array_equal(t.sides, alone.sides)
     assert signed_volume(t.V, t.exterior_F) == pytest.approx(np.prod(size), rel=0.02)
 
+
+def test_the_unfractured_object_exported_with_its_pieces_is_left_out(monkeypatch):
+    """The plank's four pieces and the plank itself (Cell Fracture hides the object it fractured; an export
+    of the whole scene writes it): the plank is left out with a note. Were it not found so, the overlap
+    says what it is (it was "pieces 'a' and 'Plank' overlap ... (is a piece moved?)")."""
+    import fracture.coarse.tiling as tiling
+
+    size = (6.0, 0.8, 0.5)
+    V, polygons = _plank_of_boxes([1.5, 1.7, 4.0], size, (15.0, 0.0, 30.0))
+    whole, _ = _plank_of_boxes([], size, (15.0, 0.0, 30.0))
+    X = np.concatenate([V, whole])
+    P = polygons + [[q + len(V) for q in polygons[0]]]
+    names = ["a", "b", "c", "d", "Plank"]
+    t = tiling.label_tiling(X, P, names)
+    assert list(t.kept) == [0, 1, 2, 3]
+    assert t.notes[0] == ("left out pieces that hold the others (the unfractured object, exported with its "
+                          "pieces?): 'Plank'")
+    monkeypatch.setattr(tiling, "holding_the_rest", lambda pieces: np.zeros(len(pieces), bool))
+    with pytest.raises(InputError, match="piece 'Plank' holds the other pieces .* is the unfractured object "
+                                         "exported with its pieces"):
+        tiling.label_tiling(X, P, names)
+
 def test_slits_left_by_cell_fractures_margin_are_closed_flush_with_the_surface():
     """Cell Fracture's margin shrinks every piece from its neighbours: eight boxes tiling a cube of side 2 leave
     slits 0.02 wide (a third of a cell of the import's grid), turned. The import closes them: B is the cube, without a

@@ -47,7 +47,7 @@ from fracture.mesh.multilabel import contour_labels
 from fracture.mesh.sheets import coarsen_sheets
 from fracture.errors import InputError
 from fracture.tolerances import tol
-from fracture.mesh.topology import closed_oriented, fan
+from fracture.mesh.topology import closed_oriented, fan, signed_volume
 
 # Cells along the object's largest extent, at least ...
 DEFAULT_CELLS = 32
@@ -61,6 +61,13 @@ _MOST_CELLS = 256
 _OVERLAP = 0.2
 # ... over at least this many grid nodes (a node or two inside two small pieces is noise).
 _OVERLAP_NODES = 10
+# A piece overlapping others over more than this share of the object's nodes holds them: the object itself.
+_HOLDING = 0.5
+# A piece whose box holds the others' (within this fraction of its diagonal) and whose volume is theirs
+# together (within _HOLDS_VOLUME of its own: Cell Fracture's margin takes up to a tenth) is the unfractured
+# object (holding_the_rest).
+_HOLDS = 0.05
+_HOLDS_VOLUME = 0.15
 # A point lies in a slit between two pieces when its distances to its closest points on them add up to at most
 # this many times their distance apart (within a tenth of the slit's width of the segment between them).
 _BRIDGE = 1.02
@@ -110,14 +117,48 @@ class LabelTiling:
     notes: list = field(default_factory=list)
 
 
-def not_of_the_object(pieces: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
-    """Which pieces ``(V, F)`` are flat (:data:`_FLAT`: a ground plane) and which of the others lie apart
-    from all the rest (:func:`apart_from_the_rest`), two ``(len(pieces),)`` bool."""
-    flat = np.array([thinnest_extent(V) <= _FLAT * float(np.ptp(V, axis=0).max()) for V, _ in pieces])
+def not_of_the_object(pieces: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Which pieces ``(V, F)`` are flat (:data:`_FLAT`) and reach out of the others' box (a ground plane),
+    which of the others hold most of
+    the rest (:func:`holding_the_rest`: the unfractured object) and which of the others lie apart from all
+    the rest (:func:`apart_from_the_rest`), three ``(len(pieces),)`` bool."""
+    n = len(pieces)
+    thin = np.array([thinnest_extent(V) <= _FLAT * float(np.ptp(V, axis=0).max()) for V, _ in pieces])
+    flat = np.zeros(n, bool)
+    if not thin.all():
+        # a flat piece within the solids' box (a sliver Cell Fracture left) is left out as thinner than a cell
+        # later, on the same grid as before; one that reaches out of it (a ground plane) would widen the grid
+        X = np.concatenate([V for (V, _), t in zip(pieces, thin) if not t])
+        lo, hi = X.min(axis=0), X.max(axis=0)
+        slack = _HOLDS * float(np.linalg.norm(hi - lo))
+        flat = thin & np.array([(V.min(axis=0) < lo - slack).any() or (V.max(axis=0) > hi + slack).any()
+                                for V, _ in pieces])
+    holds, apart = np.zeros(n, bool), np.zeros(n, bool)
     solid = np.flatnonzero(~flat)
-    apart = np.zeros(len(pieces), bool)
-    apart[solid] = apart_from_the_rest([pieces[p] for p in solid])
-    return flat, apart
+    holds[solid] = holding_the_rest([pieces[p] for p in solid])
+    rest = np.flatnonzero(~flat & ~holds)
+    apart[rest] = apart_from_the_rest([pieces[p] for p in rest])
+    return flat, holds, apart
+
+
+def holding_the_rest(pieces: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
+    """Which pieces ``(V, F)`` are the whole of the others, ``(len(pieces),)`` bool: the unfractured object
+    exported with its pieces (Cell Fracture hides it; an export of the whole scene writes it). Such a piece,
+    among four or more, has a box that holds every other's (within :data:`_HOLDS` of its diagonal) and the
+    volume of all the others together (within :data:`_HOLDS_VOLUME` of its own); a piece of a tiling holds
+    no other's box, or has the volume of some of them only."""
+    holds = np.zeros(len(pieces), bool)
+    if len(pieces) < 4:
+        return holds
+    lo = np.array([V.min(axis=0) for V, _ in pieces])
+    hi = np.array([V.max(axis=0) for V, _ in pieces])
+    volume = np.array([abs(signed_volume(V, F)) for V, F in pieces])
+    for q in range(len(pieces)):
+        others = np.delete(np.arange(len(pieces)), q)
+        slack = _HOLDS * float(np.linalg.norm(hi[q] - lo[q]))
+        boxed = (lo[others] >= lo[q] - slack).all() and (hi[others] <= hi[q] + slack).all()
+        holds[q] = boxed and abs(volume[others].sum() - volume[q]) <= _HOLDS_VOLUME * volume[q]
+    return holds if (~holds).sum() >= 2 else np.zeros(len(pieces), bool)
 
 
 def apart_from_the_rest(pieces: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
@@ -305,6 +346,15 @@ def _check_tiling(label, overlap, gaps, names, h, where) -> str | None:
     over the smaller piece's volume to the power 2/3, an area); returns a note on the widest slit that
     was filled, or None."""
     count = np.bincount(label.ravel(), minlength=len(names) + 1)[1:].astype(np.float64)
+    if len(overlap):  # one piece over most of the others: the object itself, exported with its pieces
+        holds = np.bincount(overlap.ravel(), minlength=len(names))
+        q = int(np.argmax(holds))
+        partners = np.unique(overlap[(overlap == q).any(axis=1)])
+        if holds[q] > _HOLDING * count.sum() and len(partners) > 2:
+            raise InputError(f"{where}piece {names[q]!r} holds the other pieces (it overlaps {len(partners) - 1} of "
+                             f"them, over {holds[q] / count.sum():.0%} of the object): is the unfractured object "
+                             "exported with its pieces? Export the pieces alone (Blender: select them, Selection "
+                             "Only)")
     note = None
     for what, pairs in (("overlap by", overlap), ("leave a slit of", gaps)):
         if not len(pairs):
@@ -344,12 +394,10 @@ def label_tiling(V: np.ndarray, polygons: list[list[np.ndarray]], names: list[st
     V = np.asarray(V, np.float64)
     pieces = _piece_triangles(V, polygons)
     notes: list[str] = []
-    flat, apart = not_of_the_object(pieces)
-    if flat.all():
-        raise InputError(f"{where}every piece is flat ({', '.join(map(repr, names))}): the pieces must be solids "
-                         "that tile the object")
-    take = np.flatnonzero(~flat & ~apart)  # the pieces of the object: numbered in this order below
+    flat, holds, apart = not_of_the_object(pieces)
+    take = np.flatnonzero(~flat & ~holds & ~apart)  # the pieces of the object: numbered in this order below
     for which, what in ((flat, "flat pieces (a ground plane?): not solids"),
+                        (holds, "pieces that hold the others (the unfractured object, exported with its pieces?)"),
                         (apart, "pieces that touch no other piece (a ground, a projectile or a collider exported "
                                 "with the object?)")):
         if which.any():
