@@ -435,6 +435,21 @@ def _renamed_sample(tmp_path, name_of):
     return d
 
 
+
+def test_one_object_holding_every_piece_is_split_into_its_parts(tmp_path):
+    """The sample's frames with every piece written into one object (an exporter asked to merge the
+    fracture): the object's connected parts are the pieces, named after it, in the order of their first
+    vertex; the import is the one of the pieces written apart."""
+    d = _copy_sample(tmp_path)
+    for path in sorted(d.glob("*.obj")):
+        _edit(path, lambda lines: ["o Fractured"] + [l for l in lines if not l.startswith("o ")])
+    cf, _ = load_coarse_sequence(d)
+    want, _ = load_coarse_sequence(SAMPLE)
+    assert cf.names == [f"Fractured_{i:03d}" for i in range(8)]
+    assert cf.n_components == want.n_components == 8
+    np.testing.assert_array_equal(cf.F, want.F)
+    np.testing.assert_allclose(cf.V, want.V)
+
 def test_frames_are_ordered_by_their_number_not_their_text(tmp_path):
     d = _renamed_sample(tmp_path, lambda t: f"frame{t}.obj")  # Blender's exporter: frame1 ... frame40
     frames = read_sequence(d)

@@ -365,6 +365,36 @@ def test_hidden_meshes_guides_and_proxies_are_not_pieces(tmp_path):
     assert notes[0] == "coarse: left out 3 invisible or guide or proxy meshes of the USD file: /geo/Cube, " \
                        "/geo/Cube_proxy, /geo/helper"
 
+
+def test_one_mesh_holding_every_piece_is_split_into_its_parts(tmp_path):
+    """All the pieces written as one mesh with time-sampled points (Houdini's geometry unpartitioned): its
+    connected parts are the pieces, in every frame."""
+    from pxr import Usd, UsdGeom, Vt
+
+    from conftest import SAMPLE
+    from fracture.coarse.mesh_sequence import read_sequence
+    from fracture.coarse.usd_input import read_usd_frames
+
+    frames = read_sequence(SAMPLE)[:4]
+    path = tmp_path / "merged.usda"
+    stage = Usd.Stage.CreateNew(str(path))
+    stage.SetStartTimeCode(1)
+    stage.SetEndTimeCode(len(frames))
+    mesh = UsdGeom.Mesh.Define(stage, "/geo/fractured")
+    polys = [f for piece in frames[0].polygons for f in piece]
+    mesh.CreateFaceVertexCountsAttr(Vt.IntArray([len(f) for f in polys]))
+    mesh.CreateFaceVertexIndicesAttr(Vt.IntArray([int(v) for f in polys for v in f]))
+    for t, fr in enumerate(frames, start=1):
+        mesh.GetPointsAttr().Set(Vt.Vec3fArray.FromNumpy(fr.V.astype(np.float32)), t)
+    stage.GetRootLayer().Save()
+    got = read_usd_frames(path).frames
+    assert got[0].names == [f"fractured_{i:03d}" for i in range(8)]
+    for t in (0, 3):
+        assert got[t].names == got[0].names
+        for k in range(8):
+            np.testing.assert_allclose(got[t].V[got[t].piece_vertices(k)],
+                                       frames[t].V[frames[t].piece_vertices(k)], atol=1e-6)
+
 def test_a_usd_of_time_sampled_points_imports_as_its_obj_frames_do(tmp_path):
     from conftest import SAMPLE
     from fracture.coarse.mesh_sequence import coarse_from_frames, read_sequence

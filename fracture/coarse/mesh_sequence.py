@@ -7,8 +7,9 @@ the rest pose. In an OBJ every piece is an object (``o name``)
 and faces may be n-gons; in a PLY, which has no objects, the pieces are the
 connected components of the mesh, joined where their open boundaries close
 each other (:func:`join_open_shells`), named ``piece_000``, ``piece_001``, ...
-in the order of their first vertex. Every frame must have the same pieces, the
-same vertices in the same order and the same faces.
+in the order of their first vertex; so are those of an OBJ whose one object
+holds them all (``NAME_000``, ...: :func:`split_one_object`). Every frame must
+have the same pieces, the same vertices in the same order and the same faces.
 """
 
 from __future__ import annotations
@@ -40,7 +41,7 @@ class MeshFrame:
     polygons : list of list of (k,) int arrays
         ``polygons[p]`` are the faces of piece ``p``.
     face_piece : (m,) int or None
-        For a PLY (which has no objects): each face's piece, in file order.
+        For a PLY (which has no objects), or one object holding every piece: each face's piece, in file order.
     time : float or None
         The frame's number in the input (its file's number, a USD time code); None: not known.
     """
@@ -68,18 +69,45 @@ def _read_ply_pieces(path: Path, face_piece: np.ndarray | None = None) -> MeshFr
     if not polys:
         return MeshFrame(path, [], V.reshape(-1, 3), [])
     if face_piece is None or len(face_piece) != len(polys):
-        n = len(V)
-        flat = np.concatenate(polys)
-        first = np.repeat(np.array([f[0] for f in polys]), [len(f) for f in polys])
-        A = coo_matrix((np.ones(len(flat)), (first, flat)), shape=(n, n))
-        _, label = connected_components(A, directed=False)
-        # connected_components numbers components by their lowest vertex, which
-        # is the "order of the first vertex" rule; keep only labels with faces.
-        face_piece = np.unique(join_open_shells(V, polys, label[[f[0] for f in polys]]), return_inverse=True)[1]
+        face_piece = face_pieces(V, polys)
+    return MeshFrame(path, [f"piece_{i:03d}" for i in range(face_piece.max() + 1)], V, _grouped(polys, face_piece),
+                     face_piece)
+
+
+def face_pieces(V: np.ndarray, polys: list[np.ndarray]) -> np.ndarray:
+    """Each face's piece, when one mesh holds several: the connected components of the faces, joined where
+    their open boundaries close each other (:func:`join_open_shells`), numbered in the order of their first
+    vertex."""
+    n = len(V)
+    flat = np.concatenate(polys)
+    first = np.repeat(np.array([f[0] for f in polys]), [len(f) for f in polys])
+    A = coo_matrix((np.ones(len(flat)), (first, flat)), shape=(n, n))
+    _, label = connected_components(A, directed=False)
+    # connected_components numbers components by their lowest vertex, which
+    # is the "order of the first vertex" rule; keep only labels with faces.
+    return np.unique(join_open_shells(V, polys, label[[f[0] for f in polys]]), return_inverse=True)[1]
+
+
+def _grouped(polys: list[np.ndarray], face_piece: np.ndarray) -> list[list[np.ndarray]]:
     order = np.argsort(face_piece, kind="stable")
     ends = np.cumsum(np.bincount(face_piece))[:-1]
-    pieces = [[polys[i] for i in group] for group in np.split(order, ends)]
-    return MeshFrame(path, [f"piece_{i:03d}" for i in range(len(pieces))], V, pieces, face_piece)
+    return [[polys[i] for i in group] for group in np.split(order, ends)]
+
+
+def split_one_object(frame: MeshFrame, rest: MeshFrame | None = None) -> MeshFrame:
+    """A frame whose one object holds all the pieces (an OBJ without objects, a USD of one mesh, as exporters
+    write a fracture when asked to merge it) as its pieces (:func:`face_pieces`; ``rest``'s when given: every
+    frame has the same faces), named ``NAME_000``, ``NAME_001``, ...; any other frame as it is."""
+    if len(frame.names) != 1:
+        return frame
+    polys = frame.polygons[0]
+    face_piece = rest.face_piece if rest is not None and rest.face_piece is not None else None
+    if face_piece is None or len(face_piece) != len(polys):
+        face_piece = face_pieces(frame.V, polys)
+    if face_piece.max() == 0:
+        return frame
+    names = [f"{frame.names[0]}_{i:03d}" for i in range(face_piece.max() + 1)]
+    return MeshFrame(frame.path, names, frame.V, _grouped(polys, face_piece), face_piece, frame.time)
 
 
 def join_open_shells(V: np.ndarray, polys: list[np.ndarray], face_label: np.ndarray) -> np.ndarray:
@@ -162,7 +190,7 @@ def read_frame(path: str | Path, rest: MeshFrame | None = None) -> MeshFrame:
         raise InputError(f"{path}: file is empty")
     suffix = path.suffix.lower()
     if suffix == ".obj":
-        frame = MeshFrame(path, *read_obj_objects(path))
+        frame = split_one_object(MeshFrame(path, *read_obj_objects(path)), rest)
     elif suffix == ".ply":
         frame = _read_ply_pieces(path, rest.face_piece if rest is not None else None)
     else:

@@ -18,7 +18,7 @@ from typing import NamedTuple
 import numpy as np
 
 from fracture.errors import InputError
-from fracture.coarse.mesh_sequence import MeshFrame
+from fracture.coarse.mesh_sequence import MeshFrame, split_one_object
 
 
 def _piece_name(prim) -> str:
@@ -120,6 +120,9 @@ def read_usd_frames(path: str | Path) -> UsdAnimation:
             offset += len(P)
         frames.append(MeshFrame(path, list(names), np.concatenate(V), polys,
                                 time=None if t.IsDefault() else float(t.GetValue())))
+    if len(names) == 1:  # one mesh holding every piece: its parts
+        frames[0] = split_one_object(frames[0])
+        frames[1:] = [split_one_object(f, frames[0]) for f in frames[1:]]
     rest = frames[0]
     for t, frame in zip(times[1:], frames[1:]):
         if len(frame.V) != len(rest.V):
