@@ -100,8 +100,8 @@ class LabelTiling:
     exterior_piece : (k,) int
         The piece each B triangle belongs to.
     kept : (pieces,) int
-        The input pieces that take part (all but those thinner than a cell and those apart from the others:
-        :func:`apart_from_the_rest`); pieces are numbered in this order.
+        The input pieces that take part (all but those thinner than a cell and those not of the object:
+        :func:`not_of_the_object`); pieces are numbered in this order.
     cells : int
         Cells along the largest extent of the grid that was used.
     notes : list of str
@@ -118,10 +118,10 @@ class LabelTiling:
 
 
 def not_of_the_object(pieces: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Which pieces ``(V, F)`` are flat (:data:`_FLAT`) and reach out of the others' box (a ground plane),
-    which of the others hold most of
-    the rest (:func:`holding_the_rest`: the unfractured object) and which of the others lie apart from all
-    the rest (:func:`apart_from_the_rest`), three ``(len(pieces),)`` bool."""
+    """Which pieces ``(V, F)`` are not of the fractured object, three ``(len(pieces),)`` bool: flat
+    (:data:`_FLAT`) and reaching out of the others' box (a ground plane); of the others, the whole of the
+    rest (:func:`holding_the_rest`: the unfractured object); of the others, apart from all the rest
+    (:func:`apart_from_the_rest`: a ground, a projectile)."""
     n = len(pieces)
     thin = np.array([thinnest_extent(V) <= _FLAT * float(np.ptp(V, axis=0).max()) for V, _ in pieces])
     flat = np.zeros(n, bool)
