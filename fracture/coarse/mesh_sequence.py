@@ -404,7 +404,8 @@ def coarse_from_frames(frames: list[MeshFrame], lattice: int = 2, separation: fl
     rest = frames[0]
     shared = label_tiling(rest.V, rest.polygons, rest.names, source=str(rest.path))
     names = [rest.names[p] for p in shared.kept]
-    object_vids = np.concatenate([rest.piece_vertices(p) for p in shared.kept])
+    piece_vids = [rest.piece_vertices(p) for p in shared.kept]
+    object_vids = np.concatenate(piece_vids)
     diag = diagonal(rest.V[object_vids])
     V, F = _compact(shared.V, shared.fracture_F)
     BV, BF = _compact(shared.V, shared.exterior_F)
@@ -419,8 +420,7 @@ def coarse_from_frames(frames: list[MeshFrame], lattice: int = 2, separation: fl
     # that (a small object written with 6 decimals: every piece was fitted with a lattice)
     quantum = max(coordinate_quantum(frame.V) for frame in frames)
     rigid_tolerance = max(tol.rigid_fit * diag, np.sqrt(3.0) * quantum)
-    for p, source in enumerate(shared.kept.tolist()):
-        vids = rest.piece_vertices(source)
+    for p, vids in enumerate(piece_vids):
         X = rest.V[vids]
         lo[p], hi[p] = lattice_box(X)
         for t, frame in enumerate(frames):

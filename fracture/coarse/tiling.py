@@ -46,6 +46,7 @@ from fracture.coarse.pinholes import PINHOLE, close_pinholes
 from fracture.mesh.multilabel import contour_labels
 from fracture.mesh.sheets import coarsen_sheets
 from fracture.errors import InputError
+from fracture.mesh.exterior import Exterior
 from fracture.tolerances import tol
 from fracture.mesh.topology import closed_oriented, fan, signed_volume
 
@@ -63,10 +64,11 @@ _OVERLAP = 0.2
 _OVERLAP_NODES = 10
 # A piece overlapping others over more than this share of the object's nodes holds them: the object itself.
 _HOLDING = 0.5
-# A piece whose box holds the others' (within this fraction of its diagonal) and whose volume is theirs
-# together (within _HOLDS_VOLUME of its own: Cell Fracture's margin takes up to a tenth) is the unfractured
-# object (holding_the_rest).
-_HOLDS = 0.05
+# A box holds another when it does within this fraction of its diagonal (a piece reaching out of the others'
+# box, a box holding the others').
+_BOX_SLACK = 0.05
+# A piece whose box holds the others' and whose volume is theirs together (within this fraction of its own:
+# Cell Fracture's margin takes up to a tenth) is the unfractured object (holding_the_rest).
 _HOLDS_VOLUME = 0.15
 # A point lies in a slit between two pieces when its distances to its closest points on them add up to at most
 # this many times their distance apart (within a tenth of the slit's width of the segment between them).
@@ -130,7 +132,7 @@ def not_of_the_object(pieces: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.n
         # later, on the same grid as before; one that reaches out of it (a ground plane) would widen the grid
         X = np.concatenate([V for (V, _), t in zip(pieces, thin) if not t])
         lo, hi = X.min(axis=0), X.max(axis=0)
-        slack = _HOLDS * float(np.linalg.norm(hi - lo))
+        slack = _BOX_SLACK * float(np.linalg.norm(hi - lo))
         flat = thin & np.array([(V.min(axis=0) < lo - slack).any() or (V.max(axis=0) > hi + slack).any()
                                 for V, _ in pieces])
     holds, apart = np.zeros(n, bool), np.zeros(n, bool)
@@ -144,7 +146,7 @@ def not_of_the_object(pieces: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.n
 def holding_the_rest(pieces: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
     """Which pieces ``(V, F)`` are the whole of the others, ``(len(pieces),)`` bool: the unfractured object
     exported with its pieces (Cell Fracture hides it; an export of the whole scene writes it). Such a piece,
-    among four or more, has a box that holds every other's (within :data:`_HOLDS` of its diagonal) and the
+    among four or more, has a box that holds every other's (within :data:`_BOX_SLACK` of its diagonal) and the
     volume of all the others together (within :data:`_HOLDS_VOLUME` of its own); a piece of a tiling holds
     no other's box, or has the volume of some of them only."""
     holds = np.zeros(len(pieces), bool)
@@ -155,7 +157,7 @@ def holding_the_rest(pieces: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
     volume = np.array([abs(signed_volume(V, F)) for V, F in pieces])
     for q in range(len(pieces)):
         others = np.delete(np.arange(len(pieces)), q)
-        slack = _HOLDS * float(np.linalg.norm(hi[q] - lo[q]))
+        slack = _BOX_SLACK * float(np.linalg.norm(hi[q] - lo[q]))
         boxed = (lo[others] >= lo[q] - slack).all() and (hi[others] <= hi[q] + slack).all()
         holds[q] = boxed and abs(volume[others].sum() - volume[q]) <= _HOLDS_VOLUME * volume[q]
     return holds if (~holds).sum() >= 2 else np.zeros(len(pieces), bool)
@@ -169,18 +171,18 @@ def apart_from_the_rest(pieces: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarr
     hundredth of a piece or less); a ground below the object, or a ball thrown at it, is a piece a quarter
     of a piece's size or more from every other (a piece of the object moved a twentieth of its size out of
     place is still one of its pieces). Two pieces' distance is the least distance of
-    either's vertices to the other's triangles (libigl), asked only of pieces whose boxes come that close."""
+    either's vertices to the other's triangles (each piece's libigl tree built once: :class:`Exterior`), asked
+    only of pieces whose boxes come that close."""
     n = len(pieces)
     lo = np.array([V.min(axis=0) for V, _ in pieces])
     hi = np.array([V.max(axis=0) for V, _ in pieces])
     reach = _APART * float(np.median(np.linalg.norm(hi - lo, axis=1)))
+    trees = [Exterior(V, F) for V, F in pieces]
     nearest = np.full(n, np.inf)
     for i in range(n):
         near = np.flatnonzero((lo <= hi[i] + reach).all(axis=1) & (hi >= lo[i] - reach).all(axis=1))
         for j in near[near > i].tolist():
-            (Vi, Fi), (Vj, Fj) = pieces[i], pieces[j]
-            d2 = min(igl.point_mesh_squared_distance(Vi, Vj, Fj)[0].min(),
-                     igl.point_mesh_squared_distance(Vj, Vi, Fi)[0].min())
+            d2 = min(trees[j].closest(pieces[i][0])[0].min(), trees[i].closest(pieces[j][0])[0].min())
             nearest[i] = min(nearest[i], np.sqrt(d2))
             nearest[j] = min(nearest[j], np.sqrt(d2))
     touching = np.isfinite(nearest)

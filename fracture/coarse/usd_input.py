@@ -12,6 +12,7 @@ with what the outputs keep of the stage: its up axis, time codes per second and 
 
 from __future__ import annotations
 
+from collections import Counter
 from pathlib import Path
 from typing import NamedTuple
 
@@ -34,8 +35,8 @@ def _piece_names(prims) -> list[str]:
     instanced pieces are written) take their parent's, and any still shared, their paths."""
     names = [_piece_name(p) for p in prims]
     for other in (lambda p: p.GetParent().GetName(), lambda p: str(p.GetPath()).strip("/")):
-        shared = {n for n in names if names.count(n) > 1}
-        names = [other(p) if n in shared else n for p, n in zip(prims, names)]
+        count = Counter(names)
+        names = [other(p) if count[n] > 1 else n for p, n in zip(prims, names)]
     return names
 
 
