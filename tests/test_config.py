@@ -183,7 +183,7 @@ def test_explain_says_what_a_key_means_from_the_same_declarations_the_code_uses(
         "strength.layers.radial.center = None: a list of 3 numbers (or null)")
     lines = explain("refine").splitlines()
     assert [line.split(" = ")[0] for line in lines] == [f"refine.{k}" for k in RefineSection.model_fields]
-    assert list(RefineSection.model_fields) == [*RefineParams.model_fields, "snapshots"]
+    assert list(RefineSection.model_fields) == [*RefineParams.model_fields, "snapshots", "draw"]
     assert RefineSection().params() == RefineParams()
     assert [line.split(" = ")[0] for line in explain("strength.layers.grain").splitlines()] == [
         "strength.layers.grain.weight", "strength.layers.grain.fibres", "strength.layers.grain.axis",

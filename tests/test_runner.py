@@ -378,8 +378,54 @@ def test_a_searched_surface_that_makes_no_sound_pieces_is_refined_again_without_
             assert am["stages"]["refine"]["cache"] == "reused"
             assert {k: v for k, v in am["files"].items() if k != "config.yaml"} == same
             assert am["counts"] == pm["counts"] and bool(refused) == (k == 0)
-    # a surface the search did not make is refused as it is: one line, nothing written
-    refused.clear()
-    with pytest.raises(JoinError if why == JOIN else ResultError, match="cross"):
-        runner.run(load_config(small_config, ["refine.iterations=3"]), tmp_path / "flow", progress=False)
-    assert not (tmp_path / "flow").exists()
+
+
+@pytest.mark.parametrize("refusals", [1, 2, 3])
+def test_a_refined_surface_that_makes_no_sound_pieces_is_refined_again_with_other_draws(tmp_path, small_config,
+                                                                                       monkeypatch, refusals):
+    """The flow's own surface cannot be joined to B (as on a plank torus of the Blender sweeps: a rim doubling
+    back where a sheet grazes a concave part of B): the run refines again with the next draws of the
+    refinement's random choices (``refine.draw``), says so, and its files are those of a run with that draw;
+    after the third refusal it stops with the last refusal and how many there were, and writes nothing."""
+    import fracture.pipeline.stages.animate as animate
+    from fracture.errors import JoinError
+
+    imprint, refused = animate.imprint_boundary, []
+
+    def refuse(BV, BF, mesh, where="animate"):
+        if len(refused) < refusals:
+            refused.append(len(mesh.F))
+            raise JoinError(where, JOIN, "; advice")
+        return imprint(BV, BF, mesh, where)
+
+    monkeypatch.setattr(animate, "imprint_boundary", refuse)
+    config = load_config(small_config, ["refine.iterations=3"])
+    out = tmp_path / "redrawn"
+    if refusals == 3:
+        inputs = sorted(tmp_path.iterdir())
+        with pytest.raises(JoinError) as error:
+            runner.run(config, out, progress=False)
+        assert str(error.value) == (f"animate: {JOIN}; advice (the surfaces of 3 refinements were refused, the last "
+                                    "with refine.draw: 2)")
+        assert sorted(tmp_path.iterdir()) == inputs  # nothing written beside them
+        return
+    done = runner.run(config, out, progress=False)
+    m = json.loads((done / "manifest.json").read_text())
+    assert len(refused) == refusals and len(set(refused)) >= 1
+    assert m["stages"]["refine"]["tries"] == refusals + 1 and m["stages"]["refine"]["draw"] == refusals
+    assert [n for n in m["notes"] if "refused" in n] == [
+        f"refine: the refined surface was refused: {JOIN}; refined again with other random split positions "
+        f"(refine.draw: {k + 1})" for k in range(refusals)]
+    assert yaml.safe_load((done / "config.yaml").read_text())["refine"]["draw"] == 0
+    monkeypatch.setattr(animate, "imprint_boundary", imprint)
+    plain = runner.run(load_config(small_config, ["refine.iterations=3", f"refine.draw={refusals}"]),
+                       tmp_path / "plain", progress=False)
+    pm = json.loads((plain / "manifest.json").read_text())
+    assert {k: v for k, v in m["files"].items() if k != "config.yaml"} == \
+        {k: v for k, v in pm["files"].items() if k != "config.yaml"}
+    assert m["counts"] == pm["counts"]
+    # another draw is another refinement: other split positions
+    first = runner.run(config, tmp_path / "first", progress=False)
+    fm = json.loads((first / "manifest.json").read_text())
+    refined = [f for f in fm["files"] if f.startswith("refined/")]
+    assert refined and any(fm["files"][f] != pm["files"][f] for f in refined)

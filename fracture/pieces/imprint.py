@@ -69,7 +69,7 @@ RIM_EDGE = 0.2
 RIM_REACH = 2.0
 
 # What a user can change when S cannot be imprinted (said after each such refusal).
-_RETRY = "; a different seed or refine.max_triangles gives other refined cracks there"
+_RETRY = "; another refine.max_triangles or refine.draw gives other refined cracks there"
 
 
 @dataclass

@@ -71,38 +71,80 @@ class _Before:
         return cls(len(ctx.notes), len(ctx.files), dict(ctx.counts), dict(ctx.stats))
 
 
-def _refine_without_search(ctx: RunContext, refine: Stage, refused: JoinError | ResultError, manifest: dict,
-                           before: _Before, out: Path, writer: Executor) -> None:
-    """No sound pieces can be made of the searched surface (a later stage raised ``refused``: it cannot be
-    joined to the object's surface, or a piece would not close or would cross itself): refine again with the
-    flow alone (``refine.search: none``), from the coarse surface. The context goes back to what it held
-    before the first refinement (``before``: its notes, files, counts and statistics, and the cache keys
-    from it on), so that the second refinement's cache entry holds its own files and counts; the first
-    one's entry stays (it is what that config refines to). A note says what happened and why."""
-    first = manifest["stages"]["refine"]
-    if isinstance(first.get("cache"), Future):  # its entry copies the files about to be replaced
-        first["cache"] = _stored(first["cache"].result())
+# Refinements after the first whose surface yields no sound pieces: the flow alone (after a search), then
+# other draws of the refinement's random choices.
+_REDRAWS = 2
+
+
+@dataclass(frozen=True)
+class _Again:
+    """How to refine again after a refusal: the refine keys changed, what the run says, and its note."""
+
+    update: dict
+    say: str
+    note: str
+
+
+def _again(ctx: RunContext, first_draw: int) -> _Again | None:
+    """The next refinement to try after a later stage refused the refined surface (None: none is left).
+
+    A searched surface is refined again with the flow alone first (the search's surface and the flow's
+    differ most). Then the refinement runs again with other draws of its random choices (where edges and
+    triangles are split, ``refine.draw``), up to :data:`_REDRAWS` more: the rare rims that cannot be cut
+    into B (a sheet grazing a concave part of B, a rim doubling back in a groove of it) and pieces that do
+    not close come from the fine detail of one refinement, and another draw makes other detail there (on a
+    plank torus of the Blender sweeps, draw 1 of the one draw 0 refused)."""
+    refine = ctx.config.refine
+    if _searched(ctx):
+        return _Again({"search": "none"}, "no sound pieces can be made of the global search's surface; refining "
+                      "again with the flow alone", "the global search's surface was refused: {why}; refined again "
+                      "with the flow alone (refine.search: none), from the coarse surface")
+    if refine.draw < first_draw + _REDRAWS:
+        draw = refine.draw + 1
+        return _Again({"draw": draw}, f"no sound pieces can be made of the refined surface; refining again with "
+                      f"other random split positions (refine.draw: {draw})", "the refined surface was refused: {why}; "
+                      f"refined again with other random split positions (refine.draw: {draw})")
+    return None
+
+
+def _undo_refinement(ctx: RunContext, again: _Again, refused: JoinError | ResultError, manifest: dict,
+                     before: _Before, refusals: list[str]) -> None:
+    """Take the context back to what it held before the refinement (``before``: its notes, files, counts and
+    statistics, and the cache keys from it on), with the refine keys ``again.update``, so that the next
+    refinement (the run goes on from the refine stage) and its cache entry hold their own files and counts;
+    the refused one's entry stays (it is what that config refines to). ``refusals`` and the notes gain the note
+    of this refusal (``refused``: a stage could not join the refined surface to the object's surface, or a
+    piece would not close or would cross itself)."""
+    for info in manifest["stages"].values():  # their entries copy the files about to be removed
+        if isinstance(info.get("cache"), Future):
+            info["cache"] = _stored(info["cache"].result())
     ctx.wait_for_files()
     for rel in ctx.files[before.files:]:
         (ctx.dir / rel).unlink(missing_ok=True)
     del ctx.files[before.files:]
-    del ctx.notes[before.notes:]
+    why = refused.problem if isinstance(refused, JoinError) else str(refused).removeprefix("animate: ")
+    refusals.append("refine: " + again.note.format(why=why))
+    del ctx.notes[before.notes:]  # the earlier refusals' notes came before the refinement: they stay
+    ctx.notes.append(refusals[-1])
     ctx.counts, ctx.stats = dict(before.counts), dict(before.stats)
     names = list(ctx.keys)
     for name in names[names.index("refine"):] if "refine" in names else ():
         del ctx.keys[name]  # the cache keys of the refinement and of the stages after it are made again
     cfg = ctx.config
-    ctx.config = cfg.model_copy(update={"refine": cfg.refine.model_copy(update={"search": "none"})})
-    ctx.say("refine: no sound pieces can be made of the global search's surface; refining again with the flow "
-            "alone")
-    why = refused.problem if isinstance(refused, JoinError) else str(refused).removeprefix("animate: ")
-    ctx.notes.append(f"refine: the global search's surface was refused: {why}; refined again with the flow alone "
-                     "(refine.search: none), from the coarse surface")
-    t0 = time.perf_counter()
-    ctx.tell("stage", name="refine")
-    info = _run_stage(ctx, refine, keep_products=True, out=out, writer=writer)
-    manifest["stages"]["refine"] = {"seconds": round(first["seconds"] + time.perf_counter() - t0, 4), **info,
-                                    "without_search": True}
+    ctx.config = cfg.model_copy(update={"refine": cfg.refine.model_copy(update=again.update)})
+    ctx.say(f"refine: {again.say}")
+
+
+def _after_tries(refused: JoinError | ResultError, tries: int, draw: int) -> JoinError | ResultError:
+    """``refused``, saying how often the run refined (``tries``, the last with ``refine.draw`` ``draw``) when it
+    refined more than once."""
+    if tries == 1:
+        return refused
+    told = f" (the surfaces of {tries} refinements were refused, the last with refine.draw: {draw})"
+    if isinstance(refused, JoinError):
+        head = f"{refused.where}: {refused.problem}"
+        return JoinError(refused.where, refused.problem, str(refused).removeprefix(head) + told)
+    return ResultError(f"{refused}{told}")
 
 
 def _sha256(path: Path) -> str:
@@ -243,7 +285,11 @@ def run(cfg: Config, out: str | Path, until: str | None = None, force: bool = Fa
         ctx = RunContext(config=cfg, dir=staging, progress=progress, listener=listener, cache=cache, writer=writer)
         ctx.path(layout.CONFIG).write_text(dump_config(cfg), encoding="utf-8")
         before: dict[str, _Before] = {}  # what the context held when each stage began
-        for stage in chosen:
+        first_draw, refusals = cfg.refine.draw, []  # refinements refused so far: their notes
+        spent: dict[str, float] = {}  # seconds per stage, every try
+        at = 0
+        while at < len(chosen):
+            stage = chosen[at]
             t0 = time.perf_counter()
             before[stage.name] = _Before.of(ctx)
             ctx.tell("stage", name=stage.name)
@@ -251,17 +297,20 @@ def run(cfg: Config, out: str | Path, until: str | None = None, force: bool = Fa
             try:
                 info = _run_stage(ctx, stage, keep_products=stage is not stages[-1], out=Path(out), writer=writer)
             except (JoinError, ResultError) as refused:
-                if not _searched(ctx):
-                    raise
-                failed = time.perf_counter() - t0
-                _refine_without_search(ctx, next(s for s in chosen if s.name == "refine"), refused, manifest,
-                                       before["refine"], Path(out), writer)
-                t0 = time.perf_counter() - failed  # the stage's seconds: both tries
-                before[stage.name] = _Before.of(ctx)
-                ctx.tell("stage", name=stage.name)
-                info = _run_stage(ctx, stage, keep_products=stage is not stages[-1], out=Path(out), writer=writer)
-            manifest["stages"][stage.name] = {"seconds": round(time.perf_counter() - t0, 4), **info}
+                again = _again(ctx, first_draw) if "refine" in before else None
+                if again is None:
+                    raise _after_tries(refused, len(refusals) + 1, ctx.config.refine.draw) from None
+                spent[stage.name] = spent.get(stage.name, 0.0) + time.perf_counter() - t0
+                _undo_refinement(ctx, again, refused, manifest, before["refine"], refusals)
+                at = next(i for i, s in enumerate(chosen) if s.name == "refine")
+                continue
+            spent[stage.name] = spent.get(stage.name, 0.0) + time.perf_counter() - t0
+            manifest["stages"][stage.name] = {"seconds": round(spent[stage.name], 4), **info}
+            if stage.name == "refine" and refusals:
+                manifest["stages"]["refine"].update(tries=len(refusals) + 1, draw=ctx.config.refine.draw,
+                                                    without_search=ctx.config.refine.search != cfg.refine.search)
             log.info("%s: done in %.2f s", stage.name, manifest["stages"][stage.name]["seconds"])
+            at += 1
         ctx.wait_for_files()  # before their hashes (a write that failed fails the run)
         for info in manifest["stages"].values():
             if isinstance(info.get("cache"), Future):

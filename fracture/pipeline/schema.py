@@ -94,6 +94,9 @@ class RefineSection(RefineParams):
     """The refinement's parameters and the pipeline's keys of its stage."""
 
     snapshots: bool = flag(True, "save every iteration for the viewer (refined/iterations.*)")
+    draw: int = integer(0, 0, 2**32 - 1, "which draw of the refinement's random choices (where it splits edges "
+                        "and triangles; the material keeps the run's seed): a run whose refined surface yields no "
+                        "sound pieces refines again with the next two draws, with a note")
 
     def params(self) -> RefineParams:
         """The refinement's own parameters (without the pipeline's keys)."""

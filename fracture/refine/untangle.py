@@ -66,7 +66,7 @@ def require_uncrossed(V: np.ndarray, F: np.ndarray, B: Exterior, where: str = "r
         _, pairs = self_intersections(X, F, report=1)
         at = np.round(X[F[pairs[0, 0]]].mean(axis=0), 6).tolist()
         raise ResultError(f"{where}: {left} pairs of refined fracture triangles cross each other (the first near "
-                         f"{at}) and relaxing them did not part them; a different seed or refine.max_triangles gives "
-                         "another refined surface")
+                         f"{at}) and relaxing them did not part them; another refine.max_triangles or refine.draw "
+                         "gives another refined surface")
     return X, before, left
 

@@ -40,7 +40,10 @@ def refine_stage(ctx: RunContext) -> None:
     BV, BF = ctx.products.exterior
     grain = getattr(fs, "grain", None)
     bands = _CachedBand(ctx) if ctx.cache is not None else None
-    refiner = Refiner(mesh, fs.pyramid, BV, BF, params, np.random.default_rng(config.seed), grain=grain,
+    # draw 0 is the seed's own generator; another draw one derived from both (the material keeps the seed)
+    draw = config.refine.draw
+    rng = np.random.default_rng(config.seed if draw == 0 else [config.seed, draw])
+    refiner = Refiner(mesh, fs.pyramid, BV, BF, params, rng, grain=grain,
                       search=default_search(params, distance=fs.field("distance"), names=cf.names, grain=grain,
                                             bands=bands))
     snaps = Snapshots() if config.refine.snapshots else None
