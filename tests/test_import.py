@@ -146,6 +146,17 @@ def _shift_piece(lines, name, delta):
     return out
 
 
+def _scaled(lines, scale):
+    """Every vertex's coordinates times ``scale`` (0 rounds an object to a point)."""
+    out = []
+    for line in lines:
+        if line.startswith("v "):
+            xyz = np.array(line.split()[1:4], float) * scale
+            line = "v " + " ".join(f"{c:.6f}" for c in xyz)
+        out.append(line)
+    return out
+
+
 def _drop_face(lines, name):
     start, end = _object_lines(lines, name)
     face = next(i for i in range(start, end) if lines[i].startswith("f "))
@@ -176,6 +187,11 @@ def _remove_object(lines, name):
     ("moved piece", [1], lambda l: _shift_piece(l, "source_cell.005", (0.05, 0.05, 0.05)), ["frame_0001.obj", "'source_cell.005'", "must tile"]),
     ("duplicate name", [1, 2], lambda l: _rename(l, "source_cell.004", "source_cell.003"),
      ["frame_0001.obj", "two pieces are named 'source_cell.003'"]),
+    ("vertex 0", [1], lambda l: [("f 0 " + " ".join(x.split()[2:])) if x.startswith("f ") else x for x in l],
+     ["frame_0001.obj", "a face uses vertex 0; OBJ counts its vertices from 1"]),
+    ("rounded to a point", range(1, 41), lambda l: _scaled(l, (0.0, 0.0, 0.0)),
+     ["frame_0001.obj", "the pieces' vertices all lie at one point"]),
+    ("flat", range(1, 41), lambda l: _scaled(l, (1.0, 1.0, 0.0)), ["frame_0001.obj", "all lie in one plane"]),
 ])
 def test_bad_sequences_are_rejected_with_their_place(tmp_path, case, frames, edit, words):
     d = _copy_sample(tmp_path)
@@ -417,6 +433,66 @@ def test_an_open_piece_is_taken_by_its_winding_number_and_noted(tmp_path):
     cf, _ = load_coarse_sequence(d)
     assert cf.n_components == 8
     assert any("'source_cell.002' is not a closed surface" in n for n in cf.notes)
+
+
+def _turn_faces(lines, name, every=1):
+    """Every ``every``-th face of piece ``name`` written in the reverse order of its corners."""
+    start, end = _object_lines(lines, name)
+    out, k = list(lines), 0
+    for i in range(start, end):
+        if out[i].startswith("f "):
+            if k % every == 0:
+                out[i] = "f " + " ".join(reversed(out[i].split()[1:]))
+            k += 1
+    return out
+
+
+def test_pieces_exported_inside_out_or_with_faces_turned_import_as_the_sample(tmp_path, imported):
+    """A piece written inside out (as some exporters write a piece whose scale is negative), and one with
+    every third face turned: their insides (winding numbers) would be -1 and about 0, and the piece lost or
+    cut down; they are turned outward, with a note, and the object imports as the sample does."""
+    d = _copy_sample(tmp_path)
+    for t in range(1, 41):
+        _edit(d / f"frame_{t:04d}.obj", lambda l: _turn_faces(_turn_faces(l, "source_cell.002"), "source_cell.005", 3))
+    cf, _ = load_coarse_sequence(d)
+    ref = imported[0]
+    assert cf.n_components == 8
+    # the same surfaces within the turned n-gons' other fans (a reversed polygon is fanned from another corner)
+    assert area(cf.exterior_V, cf.exterior_F) == pytest.approx(area(ref.exterior_V, ref.exterior_F), rel=1e-4)
+    assert area(cf.V, cf.F) == pytest.approx(area(ref.V, ref.F), rel=1e-3)
+    for c in range(8):  # every piece keeps its part of B
+        mine, theirs = cf.exterior_component == c, ref.exterior_component == c
+        assert area(cf.exterior_V, cf.exterior_F[mine]) == pytest.approx(
+            area(ref.exterior_V, ref.exterior_F[theirs]), rel=1e-3)
+    assert [n for n in cf.notes if "turned the faces" in n] == [
+        "turned the faces of pieces exported inside out or with faces facing in (their insides are taken from "
+        "their faces' orientation): 'source_cell.002', 'source_cell.005'"]
+    assert not any("turned" in n for n in ref.notes)
+
+
+def test_outward_turns_inverted_parts_and_keeps_a_cavity():
+    from fracture.coarse.tiling import outward
+    from fracture.mesh.primitives import box
+
+    V1, F1 = box(np.zeros(3), np.ones(3))
+    V2, F2 = box(np.full(3, 0.25), np.full(3, 0.75))  # a cavity: its faces face in, into the hole
+    V = np.concatenate([V1, V2])
+    hollow = np.concatenate([F1, F2[:, ::-1] + len(V1)])
+    G, changed = outward(V, hollow)
+    assert not changed and np.array_equal(G, hollow)
+    assert signed_volume(V, G) == pytest.approx(1.0 - 0.125)
+    G, changed = outward(V, hollow[:, ::-1])  # inside out: both turn
+    assert changed and signed_volume(V, G) == pytest.approx(1.0 - 0.125) and closed_oriented(G)
+    V3, F3 = box(np.full(3, 0.8), np.full(3, 1.3))  # a part overlapping another (Suzanne's eyes): kept
+    eye = np.concatenate([F1, F3 + len(V1)])
+    G, changed = outward(np.concatenate([V1, V3]), eye)
+    assert not changed
+    G, changed = outward(np.concatenate([V1, V3]), np.concatenate([F1, F3[:, ::-1] + len(V1)]))
+    assert changed and np.array_equal(G, eye)
+    turned = F1.copy()
+    turned[::2] = turned[::2, ::-1]
+    G, changed = outward(V1, turned)
+    assert changed and np.array_equal(G, F1)
 
 
 def test_missing_directory_and_no_frames(tmp_path):

@@ -107,6 +107,36 @@ def test_a_resumed_sweep_runs_only_the_missing_points_and_a_failure_stops_no_oth
     assert "failed" in (tmp_path / "f" / "table.md").read_text()
 
 
+def test_a_resumed_sweep_runs_again_the_points_whose_config_or_stages_changed(local_sweep, tmp_path):
+    """A complete point run with another config (the sweep asked again with another ``--set``) or other stages
+    (``--until``) is not "done before": it runs again, and its earlier run is replaced once the new one is
+    complete; the points that are what the sweep asks for are kept."""
+    config, _, _ = local_sweep
+    out = tmp_path / "s"
+    grid = {"seed": [7, 8]}
+    run_sweep(config, grid, out, until="coarse", progress=False)
+    state = run_sweep(config, grid, out, overrides=["psi.stress_weight=3"], until="fields", progress=False)
+    assert statuses(out) == {"seed=7": "ok", "seed=8": "ok"}
+    assert state["points"]["seed=7"]["replaces"] == "an earlier run: its config changed"
+    for name in ("seed=7", "seed=8"):
+        assert "stress_weight: 3" in (out / name / "config.yaml").read_text()
+        assert list(json.loads((out / name / "manifest.json").read_text())["stages"]) == ["coarse", "fields"]
+    state = run_sweep(config, grid, out, overrides=["psi.stress_weight=3"], until="coarse", progress=False)
+    assert state["points"]["seed=8"]["replaces"] == "an earlier run: it ran other stages (--until)"
+    state = run_sweep(config, grid, out, overrides=["psi.stress_weight=3"], until="coarse", progress=False)
+    assert statuses(out) == {"seed=7": "done before", "seed=8": "done before"}
+    assert sorted(p.name for p in out.iterdir()) == ["seed=7", "seed=8", "sweep.json", "table.csv", "table.md"]
+
+
+def test_a_value_given_twice_is_refused(local_sweep, tmp_path, capsys):
+    config, _, _ = local_sweep
+    for grid in ("psi.stress_weight=0.2,0.2", "seed=1,01"):
+        rc = main(["sweep", str(config), "--grid", grid, "--out", str(tmp_path / "twice"), "--quiet", "--no-sheet"])
+        err = capsys.readouterr().err
+        assert rc == 2 and "is given twice; expected distinct values" in err and "Traceback" not in err, err
+        assert not (tmp_path / "twice").exists()
+
+
 def test_sweep_grids_are_read_from_the_command_line_or_the_config_and_checked_first(local_sweep, tmp_path, capsys):
     config, _, _ = local_sweep
     assert parse_grid(["grid.resolution=[8,8,8],12", "seed=1"]) == {"grid.resolution": [[8, 8, 8], 12], "seed": [1]}

@@ -540,3 +540,88 @@ def test_bad_usd_input_is_refused_clearly(tmp_path, content, words):
         path.write_text(content)
     with pytest.raises(InputError, match=words):
         read_usd_frames(path)
+
+
+def _damaged_usd(path, damage):
+    """Two tetrahedra, points time-sampled at 1..3 (Houdini's way), with one kind of ``damage``."""
+    from pxr import Usd, UsdGeom, Vt
+
+    faces, frames = _two_tetras_falling(3)
+    stage = Usd.Stage.CreateNew(str(path))
+    if damage != "no range":
+        stage.SetStartTimeCode(1)
+        stage.SetEndTimeCode(1_000_000 if damage == "huge range" else 3)
+    for k in range(2):
+        mesh = UsdGeom.Mesh.Define(stage, f"/geo/t{k}")
+        idx = faces[k].ravel().tolist()
+        if damage == "negative index" and k == 1:
+            idx[0] = -1
+        if not (damage == "no faces" and k == 1):
+            mesh.CreateFaceVertexCountsAttr(Vt.IntArray([3] * len(faces[k])))
+            mesh.CreateFaceVertexIndicesAttr(Vt.IntArray(idx))
+        if damage == "no points" and k == 1:
+            continue
+        for t, P in enumerate(frames, start=1):
+            mesh.GetPointsAttr().Set(Vt.Vec3fArray.FromNumpy(P[k].astype(np.float32)), t)
+    stage.GetRootLayer().Save()
+
+
+@pytest.mark.parametrize("damage, words", [
+    ("no points", "piece 't1' (/geo/t1) has no points at frame 1: expected time samples or a default value"),
+    ("no faces", "piece 't1' (/geo/t1) has no faces or inconsistent face counts"),
+    ("negative index", "piece 't1' (/geo/t1): a face uses point -1; expected point indices from 0"),
+    ("huge range", "its time code range 1 to 1e+06 holds 1,000,000 frames; expected at most 10,000"),
+])
+def test_a_damaged_usd_is_refused_naming_the_piece_and_what_was_expected(tmp_path, damage, words):
+    from fracture.errors import InputError
+    from fracture.coarse.usd_input import read_usd_frames
+
+    _damaged_usd(tmp_path / "x.usdc", damage)
+    with pytest.raises(InputError) as error:
+        read_usd_frames(tmp_path / "x.usdc")
+    assert words in str(error.value)
+
+
+def test_a_usd_with_time_samples_and_no_range_reads_every_sampled_frame(tmp_path):
+    from fracture.coarse.usd_input import read_usd_frames
+
+    _damaged_usd(tmp_path / "x.usdc", "no range")
+    _, frames = _two_tetras_falling(3)
+    read = read_usd_frames(tmp_path / "x.usdc").frames
+    assert [f.time for f in read] == [1.0, 2.0, 3.0]
+    assert np.allclose(read[2].V, np.concatenate(frames[2]), atol=1e-6)
+
+
+@pytest.mark.parametrize("content, words", [
+    (b"", "the file is empty; expected a USD file"),
+    (b'#usda 1.0\ndef Mesh "a" {\n  point3f[] points = [(0,0,0), (1,\n}\n',
+     "x.usda:4:1: parse error matching Sdf_TextFileFormatParser::TupleValueClose"),
+])
+def test_a_broken_usd_file_says_why_in_one_line(tmp_path, content, words):
+    from fracture.errors import InputError
+    from fracture.coarse.usd_input import read_usd_frames
+
+    (tmp_path / "x.usda").write_bytes(content)
+    with pytest.raises(InputError) as error:
+        read_usd_frames(tmp_path / "x.usda")
+    text = str(error.value)
+    assert words in text and "\n" not in text and "pxrInternal" not in text and ".cpp" not in text
+
+
+def test_a_usd_that_cannot_be_written_is_said_of_the_users_file(tmp_path, monkeypatch):
+    """A full disk, or a folder one may not write in: USD's error, in one line, naming the file asked for
+    (not the temporary one beside it), and nothing left behind."""
+    from pxr import Sdf, Tf
+
+    from fracture.io.atomic import OutputError
+
+    def full(self, *args, **kwargs):
+        raise Tf.ErrorException("\n\tError in 'pxrInternal_v0_26_11__pxrReserved__::SdfLayer::Save' at line 1 in "
+                                "file /opt/USD/layer.cpp : 'No space left on device'")
+
+    monkeypatch.setattr(Sdf.Layer, "Save", full)
+    faces, frames = _two_tetras_falling(3)
+    with pytest.raises(OutputError) as error:
+        write_pieces_usd(tmp_path / "p.usdc", ["a", "b"], faces, [np.ones(4, bool)] * 2, frames)
+    assert str(error.value) == f"{tmp_path / 'p.usdc'}: cannot write the USD file: No space left on device"
+    assert list(tmp_path.iterdir()) == []

@@ -201,6 +201,36 @@ def _piece_triangles(V: np.ndarray, polygons: list[list[np.ndarray]]) -> list[tu
     return out
 
 
+def outward(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, bool]:
+    """The triangles ``F`` of a piece facing out, and whether any had to turn.
+
+    The pieces' insides are their winding numbers (module notes, 1), which a piece exported inside out
+    (its faces facing in: -1 inside) or with some faces turned (about 0 inside) would lose. The faces are
+    oriented alike within each connected part (libigl's ``bfs_orient``, across edges shared by two faces);
+    a piece enclosing a negative volume in all is turned whole, and a part of it that then encloses a
+    negative volume is turned, unless it lies wholly inside the larger parts (a cavity's wall faces into the
+    cavity; the larger parts are settled first). Parts that overlap, as Suzanne's eyes overlap her head,
+    keep their orientation when it is outward."""
+    G, part = igl.bfs_orient(F)
+    G, part = np.asarray(G, np.int64), np.asarray(part, np.int64)
+    centre = V.mean(axis=0)  # volumes about a point of the piece: an open part's is then still telling
+    A, B, C = (V[G[:, i]] - centre for i in range(3))
+    volume = np.bincount(part, np.einsum("ij,ij->i", A, np.cross(B, C)))
+    if volume.sum() < 0.0:  # the piece inside out, a cavity's wall with it
+        G, volume = G[:, ::-1].copy(), -volume
+    for c in np.argsort(-np.abs(volume)):
+        if volume[c] >= 0.0:
+            continue
+        mine = part == c
+        settled = (np.abs(volume) > abs(volume[c])) & (np.arange(len(volume)) != c)  # larger parts
+        around = G[settled[part]]
+        corners = V[np.unique(G[mine])]
+        if len(around) and igl.fast_winding_number(V, around, corners).min() > 0.5:
+            continue  # a cavity's wall: wholly inside the larger parts
+        G[mine] = G[mine][:, ::-1]
+    return G, bool((G != F).any())
+
+
 class _Labels(NamedTuple):
     """What :func:`_labels` finds on the grid."""
 
@@ -394,10 +424,31 @@ def label_tiling(V: np.ndarray, polygons: list[list[np.ndarray]], names: list[st
     """
     where = f"{source}: " if source else ""
     V = np.asarray(V, np.float64)
+    used = np.unique(np.concatenate([np.concatenate(p) for p in polygons]))
+    span = np.ptp(V[used], axis=0)
+    if not span.max() > tol.zero * max(float(np.abs(V[used]).max()), 1.0):
+        raise InputError(f"{where}the pieces' vertices all lie at one point, {V[used[0]].tolist()} (an object "
+                         "smaller than the file's decimals, rounded?); expected pieces of some size")
+    if not thinnest_extent(V[used]) > 1e-9 * span.max():
+        raise InputError(f"{where}the pieces' vertices all lie in one plane: the object is flat; expected the "
+                         "closed pieces of a solid")
     pieces = _piece_triangles(V, polygons)
     notes: list[str] = []
+    turned = []
+    for p, (PV, PF) in enumerate(pieces):
+        PF, changed = outward(PV, PF)
+        if changed:
+            pieces[p] = (PV, PF)
+            turned.append(p)
+    if turned:
+        notes.append("turned the faces of pieces exported inside out or with faces facing in (their insides are "
+                     "taken from their faces' orientation): " + ", ".join(repr(names[p]) for p in turned))
     flat, holds, apart = not_of_the_object(pieces)
     take = np.flatnonzero(~flat & ~holds & ~apart)  # the pieces of the object: numbered in this order below
+    if not len(take):
+        why = "flat (no volume)" if flat.all() else "flat, holding the others or apart from them"
+        raise InputError(f"{where}every piece is {why}: no solid pieces to refine; expected the closed pieces "
+                         "of a fractured object")
     for which, what in ((flat, "flat pieces (a ground plane?): not solids"),
                         (holds, "pieces that hold the others (the unfractured object, exported with its pieces?)"),
                         (apart, "pieces that touch no other piece (a ground, a projectile or a collider exported "

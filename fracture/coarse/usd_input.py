@@ -4,7 +4,8 @@ Every ``Mesh`` prim is a piece; its points in world space at each frame are its 
 (time-sampled or not) under its transforms there (time-sampled or not): Blender writes rest
 points and time-sampled transforms, Houdini often time-sampled points. A mesh whose
 ``orientation`` is ``leftHanded`` (Houdini's default: its faces wind clockwise seen from outside)
-has its faces turned. The frames are the stage's integer time codes from its start to its end.
+has its faces turned. The frames are the stage's integer time codes from its start to its end
+(with no range authored, over the span of the points' and transforms' time samples).
 The result holds the list of :class:`~fracture.coarse.mesh_sequence.MeshFrame` that a folder of OBJ
 frames gives, so the same import follows (:func:`fracture.coarse.mesh_sequence.coarse_from_frames`),
 with what the outputs keep of the stage: its up axis, time codes per second and ``metersPerUnit``.
@@ -20,6 +21,10 @@ import numpy as np
 
 from fracture.errors import InputError
 from fracture.coarse.mesh_sequence import MeshFrame, split_one_object
+from fracture.io.usd import usd_problem
+
+# Frames read at most: a time code range set by mistake (an end of 1e6) would read for hours.
+MOST_FRAMES = 10_000
 
 
 def _piece_name(prim) -> str:
@@ -65,10 +70,12 @@ def read_usd_frames(path: str | Path) -> UsdAnimation:
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: USD file not found")
+    if path.stat().st_size == 0:
+        raise InputError(f"{path}: the file is empty; expected a USD file (.usd, .usda, .usdc or .usdz)")
     try:
         stage = Usd.Stage.Open(str(path))
     except Tf.ErrorException as exc:
-        raise InputError(f"{path}: cannot open as USD ({str(exc).strip().splitlines()[-1]})") from None
+        raise InputError(f"{path}: cannot open as USD: {usd_problem(exc)}") from None
     # instanced pieces (instanceable references, as Houdini may write packed fragments) are walked into
     found = [p for p in Usd.PrimRange.Stage(stage, Usd.TraverseInstanceProxies()) if p.IsA(UsdGeom.Mesh)]
     if not found:
@@ -81,20 +88,36 @@ def read_usd_frames(path: str | Path) -> UsdAnimation:
         raise InputError(f"{path}: every Mesh prim is invisible or a guide or proxy ({', '.join(hidden[:3])}"
                          f"{', ...' if len(hidden) > 3 else ''}): expected one visible mesh per piece")
     names = _piece_names(meshes)
+    sampled = _sample_times(meshes)
     if stage.HasAuthoredTimeCodeRange():
         start, end = stage.GetStartTimeCode(), stage.GetEndTimeCode()
-        times = [Usd.TimeCode(float(t)) for t in range(int(np.floor(start)), int(np.floor(end)) + 1)]
-        if not times:
-            raise InputError(f"{path}: its time code range {start} to {end} holds no frame")
+        what = f"its time code range {start:g} to {end:g}"
+    elif sampled:  # animated, with no range authored: the span of the samples
+        start, end = sampled[0], sampled[-1]
+        what = f"its time samples ({start:g} to {end:g}; no time code range is authored)"
     else:  # no animation: one frame, the default values
+        start = end = what = None
+    if what is None:
         times = [Usd.TimeCode.Default()]
+    else:
+        first, last = int(np.floor(start)), int(np.floor(end))
+        if last < first:
+            raise InputError(f"{path}: {what} holds no frame; expected a start time code at or before its end")
+        if last - first + 1 > MOST_FRAMES:
+            raise InputError(f"{path}: {what} holds {last - first + 1:,} frames; expected at most {MOST_FRAMES:,} "
+                             "(set the stage's start and end time codes to the frames of the fracture)")
+        times = [Usd.TimeCode(float(t)) for t in range(first, last + 1)]
     topology = []
     for p, name in zip(meshes, names):
         mesh = UsdGeom.Mesh(p)
-        counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get(), np.int64)
-        idx = np.asarray(mesh.GetFaceVertexIndicesAttr().Get(), np.int64)
+        counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get() or [], np.int64)
+        idx = np.asarray(mesh.GetFaceVertexIndicesAttr().Get() or [], np.int64)
         if counts.size == 0 or counts.sum() != idx.size or (counts < 3).any():
-            raise InputError(f"{path}: piece {name!r} ({p.GetPath()}) has no faces or inconsistent face counts")
+            raise InputError(f"{path}: piece {name!r} ({p.GetPath()}) has no faces or inconsistent face counts "
+                             "(faceVertexCounts and faceVertexIndices); expected polygons of 3 or more corners")
+        if idx.min() < 0:
+            raise InputError(f"{path}: piece {name!r} ({p.GetPath()}): a face uses point {idx.min()}; expected "
+                             "point indices from 0")
         if mesh.GetOrientationAttr().Get() == UsdGeom.Tokens.leftHanded:  # each face's corners reversed
             ends = np.cumsum(counts)
             k = np.arange(idx.size) - np.repeat(ends - counts, counts)  # corner k of its face
@@ -107,7 +130,12 @@ def read_usd_frames(path: str | Path) -> UsdAnimation:
         V, polys, offset = [], [], 0
         for p, name, (counts, idx) in zip(meshes, names, topology):
             mesh = UsdGeom.Mesh(p)
-            P = np.asarray(mesh.GetPointsAttr().Get(t), np.float64).reshape(-1, 3)
+            P = mesh.GetPointsAttr().Get(t)
+            if P is None:
+                raise InputError(f"{path}: piece {name!r} ({p.GetPath()}) has no points at frame "
+                                 f"{'default' if t.IsDefault() else format(t.GetValue(), 'g')}: expected time "
+                                 "samples or a default value of its points")
+            P = np.asarray(P, np.float64).reshape(-1, 3)
             if idx.max() >= len(P):
                 raise InputError(f"{path}: piece {name!r} at frame {t.GetValue():g}: a face uses point {idx.max()} "
                                  f"of {len(P)}")
@@ -132,6 +160,22 @@ def read_usd_frames(path: str | Path) -> UsdAnimation:
     up = "y" if UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.y else "z"
     return UsdAnimation(frames, up, float(stage.GetTimeCodesPerSecond()), float(UsdGeom.GetStageMetersPerUnit(stage)),
                         hidden)
+
+
+def _sample_times(meshes) -> list[float]:
+    """The times at which the meshes' points or their transforms (theirs or an ancestor's) are sampled."""
+    from pxr import UsdGeom
+
+    times, seen = set(), set()
+    for p in meshes:
+        times.update(UsdGeom.Mesh(p).GetPointsAttr().GetTimeSamples())
+        q = p
+        while q and not q.IsPseudoRoot() and q.GetPath() not in seen:
+            seen.add(q.GetPath())
+            if q.IsA(UsdGeom.Xformable):
+                times.update(UsdGeom.Xformable(q).GetTimeSamples())
+            q = q.GetParent()
+    return sorted(times)
 
 
 def _shown(prim) -> bool:

@@ -190,6 +190,8 @@ def read_obj_objects(path: Path, what: str | None = None) -> tuple[list[str], np
                     idx = [int(tok.split("/")[0]) for tok in parts[1:]]
                     if len(idx) < 3:
                         raise ValueError("a face needs at least 3 vertices")
+                    if 0 in idx:
+                        raise ValueError("a face uses vertex 0; OBJ counts its vertices from 1 (or back from -1)")
                     if not names:
                         names.append("object_000")
                         polys.append([])

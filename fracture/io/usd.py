@@ -37,12 +37,29 @@ from pathlib import Path
 
 import numpy as np
 
+from fracture.io.atomic import OutputError
+
 # A piece whose points at a frame are within this of a rotation and translation of its rest points (relative
 # to the scene's size) moves rigidly at that frame: its transform is written, not its points. Rigid-body
 # pieces come out of the transfer exact to rounding (1e-15); the positions are checked to 1e-6.
 RIGID = 1e-7
 # Colours of the two materials (linear RGB): pale stone outside, a darker, warmer break inside.
 _COLOURS = {"exterior": (0.62, 0.62, 0.60), "interior": (0.55, 0.35, 0.25)}
+
+
+def usd_problem(exc: Exception) -> str:
+    """What a USD error (``pxr.Tf.ErrorException``) says, in one line: its first message (USD reports the
+    deepest cause first), without USD's source locations and internal namespaces."""
+    text = str(exc)
+    messages = []
+    for chunk in text.split("Error in ")[1:] or [text]:
+        head, sep, message = chunk.partition(" : '")
+        message = (message if sep else head).strip().rstrip("'").strip()
+        message = re.sub(r"pxrInternal_v\w+?__pxrReserved__::", "", message)
+        if message and message not in messages:
+            messages.append(" ".join(message.split()))
+    useful = [m for m in messages if not m.startswith("Failed to open layer")] or messages
+    return useful[0] if useful else type(exc).__name__
 
 
 def prim_name(name: str, taken: set[str]) -> str:
@@ -109,7 +126,7 @@ def write_pieces_usd(path: str | Path, names: Sequence[str], faces: Sequence[np.
 
     Returns the path written.
     """
-    from pxr import Gf, Sdf, Usd, UsdGeom, UsdShade, Vt
+    from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdShade, Vt
 
     path = Path(path)
     if up_axis not in ("Y", "Z"):
@@ -212,6 +229,10 @@ def write_pieces_usd(path: str | Path, names: Sequence[str], faces: Sequence[np.
         stage.GetRootLayer().Save()
         del stage
         os.replace(tmp, path)
+    except Tf.ErrorException as exc:  # a full disk, a folder one may not write in: said of the user's file
+        raise OutputError(f"{path}: cannot write the USD file: {usd_problem(exc)}") from None
+    except OSError as exc:
+        raise OutputError(f"{path}: cannot write the USD file: {exc.strerror or exc}") from None
     finally:
         tmp.unlink(missing_ok=True)
     return path

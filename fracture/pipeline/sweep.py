@@ -9,8 +9,9 @@ into ``OUT/<key>=<value>,<key>=<value>/``. The sweep directory also holds
 * ``table.csv`` and ``table.md``: each point's figures (:func:`point_figures`: seconds,
   triangles, iterations, energy and the fidelity figures of :mod:`fracture.fidelity`).
 
-A sweep is resumable: a point whose run directory is complete (it has its manifest) is not run
-again, and each run is moved into place whole (:mod:`fracture.io.atomic`), so a killed sweep loses
+A sweep is resumable: a point whose run directory is complete (it has its manifest) and was run with
+the config and stages asked for now is not run again (one whose config or ``--until`` changed is run
+again, and its earlier run replaced once the new one is complete), and each run is moved into place whole (:mod:`fracture.io.atomic`), so a killed sweep loses
 only the points that were running. A failed point is listed with its error and does not stop
 the others. Every point's config is checked before anything runs.
 
@@ -40,7 +41,7 @@ import yaml
 
 from fracture.io import layout
 from fracture.io.atomic import atomic_write_text, staged_directory
-from fracture.pipeline.config import load_config
+from fracture.pipeline.config import dump_config, load_config
 from fracture.errors import ConfigError
 
 GRID_SOURCE = "--grid"
@@ -101,32 +102,62 @@ def _split_values(raw: str) -> list[str]:
 
 
 def points(grid: dict[str, list]) -> list[Point]:
-    """Every combination of the grid's values (the last key varying fastest)."""
+    """Every combination of the grid's values (the last key varying fastest); a value given twice for a key
+    (``0.2,0.2``, or ``1,01``: both 1) is refused, as its two points would be one run."""
     keys = list(grid)
+    for k in keys:
+        seen = set()
+        for v in grid[k]:
+            text = json.dumps(v, sort_keys=True)
+            if text in seen:
+                raise ConfigError(GRID_SOURCE, k, f"the value {text} is given twice; expected distinct values")
+            seen.add(text)
     return [Point(tuple(zip(keys, combo))) for combo in itertools.product(*(grid[k] for k in keys))]
 
 
-def check_points(config: Path, base: list[str], pts: list[Point]) -> None:
-    """Load every point's config, so that a bad value stops the sweep before anything runs (naming the point)."""
+def check_points(config: Path, base: list[str], pts: list[Point]) -> dict[str, str]:
+    """Load every point's config, so that a bad value stops the sweep before anything runs (naming the point);
+    returns each point's config as its run writes it (``config.yaml``), by the point's name."""
+    out = {}
     for p in pts:
         try:
-            load_config(config, base + p.overrides)
+            out[p.name] = dump_config(load_config(config, base + p.overrides))
         except ConfigError as exc:
             raise ConfigError(f"{config} at the sweep point {p.label}", exc.key, exc.problem) from None
+    return out
+
+
+def _stale(run_dir: Path, config_text: str, until: str | None) -> str | None:
+    """Why the complete run ``run_dir`` of a point is not the run asked for now (None: it is): another config
+    (the sweep's config file, ``--set`` or the grid changed since) or other stages (``--until``)."""
+    from fracture.pipeline.runner import stages_until
+
+    try:
+        written = (run_dir / layout.CONFIG).read_text(encoding="utf-8")
+        ran = list(json.loads((run_dir / layout.MANIFEST).read_text(encoding="utf-8"))["stages"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return "its run directory cannot be read"
+    if written != config_text:
+        return "its config changed"
+    if ran != [s.name for s in stages_until(until)]:
+        return "it ran other stages (--until)"
+    return None
 
 
 # -- running one point ---------------------------------------------------------------------------
 
 def run_point(config: str, overrides: list[str], out: str, until: str | None, cache_dir: str | None,
-              use_cache: bool) -> dict:
-    """Run one point into ``out`` (a worker's task); returns its status, never raises for a failed run."""
+              use_cache: bool, force: bool = False) -> dict:
+    """Run one point into ``out`` (a worker's task; ``force`` replaces an earlier run there once this one is
+    complete); returns its status, never raises for a failed run."""
     from fracture.pipeline import runner
     from fracture.pipeline.cache import StageCache
 
     start = time.perf_counter()
     try:
         cfg = load_config(config, overrides)
-        runner.run(cfg, out, until=until, progress=False, cache=StageCache(cache_dir) if use_cache else None)
+        runner.run(cfg, out, until=until, force=force, progress=False,
+                   cache=StageCache(cache_dir) if use_cache else None)
         return {"status": "ok", "seconds": round(time.perf_counter() - start, 3)}
     except Exception as exc:  # noqa: BLE001 - a failed point is reported, the others go on
         return {"status": "failed", "error": f"{type(exc).__name__}: {exc}",
@@ -148,9 +179,10 @@ def run_point_archived(config: str, overrides: list[str], until: str | None, cac
         return status, buf.getvalue()
 
 
-def unpack_run(archive: bytes, out: Path) -> None:
-    """Write a run directory from :func:`run_point_archived`'s archive into place whole."""
-    with staged_directory(out) as staging:
+def unpack_run(archive: bytes, out: Path, force: bool = False) -> None:
+    """Write a run directory from :func:`run_point_archived`'s archive into place whole (``force``: replacing
+    an earlier run there)."""
+    with staged_directory(out, force) as staging:
         with tarfile.open(fileobj=io.BytesIO(archive), mode="r") as tar:
             tar.extractall(staging, filter="data")
 
@@ -203,8 +235,10 @@ def _ray(tasks: list[tuple[Point, tuple]], started: bool, root: Path) -> Iterato
     try:
         remote = ray.remote(num_cpus=1, max_retries=0)(run_point_archived)
         refs = {}
-        for p, (config, overrides, out, until, cache_dir, use_cache) in tasks:
+        replace = {}
+        for p, (config, overrides, out, until, cache_dir, use_cache, force) in tasks:
             refs[remote.remote(config, overrides, until, cache_dir, use_cache)] = p
+            replace[p.name] = force
         while refs:
             done, _ = ray.wait(list(refs), num_returns=1)
             p = refs.pop(done[0])
@@ -213,7 +247,7 @@ def _ray(tasks: list[tuple[Point, tuple]], started: bool, root: Path) -> Iterato
             except Exception as exc:  # noqa: BLE001 - a lost worker fails its point only
                 status, archive = {"status": "failed", "error": f"{type(exc).__name__}: {exc}"}, b""
             if status["status"] == "ok":
-                unpack_run(archive, root / p.name)
+                unpack_run(archive, root / p.name, replace[p.name])
             yield p, status
     finally:
         if started:
@@ -251,7 +285,7 @@ def run_sweep(config: str | Path, grid: dict[str, list], out: str | Path, overri
     if not grid:
         raise ConfigError(GRID_SOURCE, "", "no values to sweep; expected --grid key=v1,v2 or a sweep.grid block")
     pts = points(grid)
-    check_points(config, base, pts)
+    configs = check_points(config, base, pts)
     if out.exists() and not out.is_dir():
         raise ConfigError("--out", str(out), "is a file; expected a sweep directory")
     started = _ray_start(jobs, address) if backend == "ray" else False
@@ -259,12 +293,16 @@ def run_sweep(config: str | Path, grid: dict[str, list], out: str | Path, overri
     state = {"config": str(config), "overrides": base, "grid": grid, "backend": backend, "points": {}}
     todo = []
     for p in pts:
-        if (out / p.name / layout.MANIFEST).is_file():
+        complete = (out / p.name / layout.MANIFEST).is_file()
+        stale = _stale(out / p.name, configs[p.name], until) if complete else None
+        if complete and stale is None:
             state["points"][p.name] = {"values": dict(p.values), "status": "done before"}
         else:
             state["points"][p.name] = {"values": dict(p.values), "status": "pending"}
+            if stale is not None:  # run again; the earlier run is replaced once the new one is complete
+                state["points"][p.name]["replaces"] = f"an earlier run: {stale}"
             todo.append((p, (str(config), base + p.overrides, str(out / p.name), until,
-                             None if cache_dir is None else str(cache_dir), use_cache)))
+                             None if cache_dir is None else str(cache_dir), use_cache, complete)))
     save = lambda: atomic_write_text(out / "sweep.json", json.dumps(state, indent=1, default=str) + "\n")  # noqa: E731
     save()
     bar = tqdm(total=len(todo), desc="sweep", disable=not progress, leave=True)
