@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from fields.errors import InputError
+from fields.npy import is_npy
 from fields.grid import Grid
 from fields.interpolate import trilinear
 from fields.tolerances import tol
@@ -63,6 +64,10 @@ def load_directions(path: str | Path, key: str) -> np.ndarray:
     of nonzero length; refused naming ``key``, the file and the first bad node."""
     path = Path(path)
     where = f"{key} ({path})"
+    if not path.is_file():
+        raise InputError(f"{where}: file not found; expected a .npy file of fibre directions")
+    if not is_npy(path):
+        raise InputError(f"{where}: not a .npy file (NumPy's np.save writes one); expected an array (nx, ny, nz, 3)")
     try:
         d = np.load(path, allow_pickle=False)
     except Exception as exc:  # numpy raises several kinds for a damaged file

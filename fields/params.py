@@ -199,8 +199,10 @@ def expected(model: type[BaseModel], name: str) -> str:
 def describe(model: type[BaseModel], name: str, key: str | None = None) -> str:
     """One line for ``--explain`` and the tooltips: ``key = default: what it accepts. Description``."""
     f = model.model_fields[name]
-    default = f.get_default(call_default_factory=True)
-    line = f"{key or name} = {default!r}: {expected(model, name)}"
+    if f.is_required():
+        line = f"{key or name} (required): {expected(model, name)}"
+    else:
+        line = f"{key or name} = {f.get_default(call_default_factory=True)!r}: {expected(model, name)}"
     doc = f.description or ""
     return line + (f". {doc[0].upper()}{doc[1:]}" if doc else "")
 

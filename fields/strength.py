@@ -29,6 +29,7 @@ from pydantic import Field, TypeAdapter
 from fields.grid import Grid
 from fields.interpolate import trilinear
 from fields.errors import InputError
+from fields.npy import is_npy
 from fields.params import (Bounds, Section, Vec3, bounds, choice, file, integer, number, parameters, text,
                            vec3)
 from fields.tolerances import tol
@@ -270,6 +271,8 @@ def load_volume(path: str | Path) -> np.ndarray:
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: strength volume not found (expected a .npy file with a 3D array)")
+    if not is_npy(path):
+        raise InputError(f"{path}: not a .npy file (NumPy's np.save writes one); expected a 3D array of strengths")
     try:
         values = np.load(path, allow_pickle=False)
     except Exception as exc:  # numpy raises several kinds for a damaged file
@@ -469,7 +472,10 @@ def strength_field(X: np.ndarray, bounds, layers: list, seed: int, normalize: bo
     zeta = np.zeros(U.shape[0])
     for i, layer in enumerate(map(as_layer, layers)):
         params = {k: v for k, v in parameters(layer).items() if k not in ("kind", "weight")}
-        zeta += layer.weight * KINDS[layer.kind][0](U, frame, np.random.default_rng([seed, i]), **params)
+        try:
+            zeta += layer.weight * KINDS[layer.kind][0](U, frame, np.random.default_rng([seed, i]), **params)
+        except InputError as exc:  # a layer's file: said with the layer's key
+            raise InputError(f"strength.layers[{i}] ({layer.kind}): {exc}") from None
     if normalize:
         zeta = normalize01(zeta)
     return zeta

@@ -133,8 +133,21 @@ def cache_from_args(args):
     return None if args.no_cache else StageCache(args.cache_dir)
 
 
-def _terminate(signum, frame):
-    """SIGTERM: unwind like Ctrl-C, so that a run being staged is removed.
+class _Stopped(KeyboardInterrupt):
+    """Ctrl-C or SIGTERM while a command runs: unwinds as Ctrl-C does (a run being staged is removed); ``code``
+    is the exit status (130, 143)."""
+
+    def __init__(self, signum: int):
+        super().__init__(signum)
+        self.code = 128 + signum
+
+
+# The signal that stopped the command, once one has (errors it causes while unwinding are said as the stop).
+_stopped_by: list[int] = []
+
+
+def _stop(signum, frame):
+    """Ctrl-C and SIGTERM: raise :class:`_Stopped` where the program is.
 
     Inside a callback from the compiler's C code (numba writing a kernel to
     its cache through llvmlite) an exception would be printed and dropped, and
@@ -145,10 +158,11 @@ def _terminate(signum, frame):
 
         threading.Timer(_REDELIVER_SECONDS, os.kill, (os.getpid(), signum)).start()
         return
-    raise SystemExit(128 + signum)
+    _stopped_by.append(signum)
+    raise _Stopped(signum)
 
 
-# Seconds after which a SIGTERM that arrived inside a compiler callback is sent again.
+# Seconds after which a signal that arrived inside a compiler callback is sent again.
 _REDELIVER_SECONDS = 0.05
 
 
@@ -161,14 +175,42 @@ def _in_compiler_callback(frame) -> bool:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """The command line; SIGTERM is taken like Ctrl-C while it runs (the previous handler is restored)."""
+    """The command line; Ctrl-C and SIGTERM stop it with one line (the previous handlers are restored)."""
     import signal
 
-    previous = signal.signal(signal.SIGTERM, _terminate)
+    signals = [signal.SIGINT, signal.SIGTERM] if threading_main() else []
+    previous = [signal.signal(s, _stop) for s in signals]
+    _stopped_by.clear()
     try:
         return _main(argv)
+    except _Stopped as stop:
+        return _say_stopped(stop.code, argv)
+    except Exception:
+        if _stopped_by:  # a kernel half compiled when the signal came, say: the stop, not what it broke
+            return _say_stopped(128 + _stopped_by[0], argv)
+        raise
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        for s, handler in zip(signals, previous):
+            signal.signal(s, handler)
+
+
+def threading_main() -> bool:
+    """Whether this is the main thread (the only one that may set signal handlers)."""
+    import threading
+
+    return threading.current_thread() is threading.main_thread()
+
+
+def _say_stopped(code: int, argv: list[str] | None) -> int:
+    """One line on what a stop left: a sweep keeps its finished points, any other command writes nothing."""
+    words = list(sys.argv[1:] if argv is None else argv)
+    how = "interrupted" if code == 130 else "terminated"
+    if words[:1] == ["sweep"]:
+        print(f"fracref: {how}; the sweep's finished points are kept (run the same sweep again to resume)",
+              file=sys.stderr)
+    else:
+        print(f"fracref: {how}; nothing was written", file=sys.stderr)
+    return code
 
 
 def _main(argv: list[str] | None) -> int:
@@ -235,9 +277,8 @@ def _main(argv: list[str] | None) -> int:
             raise
         print(f"fracref: error: {exc.filename}: {exc.strerror}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("fracref: interrupted; nothing was written", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as stop:  # ours (Ctrl-C, SIGTERM), or Python's where ours was not set
+        return _say_stopped(getattr(stop, "code", 130), argv)
 
 
 def _start_view(run_dir: Path, camera: Path | None):

@@ -133,6 +133,8 @@ def test_yaml_problems(tmp_path):
         load_config(tmp_path / "a.yaml")
     with pytest.raises(ConfigError, match="config file not found"):
         load_config(tmp_path / "nope.yaml")
+    with pytest.raises(ConfigError, match="is a directory; expected a YAML config file"):
+        load_config(tmp_path)
 
 
 def test_set_overrides(tmp_path, small_config):
@@ -175,6 +177,8 @@ def test_explain_says_what_a_key_means_from_the_same_declarations_the_code_uses(
     from fracture.pipeline.config import explain
     from fracture.pipeline.schema import RefineSection
     from fracture.refine.params import RefineParams
+
+    assert explain("strength.layers.volume.path").startswith("strength.layers.volume.path (required): a file path")
 
     assert explain("refine.step") == ("refine.step = 0.5: a number in [0.0001, 10]. Nominal move per iteration "
                                       "(grid cells) where grad psi has its root mean square")

@@ -197,9 +197,12 @@ def test_a_killed_cli_run_removes_its_staging(tmp_path, small_config):
         time.sleep(0.05)
     proc.send_signal(signal.SIGTERM)
     proc.wait(timeout=120)
+    err = proc.stderr.read()
     assert proc.returncode != 0 or (tmp_path / "run").is_dir()  # killed, or it had already finished
+    if proc.returncode != 0:
+        assert proc.returncode == 128 + signal.SIGTERM and err.endswith("fracref: terminated; nothing was written\n")
     assert not list(tmp_path.glob(".run.*"))
-    assert "Traceback" not in proc.stderr.read()
+    assert "Traceback" not in err
 
 
 def test_a_grid_beyond_the_memory_limit_is_refused_before_it_is_allocated(tmp_path, small_config):
@@ -294,28 +297,47 @@ def test_a_file_that_fails_to_be_written_fails_the_run_and_leaves_nothing(tmp_pa
         assert (out / rel).stat().st_size == info["bytes"] and sha256(out / rel) == info["sha256"]
 
 
-def test_sigterm_inside_a_compiler_callback_is_taken_after_it(monkeypatch):
-    """The command line's SIGTERM handler: inside a callback from llvmlite's C code (where an exception
-    would be printed and dropped) it sends the signal again a moment later; elsewhere it exits."""
+@pytest.mark.parametrize("signum", ["SIGINT", "SIGTERM"])
+def test_a_stop_inside_a_compiler_callback_is_taken_after_it(monkeypatch, signum):
+    """The command line's Ctrl-C and SIGTERM handler: inside a callback from llvmlite's C code (where an
+    exception would be printed and dropped, and the run go on) it sends the signal again a moment later;
+    elsewhere it stops the command as Ctrl-C does, with the signal's exit status."""
     import signal
     import time
 
     from fracref import cli
 
+    signum = getattr(signal, signum)
     sent = []
     monkeypatch.setattr(cli.os, "kill", lambda pid, sig: sent.append((pid, sig)))
     namespace = {"sys": sys}
     exec(compile("def callback():\n    return sys._getframe()\n",
                  "/venv/site-packages/llvmlite/binding/executionengine.py", "exec"), namespace)
-    cli._terminate(signal.SIGTERM, namespace["callback"]())  # returns: no exception inside the callback
+    cli._stop(signum, namespace["callback"]())  # returns: no exception inside the callback
     for _ in range(100):
         if sent:
             break
         time.sleep(0.02)
-    assert sent == [(os.getpid(), signal.SIGTERM)]
-    with pytest.raises(SystemExit) as exit_info:
-        cli._terminate(signal.SIGTERM, sys._getframe())
-    assert exit_info.value.code == 128 + signal.SIGTERM
+    assert sent == [(os.getpid(), signum)]
+    with pytest.raises(KeyboardInterrupt) as stop:
+        cli._stop(signum, sys._getframe())
+    assert stop.value.code == 128 + signum
+
+
+def test_an_error_while_a_stop_unwinds_is_said_as_the_stop(monkeypatch, capsys):
+    """A kernel half compiled when Ctrl-C came breaks what runs next ("no compiled object yet"): the command
+    says it was interrupted, in one line, not what the interruption broke."""
+    import signal
+
+    from fracref import cli
+
+    def broken(argv):
+        cli._stopped_by.append(signal.SIGINT)
+        raise RuntimeError("no compiled object yet for <Library '_pairs'>")
+
+    monkeypatch.setattr(cli, "_main", broken)
+    assert cli.main(["run", "x.yaml"]) == 130
+    assert capsys.readouterr().err == "fracref: interrupted; nothing was written\n"
 
 
 JOIN = ("the refined fracture surface cannot be joined to the object's surface near [0.5, 0.5, 0.5]: two of its "

@@ -157,11 +157,20 @@ def test_volume_errors_name_the_file(tmp_path):
     nan[0, 0, 0] = np.nan
     np.save(tmp_path / "nan.npy", nan)
     (tmp_path / "junk.npy").write_bytes(b"not numpy")
+    (tmp_path / "piece.obj").write_text("o a\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    np.save(tmp_path / "cut.npy", np.zeros((3, 3, 3)))
+    (tmp_path / "cut.npy").write_bytes((tmp_path / "cut.npy").read_bytes()[:100])
     for name, match in [("missing.npy", "not found"), ("flat.npy", "expected a 3D array"),
-                        ("nan.npy", "NaN"), ("junk.npy", "cannot read")]:
+                        ("nan.npy", "NaN"), ("junk.npy", r"not a \.npy file"), ("piece.obj", r"not a \.npy file"),
+                        ("cut.npy", "cannot read")]:
         with pytest.raises(InputError, match=match) as err:
             load_volume(tmp_path / name)
         assert name in str(err.value)
+    # from the config: the layer's key too
+    with pytest.raises(InputError) as err:
+        strength_field(sample_points(10), BOUNDS, [layer("radial"), {"kind": "volume", "path": str(tmp_path / "piece.obj")}],
+                       seed=0)
+    assert str(err.value).startswith(f"strength.layers[1] (volume): {tmp_path / 'piece.obj'}: not a .npy file")
 
 
 def test_layers_add_with_weights():

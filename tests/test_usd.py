@@ -255,6 +255,26 @@ def test_fracref_export_refuses_what_is_not_a_finished_run(tmp_path, capsys):
     assert "coarse/components.json is missing" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("rel, damage", [
+    ("manifest.json", b"{\"name\": \x01"),
+    ("manifest.json", b""),
+    ("animation/transfer.npz", b"PK\x03\x04 cut short"),
+    ("coarse/components.json", b"[1, 2"),
+])
+def test_fracref_export_of_a_damaged_run_names_the_file(cube8_run, tmp_path, capsys, rel, damage):
+    import shutil
+
+    from fracref.cli import main
+
+    run = tmp_path / "run"
+    shutil.copytree(cube8_run, run)
+    (run / rel).write_bytes(damage)
+    assert main(["export", str(run), "--out", str(tmp_path / "x.usdc")]) == 2
+    err = capsys.readouterr().err
+    assert f"cannot export, {rel} cannot be read (" in err and "Traceback" not in err, err
+    assert len(err.strip().splitlines()) == 1 and not (tmp_path / "x.usdc").exists()
+
+
 # -- USD input ------------------------------------------------------------------------------------
 
 def _write_points_usd(path, frames, names, up="Z", left_handed=False, start=1, fps=None, meters_per_unit=None,

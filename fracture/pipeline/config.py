@@ -47,6 +47,8 @@ class _UniqueKeyLoader(yaml.SafeLoader):
 
 def read_yaml(path: Path) -> dict:
     """Read one YAML mapping safely, with errors that name the file and line."""
+    if path.is_dir():
+        raise ConfigError(str(path), "", "is a directory; expected a YAML config file (configs/example.yaml, say)")
     if not path.is_file():
         raise ConfigError(str(path), "", "config file not found")
     try:

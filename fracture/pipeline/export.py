@@ -11,6 +11,8 @@ file. The run itself writes the USD file already
 from __future__ import annotations
 
 import json
+import zipfile
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -30,6 +32,20 @@ def _need(run: Path, rel: str) -> Path:
     return p
 
 
+@contextmanager
+def _reading(run: Path, rel: str):
+    """Say which of the run's files cannot be read, and why, in one line."""
+    try:
+        yield
+    except InputError:
+        raise
+    except (OSError, ValueError, KeyError, TypeError, IndexError, EOFError, zipfile.BadZipFile,
+            yaml.YAMLError) as exc:
+        why = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise InputError(f"{run}: cannot export, {rel} cannot be read ({why}); run the config again to "
+                         "write it whole") from None
+
+
 def export_run(run: str | Path, fmt: str = "usd", out: str | Path | None = None) -> Path:
     """Write the run's pieces and animation as ``fmt``; returns the file written.
 
@@ -44,23 +60,28 @@ def export_run(run: str | Path, fmt: str = "usd", out: str | Path | None = None)
         raise InputError(f"export: unknown format {fmt!r}; expected one of {', '.join(FORMATS)}")
     if not run.is_dir():
         raise InputError(f"{run}: not a run directory")
-    names = json.loads(_need(run, layout.COMPONENTS).read_text())["names"]
-    transfer = load_transfer(_need(run, layout.TRANSFER))
+    with _reading(run, layout.COMPONENTS):
+        names = [str(name) for name in json.loads(_need(run, layout.COMPONENTS).read_text())["names"]]
+    with _reading(run, layout.TRANSFER):
+        transfer = load_transfer(_need(run, layout.TRANSFER))
     n = len(transfer.offsets) - 1
     if n != len(names):
         raise InputError(f"{run}: coarse/components.json names {len(names)} pieces, animation/transfer.npz has {n}")
     faces, exterior = [], []
     for c in range(n):
         rel = layout.piece(c)
-        V, F, _, face_data = read_ply(_need(run, rel))
+        with _reading(run, rel):
+            V, F, _, face_data = read_ply(_need(run, rel))
         if len(V) != transfer.offsets[c + 1] - transfer.offsets[c] or "exterior" not in face_data:
             raise InputError(f"{run / rel}: does not match animation/transfer.npz ({len(V)} vertices, "
                              f"expected {transfer.offsets[c + 1] - transfer.offsets[c]}, with a face property exterior)")
         faces.append(F)
         exterior.append(np.asarray(face_data["exterior"]).astype(bool))
-    manifest = json.loads(_need(run, layout.MANIFEST).read_text())
-    up = manifest.get("stats", {}).get("coarse", {}).get("up_axis", "z")
-    timing = run_usd_timing(yaml.safe_load(_need(run, layout.CONFIG).read_text()), manifest)
+    with _reading(run, layout.MANIFEST):
+        manifest = json.loads(_need(run, layout.MANIFEST).read_text())
+        up = manifest.get("stats", {}).get("coarse", {}).get("up_axis", "z")
+    with _reading(run, layout.CONFIG):
+        timing = run_usd_timing(yaml.safe_load(_need(run, layout.CONFIG).read_text()), manifest)
     out = Path(out) if out is not None else run / layout.USD
     if out.suffix not in (".usd", ".usdc", ".usda"):
         raise InputError(f"export: {out}: a USD file name ends in .usd, .usdc or .usda")
