@@ -1,6 +1,7 @@
 """Queries against the exterior surface B (fracture.mesh.exterior)."""
 
 import numpy as np
+import pytest
 
 from fracture.mesh.exterior import Exterior
 from fracture.mesh.primitives import box
@@ -67,3 +68,19 @@ def test_grid_nodes_answer_as_asking_every_node():
         asked = np.random.default_rng(1).random(shape) < 0.3
         inside_a, on_b_a = B.grid_nodes(origin, spacing, shape, within, asked=asked)
         assert (inside_a == (inside & asked)).all() and (on_b_a == (on_b & asked)).all()
+
+
+@pytest.mark.parametrize("offset", [0.0, 1e4, 1e6])
+def test_winding_numbers_far_from_the_origin_tell_inside_from_outside(offset):
+    """libigl's fast winding number holds single-precision coordinates: about the origin, a cube 1e6 away took
+    points outside for inside; taken about the cube's centre it is exact to its own size."""
+    from fracture.mesh.exterior import fast_winding
+    from fracture.mesh.primitives import box
+
+    V, F = box(np.zeros(3), np.ones(3))
+    P = np.random.default_rng(0).random((4000, 3)) * 1.2 - 0.1
+    inside = np.all((P > 0) & (P < 1), axis=1)
+    away = np.array([offset, -0.5 * offset, 0.0])
+    clear = np.all(np.abs(P - 0.5) < 0.499, axis=1) | np.any(np.abs(P - 0.5) > 0.501, axis=1)
+    assert np.array_equal((fast_winding(V + away, F, P + away) > 0.5)[clear], inside[clear])
+    assert np.array_equal(Exterior(V + away, F).inside(P + away)[clear], inside[clear])

@@ -495,6 +495,25 @@ def test_outward_turns_inverted_parts_and_keeps_a_cavity():
     assert changed and np.array_equal(G, F1)
 
 
+def test_an_object_far_from_the_origin_imports_as_it_does_at_the_origin(tmp_path, imported):
+    """The sample a million units away (written with six decimals, as Blender writes): its pieces' insides
+    (winding numbers) are taken about their own centres, and it imports as the sample does."""
+    d = _copy_sample(tmp_path)
+    away = np.array([1e6, -5e5, 0.0])
+    for t in range(9, 41):  # eight frames are enough: the rest pose makes B and the cracks
+        (d / f"frame_{t:04d}.obj").unlink()
+    for t in range(1, 9):
+        _edit(d / f"frame_{t:04d}.obj", lambda l: [
+            "v " + " ".join(f"{c:.6f}" for c in np.array(x.split()[1:4], float) + away) if x.startswith("v ") else x
+            for x in l])
+    cf, _ = load_coarse_sequence(d)
+    ref = imported[0]
+    assert cf.n_components == 8
+    assert np.allclose(cf.exterior_V.mean(axis=0) - away, ref.exterior_V.mean(axis=0), atol=1e-3)
+    assert area(cf.exterior_V, cf.exterior_F) == pytest.approx(area(ref.exterior_V, ref.exterior_F), rel=1e-3)
+    assert area(cf.V, cf.F) == pytest.approx(area(ref.V, ref.F), rel=1e-3)
+
+
 def test_missing_directory_and_no_frames(tmp_path):
     with pytest.raises(InputError, match="not found"):
         read_sequence(tmp_path / "nope")

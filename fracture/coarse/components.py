@@ -18,7 +18,7 @@ from scipy import ndimage
 
 from fracture.errors import InputError
 from fracture.coarse.surface import flood_fill_patches
-from fracture.mesh.exterior import Exterior
+from fracture.mesh.exterior import Exterior, fast_winding
 from fracture.tolerances import tol
 from fracture.mesh.topology import (boundary_edges, diagonal, directed_edges, edge_keys, edge_outward, face_frames,
                                unique_edges)
@@ -268,7 +268,7 @@ def label_components(BV: np.ndarray, BF: np.ndarray, V: np.ndarray, F: np.ndarra
     shape = np.ceil((hi - lo) / h).astype(int) + 3
     axes = [origin[k] + h * np.arange(shape[k]) for k in range(3)]
     P = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
-    inside = igl.fast_winding_number(BV, BF, P) > 0.5
+    inside = fast_winding(BV, BF, P) > 0.5
     free = inside.copy()
     WV, WF = _with_skirt(BV, BF, V, F, h)
     near = _near_surface(np.flatnonzero(inside), shape, origin, h, WV, WF, 0.6 * h)

@@ -46,7 +46,7 @@ from fracture.coarse.pinholes import PINHOLE, close_pinholes
 from fracture.mesh.multilabel import contour_labels
 from fracture.mesh.sheets import coarsen_sheets
 from fracture.errors import InputError
-from fracture.mesh.exterior import Exterior
+from fracture.mesh.exterior import Exterior, fast_winding
 from fracture.tolerances import tol
 from fracture.mesh.topology import closed_oriented, fan, signed_volume
 
@@ -225,7 +225,7 @@ def outward(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, bool]:
         settled = (np.abs(volume) > abs(volume[c])) & (np.arange(len(volume)) != c)  # larger parts
         around = G[settled[part]]
         corners = V[np.unique(G[mine])]
-        if len(around) and igl.fast_winding_number(V, around, corners).min() > 0.5:
+        if len(around) and fast_winding(V, around, corners).min() > 0.5:
             continue  # a cavity's wall: wholly inside the larger parts
         G[mine] = G[mine][:, ::-1]
     return G, bool((G != F).any())
@@ -258,7 +258,7 @@ def _labels(pieces, nodes: np.ndarray, shape, h: float) -> _Labels:
         lo, hi = PV.min(axis=0), PV.max(axis=0)
         pad = 0.5 * (hi - lo).max()  # winding numbers fall off outside the box: only nearby nodes matter
         near = np.all((nodes >= lo - pad) & (nodes <= hi + pad), axis=1)
-        W[p, near] = igl.fast_winding_number(PV, PF, nodes[near])
+        W[p, near] = fast_winding(PV, PF, nodes[near])
     in_two = np.flatnonzero((W > 0.5).sum(axis=0) >= 2)
     top2 = np.sort(np.argsort(-W[:, in_two], axis=0)[:2].T, axis=1)
     inside = (W.sum(axis=0) > 0.5).reshape(shape)
@@ -325,7 +325,7 @@ def _winding_crossing(pieces, h: float, by_slit: np.ndarray | None = None, origi
                 near = np.flatnonzero(np.all((X >= boxes[p][0]) & (X <= boxes[p][1]), axis=1))
                 if not len(near):
                     continue
-                w = igl.fast_winding_number(PV, PF, X[near])
+                w = fast_winding(PV, PF, X[near])
                 total[near] += w
                 w_in[near[owner[near] == p]] = w[owner[near] == p]
                 w_out[near[other[near] == p]] = w[other[near] == p]

@@ -45,6 +45,7 @@ import scipy.sparse as sp
 from fracture.coarse.surface import flood_fill_patches
 from fracture.pieces.imprint import Imprint
 from fracture.mesh.intersect import self_intersections
+from fracture.mesh.exterior import fast_winding
 from fracture.mesh.fracture_surface import FractureSurface
 from fracture.mesh.topology import (barycentric_weights, closed_oriented, diagonal, directed_edge_face, signed_volume,
                                weld)
@@ -477,14 +478,14 @@ def overlap_and_gap(pieces: Pieces, BV: np.ndarray, BF: np.ndarray, samples: int
     """
     lo, hi = BV.min(axis=0), BV.max(axis=0)
     P = lo + (hi - lo) * rng.random((samples, 3))
-    inside_b = igl.fast_winding_number(np.ascontiguousarray(BV), np.ascontiguousarray(BF, np.int64), P) > 0.5
+    inside_b = fast_winding(np.ascontiguousarray(BV), np.ascontiguousarray(BF, np.int64), P) > 0.5
     P = P[inside_b]
     count = np.zeros(len(P), np.int64)
     share = np.zeros(pieces.n_pieces)
     n = max(len(P), 1)
     for c in range(pieces.n_pieces):
         _, V, F = pieces.piece(c)
-        inside = igl.fast_winding_number(V, np.ascontiguousarray(F, np.int64), P) > 0.5
+        inside = fast_winding(V, np.ascontiguousarray(F, np.int64), P) > 0.5
         count += inside
         share[c] = inside.sum() / n
     return float((count > 1).sum() / n), float((count == 0).sum() / n), share, len(P)
