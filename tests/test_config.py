@@ -125,6 +125,13 @@ def test_yaml_problems(tmp_path):
     assert message.startswith(f"{path}:4: invalid YAML: key 'grid' given twice (first on line 1)"), message
     message, _ = _error(tmp_path, "grid: {resolution: 20, resolution: 30}\n")
     assert "key 'resolution' given twice" in message
+    # aliases of aliases (a few lines standing for a billion values) are refused before they are expanded
+    bomb = "a0: &a0 [x, x, x, x, x, x, x, x, x]\n" + "".join(
+        f"a{k}: &a{k} [{', '.join([f'*a{k - 1}'] * 9)}]\n" for k in range(1, 10))
+    message, path = _error(tmp_path, bomb)
+    assert message == f"{path}:1: invalid YAML: its aliases expand to more than 1,000,000 values; expected a config"
+    anchored = "seed: &n 12\ngrid: {resolution: *n}\n"  # an alias or two is fine
+    assert load_config(write(tmp_path / "ok.yaml", anchored)).grid.resolution == 12
     message, _ = _error(tmp_path, "defaults: [missing]\n")
     assert "included config 'missing' not found" in message
     write(tmp_path / "a.yaml", "defaults: [b]\n")

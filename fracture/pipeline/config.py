@@ -43,6 +43,36 @@ class _UniqueKeyLoader(yaml.SafeLoader):
             seen[key] = key_node.start_mark.line
         return super().construct_mapping(node, deep)
 
+    def get_single_data(self):
+        node = self.get_single_node()
+        if node is None:
+            return None
+        if _expanded_size(node) > _MOST_NODES:  # aliases of aliases: a small file of billions of values
+            raise yaml.constructor.ConstructorError(
+                None, None, f"its aliases expand to more than {_MOST_NODES:,} values; expected a config",
+                node.start_mark)
+        return self.construct_document(node)
+
+
+# Values a config file may expand to through its aliases (configs hold hundreds).
+_MOST_NODES = 1_000_000
+
+
+def _expanded_size(node, sizes: dict | None = None) -> int:
+    """How many values a YAML node stands for with its aliases expanded (each node's size counted once)."""
+    sizes = {} if sizes is None else sizes
+    if id(node) in sizes:
+        return sizes[id(node)]
+    sizes[id(node)] = 1  # a node within itself (a recursive alias) counts once
+    if isinstance(node, yaml.SequenceNode):
+        n = 1 + sum(_expanded_size(child, sizes) for child in node.value)
+    elif isinstance(node, yaml.MappingNode):
+        n = 1 + sum(_expanded_size(k, sizes) + _expanded_size(v, sizes) for k, v in node.value)
+    else:
+        n = 1
+    sizes[id(node)] = n
+    return n
+
 
 
 def read_yaml(path: Path) -> dict:
