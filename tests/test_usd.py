@@ -614,6 +614,7 @@ def test_a_usd_with_time_samples_and_no_range_reads_every_sampled_frame(tmp_path
 
 @pytest.mark.parametrize("content, words", [
     (b"", "the file is empty; expected a USD file"),
+    (b"Ogawa", "an Alembic file; this reads USD"),
     (b'#usda 1.0\ndef Mesh "a" {\n  point3f[] points = [(0,0,0), (1,\n}\n',
      "x.usda:4:1: parse error matching Sdf_TextFileFormatParser::TupleValueClose"),
 ])
@@ -621,9 +622,10 @@ def test_a_broken_usd_file_says_why_in_one_line(tmp_path, content, words):
     from fracture.errors import InputError
     from fracture.coarse.usd_input import read_usd_frames
 
-    (tmp_path / "x.usda").write_bytes(content)
+    path = tmp_path / ("x.abc" if content == b"Ogawa" else "x.usda")
+    path.write_bytes(content)
     with pytest.raises(InputError) as error:
-        read_usd_frames(tmp_path / "x.usda")
+        read_usd_frames(path)
     text = str(error.value)
     assert words in text and "\n" not in text and "pxrInternal" not in text and ".cpp" not in text
 

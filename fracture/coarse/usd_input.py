@@ -70,6 +70,10 @@ def read_usd_frames(path: str | Path) -> UsdAnimation:
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: USD file not found")
+    if path.suffix.lower() == ".abc":
+        raise InputError(f"{path}: an Alembic file; this reads USD (.usd, .usda, .usdc, .usdz): export the animation "
+                         "as USD (Blender: File > Export > Universal Scene Description; Houdini: a USD ROP) or as "
+                         "OBJ frames (input.kind: mesh_sequence)")
     if path.stat().st_size == 0:
         raise InputError(f"{path}: the file is empty; expected a USD file (.usd, .usda, .usdc or .usdz)")
     try:
