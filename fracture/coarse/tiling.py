@@ -67,6 +67,12 @@ _HOLDING = 0.5
 # A box holds another when it does within this fraction of its diagonal (a piece reaching out of the others'
 # box, a box holding the others').
 _BOX_SLACK = 0.05
+# An object thinner than this fraction of its size lies in a plane: no solid pieces (rounding leaves 1e-16).
+_PLANE = 1e-9
+# A piece or part is inside out when six times the volume it encloses is below minus this fraction of twice its
+# area to the power 3/2 (a ball's ratio is 0.2, a plank a hundredth as thick as wide 0.007; two flat quads that
+# Cell Fracture left of a Suzanne as one piece, rounding, 4e-6).
+_TURNED = 1e-4
 # A piece whose box holds the others' and whose volume is theirs together (within this fraction of its own:
 # Cell Fracture's margin takes up to a tenth) is the unfractured object (holding_the_rest).
 _HOLDS_VOLUME = 0.15
@@ -215,16 +221,18 @@ def outward(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, bool]:
     G, part = np.asarray(G, np.int64), np.asarray(part, np.int64)
     centre = V.mean(axis=0)  # volumes about a point of the piece: an open part's is then still telling
     A, B, C = (V[G[:, i]] - centre for i in range(3))
-    volume = np.bincount(part, np.einsum("ij,ij->i", A, np.cross(B, C)))
-    if volume.sum() < 0.0:  # the piece inside out, a cavity's wall with it
+    cross = np.cross(B - A, C - A)
+    volume = np.bincount(part, np.einsum("ij,ij->i", A, np.cross(B, C)))  # six times each part's
+    area = np.bincount(part, np.linalg.norm(cross, axis=1))  # twice each part's
+    if volume.sum() < -_TURNED * area.sum() ** 1.5:  # the piece inside out, a cavity's wall with it
         G, volume = G[:, ::-1].copy(), -volume
     for c in np.argsort(-np.abs(volume)):
-        if volume[c] >= 0.0:
-            continue
+        if volume[c] >= -_TURNED * area[c] ** 1.5:
+            continue  # outward, or a sliver with no inside to lose (Cell Fracture leaves some)
         mine = part == c
+        corners = V[np.unique(G[mine])]
         settled = (np.abs(volume) > abs(volume[c])) & (np.arange(len(volume)) != c)  # larger parts
         around = G[settled[part]]
-        corners = V[np.unique(G[mine])]
         if len(around) and fast_winding(V, around, corners).min() > 0.5:
             continue  # a cavity's wall: wholly inside the larger parts
         G[mine] = G[mine][:, ::-1]
@@ -429,7 +437,7 @@ def label_tiling(V: np.ndarray, polygons: list[list[np.ndarray]], names: list[st
     if not span.max() > tol.zero * max(float(np.abs(V[used]).max()), 1.0):
         raise InputError(f"{where}the pieces' vertices all lie at one point, {V[used[0]].tolist()} (an object "
                          "smaller than the file's decimals, rounded?); expected pieces of some size")
-    if not thinnest_extent(V[used]) > 1e-9 * span.max():
+    if not thinnest_extent(V[used]) > _PLANE * span.max():
         raise InputError(f"{where}the pieces' vertices all lie in one plane: the object is flat; expected the "
                          "closed pieces of a solid")
     pieces = _piece_triangles(V, polygons)
