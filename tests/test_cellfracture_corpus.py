@@ -166,7 +166,9 @@ def test_a_random_suzanne_runs_where_a_small_hole_of_a_crack_touches_b(corpus, t
     """Blender's OBJ of a random Suzanne (suzanne_6_s39047) at 25,000 triangles: a crack between two pieces
     kept a hole of six edges, less than one of B's edges around, whose rim lay on B around an island of B
     of 1e-7 square units; imprinted, the rim gave the patch around it to the wrong piece, which did not
-    close (the run was refused). The hole is closed, and the run says so."""
+    close (the run was refused). Such holes are closed (fracture/pieces/holes.py; tests/test_holes.py). Since
+    the winding numbers are taken about the object's centre the refinement here leaves no such hole (on
+    draws 0 to 3 of its random choices): the run is sound, and any hole it closes is in its notes."""
     cfg = load_config(REPO / "configs" / "blender_cube8.yaml",
                       [f"input.path={corpus / 'suzanne_6_s39047' / 'blender_obj'}", "refine.max_triangles=25000",
                        "animate.usd=false", "refine.snapshots=false"])
@@ -174,8 +176,9 @@ def test_a_random_suzanne_runs_where_a_small_hole_of_a_crack_touches_b(corpus, t
     manifest = json.loads((out / "manifest.json").read_text())
     _assert_sound(manifest["stats"]["animate"])
     assert manifest["stats"]["animate"]["overlap_share"] == 0.0
-    assert any(n.startswith("animate: 1 small hole of the refined surface") for n in manifest["notes"])
-    assert manifest["stats"]["animate"]["small_holes_closed"] == 1
+    closed = manifest["stats"]["animate"]["small_holes_closed"]
+    said = [n for n in manifest["notes"] if "small hole" in n and n.startswith("animate: ")]
+    assert len(said) == (closed > 0) and all(n.startswith(f"animate: {closed} small hole") for n in said)
 
 
 def _assert_sound(animate: dict) -> None:
