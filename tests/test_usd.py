@@ -346,6 +346,56 @@ def test_instanced_pieces_are_read_through_their_instances(tmp_path):
             np.testing.assert_allclose(X, want, atol=1e-6)
 
 
+def test_pieces_of_a_point_instancer_are_read_where_its_instances_put_them(tmp_path):
+    """Pieces written as a point instancer (``/geo/rbd``: one prototype per piece, each instance's position
+    and orientation time-sampled, as Houdini may write packed fragments): each instance is a piece named
+    after its prototype, at the instance's place in every frame; the prototypes themselves are no pieces."""
+    from pxr import Gf, Usd, UsdGeom, Vt
+
+    from conftest import SAMPLE
+    from fracture.coarse.mesh_sequence import read_sequence
+    from fracture.coarse.usd_input import read_usd_frames
+
+    rest = read_sequence(SAMPLE)[0]
+    path = tmp_path / "instancer.usda"
+    stage = Usd.Stage.CreateNew(str(path))
+    stage.SetStartTimeCode(1)
+    stage.SetEndTimeCode(3)
+    instancer = UsdGeom.PointInstancer.Define(stage, "/geo/rbd")
+    protos = []
+    for k, name in enumerate(rest.names):
+        root = UsdGeom.Xform.Define(stage, f"/geo/rbd/Prototypes/{name.replace('.', '_')}")
+        mesh = UsdGeom.Mesh.Define(stage, root.GetPath().AppendChild("mesh"))
+        polys = rest.polygons[k]
+        used = np.unique(np.concatenate(polys))
+        local = {v: i for i, v in enumerate(used.tolist())}
+        mesh.CreateFaceVertexCountsAttr(Vt.IntArray([len(f) for f in polys]))
+        mesh.CreateFaceVertexIndicesAttr(Vt.IntArray([local[v] for f in polys for v in f.tolist()]))
+        mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(rest.V[used].astype(np.float32)))
+        protos.append(root.GetPath())
+    instancer.CreatePrototypesRel().SetTargets(protos)
+    n = len(protos)
+    instancer.CreateProtoIndicesAttr(Vt.IntArray(list(range(n))))
+    turn = Gf.Rotation(Gf.Vec3d(0, 0, 1), 90.0).GetQuat()  # piece 0 turns a quarter about z by frame 3
+    for t in (1, 2, 3):
+        instancer.GetPositionsAttr().Set(Vt.Vec3fArray([Gf.Vec3f(0.0, 0.0, -0.1 * (t - 1) * k) for k in range(n)]), t)
+        q = [Gf.Quath(1.0, 0.0, 0.0, 0.0)] * n
+        if t == 3:
+            q[0] = Gf.Quath(turn.GetReal(), *turn.GetImaginary())
+        instancer.GetOrientationsAttr().Set(Vt.QuathArray(q), t)
+    stage.GetRootLayer().Save()
+    got = read_usd_frames(path).frames
+    assert len(got) == 3 and got[0].names == [n.replace(".", "_") for n in rest.names]
+    for t in (0, 1):
+        for k in range(n):
+            X = got[t].V[got[t].piece_vertices(k)]
+            want = rest.V[np.unique(np.concatenate(rest.polygons[k]))] + (0.0, 0.0, -0.1 * t * k)
+            np.testing.assert_allclose(X, want, atol=1e-6)
+    X = got[2].V[got[2].piece_vertices(0)]
+    R = rest.V[np.unique(np.concatenate(rest.polygons[0]))]
+    np.testing.assert_allclose(X, np.stack([-R[:, 1], R[:, 0], R[:, 2]], 1), atol=2e-3)  # half precision
+
+
 def test_hidden_meshes_guides_and_proxies_are_not_pieces(tmp_path):
     """A stage exported whole: the object Cell Fracture hid (invisible, where all the pieces are), a proxy of
     a piece and a guide. None is a piece; the coarse stage says which were left out. Left in, the hidden

@@ -4,7 +4,8 @@ Every ``Mesh`` prim is a piece; its points in world space at each frame are its 
 (time-sampled or not) under its transforms there (time-sampled or not): Blender writes rest
 points and time-sampled transforms, Houdini often time-sampled points. A mesh whose
 ``orientation`` is ``leftHanded`` (Houdini's default: its faces wind clockwise seen from outside)
-has its faces turned. The frames are the stage's integer time codes from its start to its end
+has its faces turned. A point instancer's instances are pieces too: each mesh of the prototype an
+instance shows, where the instance puts it (Houdini may write packed fragments so). The frames are the stage's integer time codes from its start to its end
 (with no range authored, over the span of the points' and transforms' time samples).
 The result holds the list of :class:`~fracture.coarse.mesh_sequence.MeshFrame` that a folder of OBJ
 frames gives, so the same import follows (:func:`fracture.coarse.mesh_sequence.coarse_from_frames`),
@@ -91,8 +92,18 @@ def read_usd_frames(path: str | Path) -> UsdAnimation:
     if not meshes:
         raise InputError(f"{path}: every Mesh prim is invisible or a guide or proxy ({', '.join(hidden[:3])}"
                          f"{', ...' if len(hidden) > 3 else ''}): expected one visible mesh per piece")
-    names = _piece_names(meshes)
-    sampled = _sample_times(meshes)
+    # a point instancer's instances of its prototypes are pieces (Houdini may write packed fragments so):
+    # each mesh of the prototype an instance shows, where the instance puts it
+    instanced = _instanced(stage, meshes)
+    kept = {p.GetPath() for p in instanced.under}
+    meshes = [p for p in meshes if p.GetPath() not in kept]
+    names = _piece_names(meshes) + instanced.names
+    pieces = [(p, None) for p in meshes] + instanced.pieces
+    if not pieces:
+        raise InputError(f"{path}: its meshes are the prototypes of point instancers with no instances: expected "
+                         "one mesh or instance per piece")
+    meshes = [p for p, _ in pieces]
+    sampled = sorted(set(_sample_times(meshes)) | instanced.times)
     if stage.HasAuthoredTimeCodeRange():
         start, end = stage.GetStartTimeCode(), stage.GetEndTimeCode()
         what = f"its time code range {start:g} to {end:g}"
@@ -132,7 +143,8 @@ def read_usd_frames(path: str | Path) -> UsdAnimation:
     for t in times:
         cache.SetTime(t)
         V, polys, offset = [], [], 0
-        for p, name, (counts, idx) in zip(meshes, names, topology):
+        placed = {}  # each instancer's instance transforms at this time
+        for (p, instance), name, (counts, idx) in zip(pieces, names, topology):
             mesh = UsdGeom.Mesh(p)
             P = mesh.GetPointsAttr().Get(t)
             if P is None:
@@ -143,7 +155,16 @@ def read_usd_frames(path: str | Path) -> UsdAnimation:
             if idx.max() >= len(P):
                 raise InputError(f"{path}: piece {name!r} at frame {t.GetValue():g}: a face uses point {idx.max()} "
                                  f"of {len(P)}")
-            M = np.asarray(cache.GetLocalToWorldTransform(p), np.float64)  # row vectors: x' = [x 1] M
+            if instance is None:
+                M = np.asarray(cache.GetLocalToWorldTransform(p), np.float64)  # row vectors: x' = [x 1] M
+            else:  # the mesh in its prototype's space, moved by the instance, in the instancer's world
+                instancer, i, root = instance
+                if instancer.GetPath() not in placed:
+                    placed[instancer.GetPath()] = UsdGeom.PointInstancer(instancer).ComputeInstanceTransformsAtTime(
+                        t, t)
+                inside = np.asarray(cache.ComputeRelativeTransform(p, root)[0], np.float64)
+                M = inside @ np.asarray(placed[instancer.GetPath()][i], np.float64) @ np.asarray(
+                    cache.GetLocalToWorldTransform(instancer), np.float64)
             X = P @ M[:3, :3] + M[3, :3]
             if not np.isfinite(X).all():
                 raise InputError(f"{path}: piece {name!r} at frame {t.GetValue():g}: NaN or infinite coordinates")
@@ -164,6 +185,52 @@ def read_usd_frames(path: str | Path) -> UsdAnimation:
     up = "y" if UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.y else "z"
     return UsdAnimation(frames, up, float(stage.GetTimeCodesPerSecond()), float(UsdGeom.GetStageMetersPerUnit(stage)),
                         hidden)
+
+
+class _Instanced(NamedTuple):
+    """The pieces point instancers make: ``(mesh, (instancer, instance, prototype root))`` per piece, their
+    names, every mesh under the instancers' prototypes (not pieces as they are) and the times at which the
+    instancers' positions or orientations are sampled."""
+
+    pieces: list
+    names: list[str]
+    under: list
+    times: set
+
+
+def _instanced(stage, shown) -> _Instanced:
+    """The instances of the stage's point instancers as pieces: one per mesh of the prototype an instance
+    shows (``shown``: the meshes a renderer shows), named after the prototype (and the instance's number
+    where a prototype has several instances)."""
+    from pxr import Usd, UsdGeom
+
+    visible = {p.GetPath() for p in shown}
+    pieces, names, under, times = [], [], [], set()
+    for prim in Usd.PrimRange.Stage(stage, Usd.TraverseInstanceProxies()):
+        if not prim.IsA(UsdGeom.PointInstancer):
+            continue
+        instancer = UsdGeom.PointInstancer(prim)
+        roots = [stage.GetPrimAtPath(t) for t in instancer.GetPrototypesRel().GetTargets()]
+        inside = [[m for m in Usd.PrimRange(r, Usd.TraverseInstanceProxies()) if m.IsA(UsdGeom.Mesh)]
+                  for r in roots if r]
+        under += [m for ms in inside for m in ms]
+        which = np.asarray(instancer.GetProtoIndicesAttr().Get(Usd.TimeCode.EarliestTime()) or [], np.int64)
+        uses = np.bincount(which, minlength=len(roots)) if len(which) else np.zeros(len(roots), np.int64)
+        for i, k in enumerate(which.tolist()):
+            if not 0 <= k < len(inside):
+                continue
+            for m in inside[k]:
+                if m.GetPath() not in visible:
+                    continue
+                name = roots[k].GetName() if uses[k] == 1 else f"{roots[k].GetName()}_{i:03d}"
+                if len(inside[k]) > 1:
+                    name += f"_{m.GetName()}"
+                pieces.append((m, (prim, i, roots[k])))
+                names.append(name)
+        for attr in (instancer.GetPositionsAttr(), instancer.GetOrientationsAttr(), instancer.GetScalesAttr()):
+            times.update(attr.GetTimeSamples())
+        times.update(UsdGeom.Xformable(prim).GetTimeSamples())
+    return _Instanced(pieces, names, under, times)
 
 
 def _sample_times(meshes) -> list[float]:
