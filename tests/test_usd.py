@@ -306,6 +306,20 @@ def _write_points_usd(path, frames, names, up="Z", left_handed=False, start=1, f
 
 
 
+def _rest_mesh(stage, path, rest, k):
+    """Piece ``k`` of the rest frame ``rest`` as a mesh at ``path``: its own points, its polygons."""
+    from pxr import UsdGeom, Vt
+
+    mesh = UsdGeom.Mesh.Define(stage, path)
+    polys = rest.polygons[k]
+    used = np.unique(np.concatenate(polys))
+    local = {v: i for i, v in enumerate(used.tolist())}
+    mesh.CreateFaceVertexCountsAttr(Vt.IntArray([len(f) for f in polys]))
+    mesh.CreateFaceVertexIndicesAttr(Vt.IntArray([local[v] for f in polys for v in f.tolist()]))
+    mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(rest.V[used].astype(np.float32)))
+    return mesh
+
+
 def test_instanced_pieces_are_read_through_their_instances(tmp_path):
     """Pieces written as instanceable references (``/geo/NAME`` an instance moved by its own transform, its
     mesh ``/Prototypes/pK/mesh`` in a class): each is read through its instance, named by it, at the
@@ -323,13 +337,7 @@ def test_instanced_pieces_are_read_through_their_instances(tmp_path):
     stage.SetEndTimeCode(3)
     for k, name in enumerate(rest.names):
         stage.CreateClassPrim(f"/Prototypes/p{k}")
-        mesh = UsdGeom.Mesh.Define(stage, f"/Prototypes/p{k}/mesh")
-        polys = rest.polygons[k]
-        used = np.unique(np.concatenate(polys))
-        local = {v: i for i, v in enumerate(used.tolist())}
-        mesh.CreateFaceVertexCountsAttr(Vt.IntArray([len(f) for f in polys]))
-        mesh.CreateFaceVertexIndicesAttr(Vt.IntArray([local[v] for f in polys for v in f.tolist()]))
-        mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(rest.V[used].astype(np.float32)))
+        _rest_mesh(stage, f"/Prototypes/p{k}/mesh", rest, k)
         instance = UsdGeom.Xform.Define(stage, f"/geo/{name.replace('.', '_')}")
         instance.GetPrim().GetReferences().AddInternalReference(f"/Prototypes/p{k}")
         instance.GetPrim().SetInstanceable(True)
@@ -365,13 +373,7 @@ def test_pieces_of_a_point_instancer_are_read_where_its_instances_put_them(tmp_p
     protos = []
     for k, name in enumerate(rest.names):
         root = UsdGeom.Xform.Define(stage, f"/geo/rbd/Prototypes/{name.replace('.', '_')}")
-        mesh = UsdGeom.Mesh.Define(stage, root.GetPath().AppendChild("mesh"))
-        polys = rest.polygons[k]
-        used = np.unique(np.concatenate(polys))
-        local = {v: i for i, v in enumerate(used.tolist())}
-        mesh.CreateFaceVertexCountsAttr(Vt.IntArray([len(f) for f in polys]))
-        mesh.CreateFaceVertexIndicesAttr(Vt.IntArray([local[v] for f in polys for v in f.tolist()]))
-        mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(rest.V[used].astype(np.float32)))
+        _rest_mesh(stage, root.GetPath().AppendChild("mesh"), rest, k)
         protos.append(root.GetPath())
     instancer.CreatePrototypesRel().SetTargets(protos)
     n = len(protos)
