@@ -489,6 +489,12 @@ def test_outward_turns_inverted_parts_and_keeps_a_cavity():
     assert not changed
     G, changed = outward(np.concatenate([V1, V3]), np.concatenate([F1, F3[:, ::-1] + len(V1)]))
     assert changed and np.array_equal(G, eye)
+    opened = F1[2:, ::-1]  # open (a side missing), facing in: no inside to tell by, kept as it is
+    G, changed = outward(V1, opened)
+    assert not changed
+    split = V1[F1].reshape(-1, 3)  # every face with corners of its own, as Cell Fracture writes some edges
+    G, changed = outward(split, np.arange(len(split)).reshape(-1, 3)[:, ::-1])
+    assert changed and signed_volume(split, G) == pytest.approx(1.0)
     turned = F1.copy()
     turned[::2] = turned[::2, ::-1]
     G, changed = outward(V1, turned)

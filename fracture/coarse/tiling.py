@@ -73,6 +73,8 @@ _PLANE = 1e-9
 # area to the power 3/2 (a ball's ratio is 0.2, a plank a hundredth as thick as wide 0.007; two flat quads that
 # Cell Fracture left of a Suzanne as one piece, rounding, 4e-6).
 _TURNED = 1e-4
+# Corners of a piece closer than this fraction of its size (in every coordinate, rounded) are one vertex.
+_WELD_DIGITS = 9
 # A piece whose box holds the others' and whose volume is theirs together (within this fraction of its own:
 # Cell Fracture's margin takes up to a tenth) is the unfractured object (holding_the_rest).
 _HOLDS_VOLUME = 0.15
@@ -211,32 +213,55 @@ def outward(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, bool]:
     """The triangles ``F`` of a piece facing out, and whether any had to turn.
 
     The pieces' insides are their winding numbers (module notes, 1), which a piece exported inside out
-    (its faces facing in: -1 inside) or with some faces turned (about 0 inside) would lose. The faces are
-    oriented alike within each connected part (libigl's ``bfs_orient``, across edges shared by two faces);
-    a piece enclosing a negative volume in all is turned whole, and a part of it that then encloses a
-    negative volume is turned, unless it lies wholly inside the larger parts (a cavity's wall faces into the
-    cavity; the larger parts are settled first). Parts that overlap, as Suzanne's eyes overlap her head,
-    keep their orientation when it is outward."""
-    G, part = igl.bfs_orient(F)
-    G, part = np.asarray(G, np.int64), np.asarray(part, np.int64)
-    centre = V.mean(axis=0)  # volumes about a point of the piece: an open part's is then still telling
+    (its faces facing in: -1 inside) or with some faces turned (about 0 inside) would lose. The faces of
+    each closed part (every edge shared by two of its faces) are oriented alike (libigl's ``bfs_orient``);
+    a piece whose closed parts enclose a negative volume in all is turned whole, and a closed part that then
+    encloses a negative volume is turned, unless it lies wholly inside the larger parts (a cavity's wall
+    faces into the cavity; the larger parts are settled first). Parts that overlap, as Suzanne's eyes
+    overlap her head, keep their orientation when it is outward; an open part (Suzanne's pieces may hold
+    one) has no inside to tell its orientation by and is kept as it was exported."""
+    # corners at one place are one vertex here (Cell Fracture writes each piece's faces with corners of their
+    # own along some edges): the parts are then closed where the piece is
+    size = max(float(np.ptp(V, axis=0).max()), tol.zero)
+    _, weld = np.unique(np.round((V - V.min(axis=0)) / size, _WELD_DIGITS), axis=0, return_inverse=True)
+    W = weld.ravel()[F]
+    Wo, part = igl.bfs_orient(W)
+    part = np.asarray(part, np.int64)
+    n0 = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    turned = np.einsum("ij,ij->i", n0, _face_normals_of(V, weld, np.asarray(Wo, np.int64), F)) < 0.0
+    G = np.where(turned[:, None], F[:, ::-1], F)
+    edges = np.sort(W[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    _, which, count = np.unique(edges, axis=0, return_inverse=True, return_counts=True)
+    open_face = (count != 2)[which.ravel()].reshape(-1, 3).any(axis=1)
+    closed = np.bincount(part, open_face.astype(np.int64), minlength=part.max() + 1) == 0
+    G[~closed[part]] = F[~closed[part]]
+    centre = V.mean(axis=0)  # volumes about a point of the piece
     A, B, C = (V[G[:, i]] - centre for i in range(3))
-    cross = np.cross(B - A, C - A)
     volume = np.bincount(part, np.einsum("ij,ij->i", A, np.cross(B, C)))  # six times each part's
-    area = np.bincount(part, np.linalg.norm(cross, axis=1))  # twice each part's
+    area = np.bincount(part, np.linalg.norm(np.cross(B - A, C - A), axis=1))  # twice each part's
+    volume[~closed], area[~closed] = 0.0, 0.0
     if volume.sum() < -_TURNED * area.sum() ** 1.5:  # the piece inside out, a cavity's wall with it
-        G, volume = G[:, ::-1].copy(), -volume
+        G[closed[part]] = G[closed[part]][:, ::-1]
+        volume = -volume
     for c in np.argsort(-np.abs(volume)):
-        if volume[c] >= -_TURNED * area[c] ** 1.5:
-            continue  # outward, or a sliver with no inside to lose (Cell Fracture leaves some)
+        if not closed[c] or volume[c] >= -_TURNED * area[c] ** 1.5:
+            continue  # open, outward, or a sliver with no inside to lose (Cell Fracture leaves some)
         mine = part == c
         corners = V[np.unique(G[mine])]
-        settled = (np.abs(volume) > abs(volume[c])) & (np.arange(len(volume)) != c)  # larger parts
+        settled = closed & (np.abs(volume) > abs(volume[c])) & (np.arange(len(volume)) != c)  # larger parts
         around = G[settled[part]]
         if len(around) and fast_winding(V, around, corners).min() > 0.5:
             continue  # a cavity's wall: wholly inside the larger parts
         G[mine] = G[mine][:, ::-1]
     return G, bool((G != F).any())
+
+
+def _face_normals_of(V: np.ndarray, weld: np.ndarray, Wo: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Area normals of the faces ``Wo`` (of welded vertices: ``weld[v]`` per vertex of ``F``), at the positions
+    of ``F``'s corners: a welded vertex stands for the corners at its place."""
+    at = np.zeros((int(weld.max()) + 1, 3))
+    at[weld.ravel()] = V
+    return np.cross(at[Wo[:, 1]] - at[Wo[:, 0]], at[Wo[:, 2]] - at[Wo[:, 0]])
 
 
 class _Labels(NamedTuple):
