@@ -178,7 +178,7 @@ def main(argv: list[str] | None = None) -> int:
     """The command line; Ctrl-C and SIGTERM stop it with one line (the previous handlers are restored)."""
     import signal
 
-    signals = [signal.SIGINT, signal.SIGTERM] if threading_main() else []
+    signals = [signal.SIGINT, signal.SIGTERM] if _on_main_thread() else []
     previous = [signal.signal(s, _stop) for s in signals]
     _stopped_by.clear()
     try:
@@ -194,7 +194,7 @@ def main(argv: list[str] | None = None) -> int:
             signal.signal(s, handler)
 
 
-def threading_main() -> bool:
+def _on_main_thread() -> bool:
     """Whether this is the main thread (the only one that may set signal handlers)."""
     import threading
 
