@@ -48,7 +48,8 @@ from fracture.mesh.sheets import coarsen_sheets
 from fracture.errors import InputError
 from fracture.mesh.exterior import Exterior, fast_winding
 from fracture.tolerances import tol
-from fracture.mesh.topology import closed_oriented, fan, signed_volume
+from fracture.mesh.edges import edge_table
+from fracture.mesh.topology import closed_oriented, fan, signed_volume, weld
 
 # Cells along the object's largest extent, at least ...
 DEFAULT_CELLS = 32
@@ -73,8 +74,8 @@ _PLANE = 1e-9
 # area to the power 3/2 (a ball's ratio is 0.2, a plank a hundredth as thick as wide 0.007; two flat quads that
 # Cell Fracture left of a Suzanne as one piece, rounding, 4e-6).
 _TURNED = 1e-4
-# Corners of a piece closer than this fraction of its size (in every coordinate, rounded) are one vertex.
-_WELD_DIGITS = 9
+# Corners of a piece closer than this fraction of its size are one vertex.
+_WELD = 1e-9
 # A piece whose box holds the others' and whose volume is theirs together (within this fraction of its own:
 # Cell Fracture's margin takes up to a tenth) is the unfractured object (holding_the_rest).
 _HOLDS_VOLUME = 0.15
@@ -223,16 +224,12 @@ def outward(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, bool]:
     # corners at one place are one vertex here (Cell Fracture writes each piece's faces with corners of their
     # own along some edges): the parts are then closed where the piece is
     size = max(float(np.ptp(V, axis=0).max()), tol.zero)
-    _, weld = np.unique(np.round((V - V.min(axis=0)) / size, _WELD_DIGITS), axis=0, return_inverse=True)
-    W = weld.ravel()[F]
+    _, at = weld(V, _WELD * size)
+    W = at[F]
     Wo, part = igl.bfs_orient(W)
     part = np.asarray(part, np.int64)
-    n0 = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    turned = np.einsum("ij,ij->i", n0, _face_normals_of(V, weld, np.asarray(Wo, np.int64), F)) < 0.0
-    G = np.where(turned[:, None], F[:, ::-1], F)
-    edges = np.sort(W[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    _, which, count = np.unique(edges, axis=0, return_inverse=True, return_counts=True)
-    open_face = (count != 2)[which.ravel()].reshape(-1, 3).any(axis=1)
+    G = np.where((np.asarray(Wo) != W).any(axis=1)[:, None], F[:, ::-1], F)  # bfs_orient reverses a row it turns
+    open_face = (edge_table(W, len(V)).row_count != 2).reshape(-1, 3).any(axis=1)
     closed = np.bincount(part, open_face.astype(np.int64), minlength=part.max() + 1) == 0
     G[~closed[part]] = F[~closed[part]]
     centre = V.mean(axis=0)  # volumes about a point of the piece
@@ -254,14 +251,6 @@ def outward(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, bool]:
             continue  # a cavity's wall: wholly inside the larger parts
         G[mine] = G[mine][:, ::-1]
     return G, bool((G != F).any())
-
-
-def _face_normals_of(V: np.ndarray, weld: np.ndarray, Wo: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """Area normals of the faces ``Wo`` (of welded vertices: ``weld[v]`` per vertex of ``F``), at the positions
-    of ``F``'s corners: a welded vertex stands for the corners at its place."""
-    at = np.zeros((int(weld.max()) + 1, 3))
-    at[weld.ravel()] = V
-    return np.cross(at[Wo[:, 1]] - at[Wo[:, 0]], at[Wo[:, 2]] - at[Wo[:, 0]])
 
 
 class _Labels(NamedTuple):
@@ -494,7 +483,7 @@ def label_tiling(V: np.ndarray, polygons: list[list[np.ndarray]], names: list[st
         lo, hi = V_used.min(axis=0), V_used.max(axis=0)
     else:
         lo, hi = V.min(axis=0), V.max(axis=0)
-        V_used = V[np.unique(np.concatenate([np.concatenate(p) for p in polygons]))]
+        V_used = V[used]
     across = _ACROSS * float((hi - lo).max()) / max(thinnest_extent(V_used), tol.zero)
     cells = max(cells, min(_MOST_CELLS, int(np.ceil(across))))
     for n in (cells, 2 * cells):  # a piece thinner than a cell everywhere: try once at half the cell size

@@ -40,9 +40,14 @@ class Exterior:
         self.F = np.ascontiguousarray(F, np.int64)
 
     @cached_property
-    def _wn(self):  # about the centre of B's box, as fast_winding
+    def _centre(self) -> np.ndarray:
+        """The centre of B's box: winding numbers are taken about it, as :func:`fast_winding` takes them."""
+        return _centre(self.V)
+
+    @cached_property
+    def _wn(self):
         wn = igl.FastWindingNumberBVH()
-        wn.init(np.ascontiguousarray(self.V - _centre(self.V)), self.F)
+        wn.init(np.ascontiguousarray(self.V - self._centre), self.F)
         return wn
 
     @cached_property
@@ -63,7 +68,7 @@ class Exterior:
     def inside(self, P: np.ndarray) -> np.ndarray:
         """Whether points are inside (winding number above one half)."""
         return self._wn.winding_number(np.ascontiguousarray(np.asarray(P, np.float64).reshape(-1, 3)
-                                                            - _centre(self.V))) > 0.5
+                                                            - self._centre)) > 0.5
 
     def closest(self, P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Squared distances, triangle ids and closest points on B of points ``(k, 3)``."""

@@ -478,14 +478,14 @@ def overlap_and_gap(pieces: Pieces, BV: np.ndarray, BF: np.ndarray, samples: int
     """
     lo, hi = BV.min(axis=0), BV.max(axis=0)
     P = lo + (hi - lo) * rng.random((samples, 3))
-    inside_b = fast_winding(np.ascontiguousarray(BV), np.ascontiguousarray(BF, np.int64), P) > 0.5
+    inside_b = fast_winding(BV, BF, P) > 0.5
     P = P[inside_b]
     count = np.zeros(len(P), np.int64)
     share = np.zeros(pieces.n_pieces)
     n = max(len(P), 1)
     for c in range(pieces.n_pieces):
         _, V, F = pieces.piece(c)
-        inside = fast_winding(V, np.ascontiguousarray(F, np.int64), P) > 0.5
+        inside = fast_winding(V, F, P) > 0.5
         count += inside
         share[c] = inside.sum() / n
     return float((count > 1).sum() / n), float((count == 0).sum() / n), share, len(P)

@@ -134,7 +134,7 @@ def _stale(run_dir: Path, config_text: str, until: str | None) -> str | None:
 
     try:
         written = (run_dir / layout.CONFIG).read_text(encoding="utf-8")
-        ran = list(json.loads((run_dir / layout.MANIFEST).read_text(encoding="utf-8"))["stages"])
+        ran = list(layout.read_manifest(run_dir)["stages"])
     except (OSError, ValueError, KeyError, TypeError):
         return "its run directory cannot be read"
     if written != config_text:
