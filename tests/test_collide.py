@@ -158,10 +158,12 @@ def test_self_intersection_count_finds_every_crossing_pair():
     # every meeting pair listed, or those of some triangles only: the full list filtered
     every = {tuple(sorted(p)) for p in meeting_pairs(V, F).tolist()}
     assert every == _brute_force_pairs(V, F)
-    some = np.zeros(len(F), bool)
-    some[::5] = True
-    assert {tuple(sorted(p)) for p in meeting_pairs(V, F, some).tolist()} == {
-        p for p in every if some[p[0]] or some[p[1]]}
+    for stride in (2, 9):  # many triangles (the full list kept), a few (a look-up each)
+        some = np.zeros(len(F), bool)
+        some[::stride] = True
+        assert {tuple(sorted(p)) for p in meeting_pairs(V, F, some).tolist()} == {
+            p for p in every if some[p[0]] or some[p[1]]}
+    assert len(meeting_pairs(V, F, np.zeros(len(F), bool))) == 0
 
 
 def _two_sheets_with_a_fin(seed):

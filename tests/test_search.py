@@ -179,23 +179,25 @@ def test_the_coarse_to_fine_cut_costs_within_a_percent_of_the_full_grids(monkeyp
     assert banded.cut_energy[1] < 0.3 * banded.cut_energy[0]
 
 
-def test_a_region_dilated_in_its_box_is_the_grid_dilation():
+def test_the_nodes_near_a_label_are_those_of_its_grid_dilation():
     from scipy import ndimage
 
-    from fracture.refine.search import _dilated
+    from fracture.refine.reach import near_label
 
     rng = np.random.default_rng(3)
-    sub = _BoxGrid(Grid.from_bounds((0, 0, 0), (13, 10, 8), (14, 11, 9)), (slice(0, 14), slice(0, 11), slice(0, 9)))
-    near = np.flatnonzero(rng.random(sub.size) < 0.7)  # the band: some of the box's nodes
-    ijk = np.stack(np.unravel_index(near, sub.shape), 1)
-    mask = np.zeros(len(near), bool)
-    mask[rng.choice(len(near), 4, replace=False)] = True
-    vol = np.zeros(sub.shape, bool)
-    vol[tuple(ijk[mask].T)] = True
-    for cells in (1, 3):
-        expected = ndimage.binary_dilation(vol, np.ones((3, 3, 3), bool), cells)[tuple(ijk.T)]
-        assert (_dilated(sub, ijk, mask, cells) == expected).all()
-    assert not _dilated(sub, ijk, np.zeros(len(near), bool), 2).any()
+    shape = (14, 11, 9)
+    labels = np.full(shape, -1, np.int64)
+    band = rng.random(shape) < 0.7  # the band: some of the box's nodes carry a piece
+    labels[band] = 1
+    labels[:4][band[:4]] = 0  # a slab of piece 0
+    labels[band & (rng.random(shape) < 0.01)] = 2  # a few scattered nodes of piece 2
+    nodes = np.flatnonzero(band.ravel())
+    for label in (0, 2):
+        for cells in (1, 3):
+            expected = ndimage.binary_dilation(labels == label, np.ones((3, 3, 3), bool), cells).ravel()[nodes]
+            assert (near_label(labels, nodes, label, cells) == expected).all()
+            assert expected.any() and not expected.all()
+    assert not near_label(labels, nodes, 5, 2).any()
 
 
 def test_the_polish_runs_on_the_stages_asked_for_after_the_search():
@@ -279,7 +281,7 @@ def test_moves_that_make_triangles_cross_are_taken_back_and_the_others_kept():
     """Two parallel sheets a tenth apart, the upper one over half of the lower: a vertex of the lower one
     lifted through the upper one goes back (with its neighbours); one lifted where nothing is above it
     stays. A crossing the surface had before stays and counts as one it had; a new one beside it goes."""
-    from fracture.mesh.intersect import self_intersections
+    from fracture.mesh.intersect import meeting_pairs, self_intersections
     from fracture.mesh.primitives import sheet
     from fracture.refine.search import _uncrossed
 
@@ -292,8 +294,8 @@ def test_moves_that_make_triangles_cross_are_taken_back_and_the_others_kept():
     X = V.copy()
     X[[below, free], 2] = 0.3
     assert self_intersections(X, F) > 0
-    out, count = _uncrossed(V, X, F, 0)
-    assert count == 0 and self_intersections(out, F) == 0
+    out, pairs = _uncrossed(V, X, F, np.zeros((0, 2), np.int64))
+    assert len(pairs) == 0 and self_intersections(out, F) == 0
     np.testing.assert_array_equal(out[below], V[below])
     np.testing.assert_array_equal(out[free], X[free])
 
@@ -301,12 +303,13 @@ def test_moves_that_make_triangles_cross_are_taken_back_and_the_others_kept():
     spike = np.array([[0.25, 0.05, -0.05], [0.3, 0.05, 0.3], [0.25, 0.1, 0.3]])
     V2 = np.concatenate([V, spike])
     F2 = np.concatenate([F, [[len(V), len(V) + 1, len(V) + 2]]])
-    before = self_intersections(V2, F2)
-    assert before > 0
+    before = meeting_pairs(V2, F2)
+    assert len(before) > 0
     X2 = V2.copy()
     X2[[below, free], 2] = 0.3
-    out, count = _uncrossed(V2, X2, F2, before)
-    assert count == before == self_intersections(out, F2)
+    out, pairs = _uncrossed(V2, X2, F2, before)
+    assert len(pairs) == len(before) == self_intersections(out, F2)
+    assert sorted(map(tuple, pairs.tolist())) == sorted(map(tuple, meeting_pairs(out, F2).tolist()))
     np.testing.assert_array_equal(out[below], V2[below])
     np.testing.assert_array_equal(out[free], X2[free])
 

@@ -174,6 +174,11 @@ def self_intersections(V: np.ndarray, F: np.ndarray, report: int = 0) -> int | t
     return (int(count), first[:min(count, report)]) if report else int(count)
 
 
+# With fewer than 1/this of the triangles ``touching``, meeting_pairs looks up their pairs one triangle at a
+# time (hashgrid.pairs_with) rather than listing every pair and keeping theirs.
+_FEW_TOUCHING = 4
+
+
 def meeting_pairs(V: np.ndarray, F: np.ndarray, touching: np.ndarray | None = None) -> np.ndarray:
     """Every pair ``(k, 2)`` of triangles that meet other than at a shared vertex or edge; with
     ``touching`` (a mask of triangles) only the pairs with one of those in them (after a change of a few
@@ -182,8 +187,14 @@ def meeting_pairs(V: np.ndarray, F: np.ndarray, touching: np.ndarray | None = No
     F = np.ascontiguousarray(F, np.int64)
     if len(F) < 2:
         return np.zeros((0, 2), np.int64)
-    pairs = hashgrid.pairs(triangle_grid(V, F))
-    if touching is not None:
+    lo, hi = swept_boxes(V, V, F, 0.0)
+    grid = box_grid(lo, hi, V, F)
+    if touching is None:
+        pairs = hashgrid.pairs(grid)
+    elif _FEW_TOUCHING * (few := np.flatnonzero(touching)).size < len(F):  # a look-up per triangle
+        pairs = hashgrid.pairs_with(grid, lo, hi, few)
+    else:
+        pairs = hashgrid.pairs(grid)
         pairs = np.ascontiguousarray(pairs[touching[pairs[:, 0]] | touching[pairs[:, 1]]])
     found = np.zeros((len(pairs), 2), np.int64)
     return found[:_pair_tests(V, F, pairs, _EPS, found)]

@@ -79,3 +79,35 @@ def _mark(where, origin, spacing, V, F, sides, radius, n_pieces, count):
                         if s1 >= 0:
                             near[s1, n] = True
     return near
+
+
+def near_label(labels: np.ndarray, nodes: np.ndarray, label: int, cells: int) -> np.ndarray:
+    """Which of ``nodes`` (flat indices of the grid ``labels``, which holds a piece per node or -1) have a
+    node of ``label`` within ``cells`` nodes in every axis (a cube around them): where a piece's region,
+    dilated by ``cells``, reaches. Each node's cube is read on its own, on every core: a dilation of the
+    piece's whole region (a maximum filter over its box) per piece took the collapsing wall's twelve pieces
+    0.16 s, most of it over nodes no move asks about."""
+    nodes = np.ascontiguousarray(nodes, np.int64)
+    return _near_label(np.ascontiguousarray(labels, np.int64), nodes, int(label), int(cells))
+
+
+@numba.njit(cache=True, parallel=True)
+def _near_label(labels, nodes, label, cells):
+    nx, ny, nz = labels.shape
+    out = np.zeros(nodes.shape[0], np.bool_)
+    for t in numba.prange(nodes.shape[0]):
+        c = nodes[t]
+        i, j, k = c // (ny * nz), (c // nz) % ny, c % nz
+        found = False
+        for a in range(max(i - cells, 0), min(i + cells + 1, nx)):
+            for b in range(max(j - cells, 0), min(j + cells + 1, ny)):
+                for d in range(max(k - cells, 0), min(k + cells + 1, nz)):
+                    if labels[a, b, d] == label:
+                        found = True
+                        break
+                if found:
+                    break
+            if found:
+                break
+        out[t] = found
+    return out

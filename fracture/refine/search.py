@@ -74,7 +74,7 @@ from scipy.spatial import cKDTree
 
 from fracture.mesh.exterior import Exterior
 from fracture.mesh.fracture_surface import FractureSurface
-from fracture.mesh.intersect import meeting_pairs, self_intersections
+from fracture.mesh.intersect import meeting_pairs
 from fracture.mesh.multilabel import contour_labels
 from fracture.mesh.sampling import area_barycentric, uniform_barycentric
 from fracture.mesh.sheets import coarsen_sheets
@@ -83,7 +83,7 @@ from fracture.refine.crossings_on_b import close_pairs
 from fracture.refine.cut_weights import OFFSETS, GrainWeights, area_weights
 from fracture.refine.expansion import PottsGraph, expand
 from fracture.refine.flow import energy, face_terms, sampled_energy
-from fracture.refine.reach import nodes_near_sheets
+from fracture.refine.reach import near_label, nodes_near_sheets
 from fracture.tolerances import tol
 
 # Points just off each face of the coarse surface, per unit area (in cells^-2), that tell a node its side.
@@ -307,15 +307,14 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
     if not len(F):
         return SearchResult(None, seconds=seconds, notes=["search: the cut left no fracture surface; the coarse "
                                                           "surface is kept"])
-    crossings = self_intersections(V, F)
+    crossed = meeting_pairs(V, F)
     edges = unique_edges(F)  # the triangles stay the same until the coarsening: their edges and counts
-    V, crossings = _untangled(V, _apart(V, _rim_to_least(V, F, B, pyramid.value, h, edges), h), F, B, crossings,
-                              edges)
+    V, crossed = _untangled(V, _apart(V, _rim_to_least(V, F, B, pyramid.value, h, edges), h), F, B, crossed, edges)
     X = _smooth(V, F, B, edges)
     X = _where_lower(X, _to_valley(X, F, pyramid.value, h, float(np.ptp(psi)), edges), F, sides, pyramid.value,
                      h, offset, grain)
-    V, crossings = _untangled(V, _apart(V, X, h), F, B, crossings, edges)
-    V, F, sides = coarsen_sheets(V, F, sides, cell=h, crossings=crossings)
+    V, crossed = _untangled(V, _apart(V, X, h), F, B, crossed, edges)
+    V, F, sides = coarsen_sheets(V, F, sides, cell=h, crossings=len(crossed))
     used, inv = np.unique(F, return_inverse=True)  # the vertices the coarsening collapsed away go
     V, F = V[used], inv.reshape(-1, 3).astype(np.int64)
     tick("contour")
@@ -575,11 +574,13 @@ def _cut(sub: _BoxGrid, near, keep, labels, shifted, node_weights, reach_of
     # minimum cuts, the same cut within 0.01 %)
     fine_reach = {}
     ids = np.flatnonzero(moving)
+    start_vol = np.full(sub.size, -1, np.int64)
+    start_vol[near] = start_labels
+    start_vol = start_vol.reshape(sub.shape)
     for a, r in reach_of(ids).items():
         if not len(r):
             continue
-        grown = _dilated(sub, ijk, start_labels == a, _FINE_BAND)
-        fine_reach[a] = ids[r][grown[ids[r]]]
+        fine_reach[a] = ids[r][near_label(start_vol, near[ids[r]], a, _FINE_BAND)]
     out, log = expand(graph.among(moving), start_labels, moving, fine_reach, cycles=_CYCLES)
     log.energy = [start, graph.energy(out)]
     return out, graph, log
@@ -590,22 +591,6 @@ def _free_reach(reach_of, ids: np.ndarray, free: np.ndarray) -> dict:
     clay a third of the coarse level's nodes), in positions of ``ids``."""
     mine = np.flatnonzero(free)
     return {a: mine[r] for a, r in reach_of(ids[mine]).items()}
-
-
-def _dilated(sub: _BoxGrid, ijk: np.ndarray, mask: np.ndarray, cells: int) -> np.ndarray:
-    """Which band nodes (grid indices ``ijk``) lie within ``cells`` nodes (in every axis) of one in
-    ``mask``: a dilation of the box around them only."""
-    out = np.zeros(len(mask), bool)
-    if not mask.any():
-        return out
-    lo = np.maximum(ijk[mask].min(axis=0) - cells, 0)
-    hi = np.minimum(ijk[mask].max(axis=0) + cells + 1, np.array(sub.shape))
-    vol = np.zeros(tuple(hi - lo), bool)
-    vol[tuple((ijk[mask] - lo).T)] = True
-    vol = _cube_dilation(vol, cells)
-    inside = np.all((ijk >= lo) & (ijk < hi), axis=1)
-    out[inside] = vol[tuple((ijk[inside] - lo).T)]
-    return out
 
 
 def _sheet_key(sides: np.ndarray) -> np.ndarray:
@@ -825,24 +810,27 @@ def _apart(V: np.ndarray, X: np.ndarray, h: float) -> np.ndarray:
     return X
 
 
-def _uncrossed(V: np.ndarray, X: np.ndarray, F: np.ndarray, crossings: int, rounds: int = 8
-               ) -> tuple[np.ndarray, int]:
+def _uncrossed(V: np.ndarray, X: np.ndarray, F: np.ndarray, crossed: np.ndarray, rounds: int = 8
+               ) -> tuple[np.ndarray, np.ndarray]:
     """``X`` (moved vertices of ``V``) with the vertices of triangles that cross where they did not cross in
-    ``V`` (which had ``crossings`` pairs) back where they were, with their neighbours, until no more pairs
-    cross than before (at worst ``V`` itself); and how many pairs cross in the result. After each round
-    only the pairs of the triangles it moved are tested again."""
+    ``V`` (whose crossing pairs of triangles are ``crossed``) back where they were, with their neighbours,
+    until no more pairs cross than before (at worst ``V`` itself); and the pairs that cross in the result.
+    Only the pairs with a triangle that moved are tested (two triangles that kept their corners cross as
+    they did in ``V``: after the rims' moves a few hundredths of the triangles), and after each round only
+    those of the triangles it moved back."""
     X = X.copy()
-    pairs = meeting_pairs(X, F)
+    moved = (X != V).any(axis=1)[F].any(axis=1)
+    pairs = np.concatenate([crossed[~(moved[crossed[:, 0]] | moved[crossed[:, 1]])], meeting_pairs(X, F, moved)])
     for _ in range(rounds):
-        if len(pairs) <= crossings:
-            return X, len(pairs)
+        if len(pairs) <= len(crossed):
+            return X, pairs
         back = np.unique(F[pairs.ravel()].ravel())
         ring = np.isin(F, back).any(axis=1)
         back = np.unique(F[ring].ravel())
         X[back] = V[back]
         moved = np.isin(F, back).any(axis=1)
         pairs = np.concatenate([pairs[~(moved[pairs[:, 0]] | moved[pairs[:, 1]])], meeting_pairs(X, F, moved)])
-    return (X, len(pairs)) if len(pairs) <= crossings else (V, crossings)
+    return (X, pairs) if len(pairs) <= len(crossed) else (V, crossed)
 
 
 def _rims_uncrossed(V: np.ndarray, X: np.ndarray, E: np.ndarray, normal_at, had: np.ndarray | None = None,
@@ -874,9 +862,9 @@ def _rim_crossings(P: np.ndarray, E: np.ndarray, normal_at) -> np.ndarray:
     return pairs[cross, 0] * len(E) + pairs[cross, 1]
 
 
-def _untangled(V: np.ndarray, X: np.ndarray, F: np.ndarray, B: Exterior, crossings: int, edges: tuple
-               ) -> tuple[np.ndarray, int]:
-    """``X`` (moved vertices of ``V``, which has ``crossings`` crossing pairs of triangles) with what makes
+def _untangled(V: np.ndarray, X: np.ndarray, F: np.ndarray, B: Exterior, crossed: np.ndarray, edges: tuple
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """``X`` (moved vertices of ``V``, whose crossing pairs of triangles are ``crossed``) with what makes
     rims cross on B (:func:`_rims_uncrossed`) or triangles cross in space (:func:`_uncrossed`) taken back,
     the two in turn until the rims' guard takes back nothing after the triangles' (at worst ``V``); and the
     pairs that cross. ``edges``: :func:`unique_edges` of ``F``."""
@@ -885,12 +873,12 @@ def _untangled(V: np.ndarray, X: np.ndarray, F: np.ndarray, B: Exterior, crossin
     had = _rim_crossings(V, E, B.normal_at)
     X = _rims_uncrossed(V, X, E, B.normal_at, had)
     for _ in range(4):
-        Y, pairs = _uncrossed(V, X, F, crossings)
+        Y, pairs = _uncrossed(V, X, F, crossed)
         Z = _rims_uncrossed(V, Y, E, B.normal_at, had)
         if Z is Y:
             return Y, pairs
         X = Z
-    return V, crossings
+    return V, crossed
 
 
 def _smooth(V: np.ndarray, F: np.ndarray, B: Exterior, edges: tuple) -> np.ndarray:
