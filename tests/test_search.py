@@ -239,6 +239,32 @@ def test_sheets_move_into_a_thin_valley_of_psi_only_where_their_integral_falls()
     np.testing.assert_array_equal(out[len(V1):], V[len(V1):])
 
 
+def test_a_coarsened_sheet_keeps_its_rim_vertices_by_their_ids_and_appends_its_new_ones():
+    """Two curved sheets meeting along a junction, coarsened: fewer triangles, every kept vertex (the rims
+    and the junction among them) under its own id at its own point, the new inner vertices after the old
+    ones, none of them where an old one is."""
+    from fracture.mesh.primitives import sheet
+    from fracture.mesh.sheets import coarsen_sheets
+    from fracture.mesh.topology import unique_edges
+
+    bump = sheet(lambda u, v: np.stack([u, v, 0.1 * np.sin(3 * u) * np.cos(2 * v)], -1), (0, 1), (0, 1), 25, 25)
+    wing = sheet(lambda u, v: np.stack([u, 0 * u + 1, v], -1), (0, 1), (0, 1), 25, 25)
+    V = np.concatenate([bump[0], wing[0]])
+    F = np.concatenate([bump[1], wing[1] + len(bump[0])])
+    V, weld = np.unique(np.round(V, 12), axis=0, return_inverse=True)  # the sheets share the edge y = 1
+    F = weld.ravel()[F]
+    sides = np.concatenate([np.tile([0, 1], (len(bump[1]), 1)), np.tile([1, 2], (len(wing[1]), 1))])
+    X, out, out_sides = coarsen_sheets(V, F, sides, cell=0.1)
+    assert len(out) < len(F) / 3 and len(out_sides) == len(out)
+    np.testing.assert_array_equal(X[:len(V)], V)
+    e, c = unique_edges(F)
+    kept = np.unique(e[c != 2])
+    assert np.isin(kept, out).all()
+    fresh = np.unique(out[out >= len(V)])
+    assert len(fresh) and fresh.max() == len(X) - 1
+    assert not (np.abs(X[fresh][:, None] - V[None]).max(axis=2) == 0).any(axis=1).any()
+
+
 def test_a_coarsened_sheet_that_folds_two_triangles_together_keeps_its_triangles(monkeypatch):
     import fracture.mesh.sheets as sheets
     from conftest import grid_sheet

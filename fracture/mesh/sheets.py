@@ -41,15 +41,14 @@ def _simplify_sheet(X: np.ndarray, FF: np.ndarray, cell: float | None) -> tuple[
         return None
     VD, FD = (_collapse_curved if cell is not None else _collapse_flat)(X[used], local, target)
     # kept vertices sit exactly where they were: back to their ids, the others are new
-    lookup = {tuple(p): g for p, g in zip(X[used].tolist(), used.tolist())}
-    ids = np.empty(len(VD), np.int64)
-    fresh = []
-    for i, p in enumerate(VD.tolist()):
-        g = lookup.get(tuple(p))
-        if g is None:
-            g = -1 - len(fresh)
-            fresh.append(p)
-        ids[i] = g
+    _, inv = np.unique(np.concatenate([X[used], VD]), axis=0, return_inverse=True)
+    inv = inv.ravel()
+    kept_as = np.full(len(used) + len(VD), -1, np.int64)
+    kept_as[inv[:len(used)]] = used
+    ids = kept_as[inv[len(used):]]
+    new = ids < 0
+    ids[new] = -1 - np.arange(int(new.sum()))
+    fresh = VD[new]
     if not np.isin(used[rim], ids).all():  # the collapse moved a rim vertex (pymeshlab on a sheet a few cells
         return None  # wide: a thin plank's cut): the sheet keeps its triangles, which meet B and the others
     return np.asarray(fresh, np.float64).reshape(-1, 3), ids[FD]
