@@ -74,6 +74,12 @@ class Section(BaseModel):
         return value
 
 
+def refuse(expected: str) -> PydanticCustomError:
+    """The error of a value that breaks a rule between the keys of one section (two axes that must
+    differ, a path that only one choice reads); ``expected`` says, in the user's words, what would do."""
+    return PydanticCustomError("relation", "{expected}", {"expected": expected})
+
+
 def _numbers(value: Any):
     if isinstance(value, bool):
         return

@@ -24,13 +24,13 @@ from typing import Annotated, Any, Callable, Literal, Mapping, Union
 
 import noise
 import numpy as np
-from pydantic import Field, TypeAdapter
+from pydantic import Field, TypeAdapter, ValidationInfo, field_validator
 
 from fields.grid import Grid
 from fields.interpolate import trilinear
 from fields.errors import InputError
 from fields.npy import is_npy
-from fields.params import (Bounds, Section, Vec3, bounds, choice, file, integer, number, parameters, text,
+from fields.params import (Bounds, Section, Vec3, bounds, choice, file, integer, number, parameters, refuse, text,
                            vec3)
 from fields.tolerances import tol
 
@@ -327,6 +327,13 @@ class MarbleLayer(Layer):
     soft_frequency: float = number(3.0, 0.0, 400.0)
     soft_contrast: float = number(0.15, **_STRENGTH)
 
+    @field_validator("vein_direction")
+    @classmethod
+    def _a_direction(cls, value: list[float]) -> list[float]:
+        if not any(value):
+            raise refuse("a direction of non-zero length")
+        return value
+
 
 class ElongatedLayer(Layer):
     """Noise stretched along an axis (:func:`elongated`)."""
@@ -382,6 +389,13 @@ class BricksLayer(Layer):
     noise_contrast: float = number(0.05, **_STRENGTH)
     noise_frequency: float = number(20.0, 0.0, 400.0)
 
+    @field_validator("height_axis")
+    @classmethod
+    def _across(cls, value: str, info: ValidationInfo) -> str:
+        if value == info.data.get("length_axis"):
+            raise refuse(f"an axis other than length_axis ({value!r}): the courses stack across the bricks")
+        return value
+
 
 class InclusionsLayer(Layer):
     """Strong cubes in a weak matrix (:func:`inclusions`)."""
@@ -407,6 +421,16 @@ class GrainLayer(Layer):
     ratio: float = number(3.0, 1.0, 20.0, "cost of a crack across the fibres over one along them")
     path: str | None = file(None, "volume: .npy file with a fibre direction per node, (nx, ny, nz, 3)")
     bounds: Bounds | None = bounds(None, "volume: material-space box of the directions; null: the object's box")
+
+    @field_validator("center", "path", "bounds")
+    @classmethod
+    def _read_by_its_fibres(cls, value, info: ValidationInfo):
+        # a key the chosen fibres do not read is a mistake to say, not to ignore
+        reader = "around" if info.field_name == "center" else "volume"
+        if value is not None and info.data.get("fibres", reader) != reader:
+            raise refuse(f"null: only fibres: {reader} reads {info.field_name} (these fibres are "
+                         f"{info.data['fibres']!r})")
+        return value
 
 
 class VolumeLayer(Layer):

@@ -100,6 +100,17 @@ def _error(tmp_path, text, overrides=()):
     ("refine: {search: fast}\n", "refine.search", "got 'fast' (str), expected one of 'graphcut', 'none'"),
     ("refine: {band: 0}\n", "refine.band", "expected a number in [1, 200]"),
     ("refine: {core: .nan}\n", "refine.core", "expected a number"),
+    # rules between the keys of one layer
+    ("strength: {layers: [{kind: bricks, length_axis: z, height_axis: z}]}\n", "strength.layers[0].height_axis",
+     "got 'z' (str), expected an axis other than length_axis ('z')"),
+    ("strength: {layers: [{kind: marble, vein_direction: [0, 0, 0]}]}\n", "strength.layers[0].vein_direction",
+     "expected a direction of non-zero length"),
+    ("strength: {layers: [{kind: grain, fibres: along, path: d.npy}]}\n", "strength.layers[0].path",
+     "expected null: only fibres: volume reads path (these fibres are 'along')"),
+    ("strength: {layers: [{kind: grain, fibres: volume, center: [0, 0, 0]}]}\n", "strength.layers[0].center",
+     "only fibres: around reads center"),
+    ("strength: {layers: [{kind: grain, fibres: around, bounds: [[0, 0, 0], [1, 1, 1]]}]}\n",
+     "strength.layers[0].bounds", "only fibres: volume reads bounds"),
 ])
 def test_config_errors_name_file_key_given_and_expected(tmp_path, text, key, words):
     message, path = _error(tmp_path, text)
@@ -161,6 +172,18 @@ def test_set_overrides(tmp_path, small_config):
         with pytest.raises(ConfigError) as err:
             load_config(small_config, [bad])
         assert words in str(err.value), str(err.value)
+
+
+def test_numbers_in_scientific_notation_are_numbers_in_files_overrides_and_sweeps(tmp_path, small_config):
+    from fracture.pipeline.sweep import parse_grid
+
+    assert parse_override("psi.stress_weight=1e-3")[1] == 0.001
+    assert parse_override("psi.stress_weight=-2E+1")[1] == -20.0
+    assert parse_override("name=1e5x")[1] == "1e5x"  # words that only start like a number stay words
+    assert parse_grid(["psi.stress_weight=1e-3,2e-2"]) == {"psi.stress_weight": [0.001, 0.02]}
+    text = small_config.read_text() + "\npsi: {stress_weight: 5e-1}\n"
+    assert load_config(write(tmp_path / "sci.yaml", text)).psi.stress_weight == 0.5
+    assert yaml.safe_load("a: 1e-3")["a"] == "1e-3"  # PyYAML's own loader as it was: nothing changed globally
 
 
 def test_parse_override_tokens():

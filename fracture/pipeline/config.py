@@ -30,7 +30,9 @@ SET_SOURCE = "--set"
 
 
 class _UniqueKeyLoader(yaml.SafeLoader):
-    """PyYAML's safe loader, refusing a key given twice in one mapping (PyYAML keeps the last silently)."""
+    """PyYAML's safe loader, refusing a key given twice in one mapping (PyYAML keeps the last silently), and
+    reading ``1e-3`` as the number YAML 1.2 and every other tool take it for (YAML 1.1, which PyYAML
+    follows, wants ``1.0e-3`` and reads ``1e-3`` as a string)."""
 
     def construct_mapping(self, node, deep=False):
         seen = {}
@@ -57,6 +59,17 @@ class _UniqueKeyLoader(yaml.SafeLoader):
 # Values a config file may expand to through its aliases (configs hold hundreds).
 _MOST_NODES = 1_000_000
 
+# A number in scientific notation without a decimal point (1e-3, -2E5): a float, as YAML 1.2 reads it. The
+# resolver is added to the loader's own copy of the table (PyYAML copies it for a subclass), not SafeLoader's.
+_UniqueKeyLoader.add_implicit_resolver("tag:yaml.org,2002:float", re.compile(r"^[-+]?[0-9][0-9_]*[eE][-+]?[0-9]+$"),
+                                       list("-+0123456789"))
+
+
+def load_yaml(text: str) -> Any:
+    """YAML text as the config files are read (:class:`_UniqueKeyLoader`): safe, each key once, ``1e-3`` a
+    number."""
+    return yaml.load(text, Loader=_UniqueKeyLoader)
+
 
 def _expanded_size(node, sizes: dict | None = None) -> int:
     """How many values a YAML node stands for with its aliases expanded (each node's size counted once)."""
@@ -82,7 +95,7 @@ def read_yaml(path: Path) -> dict:
     if not path.is_file():
         raise ConfigError(str(path), "", "config file not found")
     try:
-        data = yaml.load(path.read_text(encoding="utf-8"), Loader=_UniqueKeyLoader)
+        data = load_yaml(path.read_text(encoding="utf-8"))
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"{path}:{mark.line + 1}" if mark is not None else str(path)
@@ -168,7 +181,7 @@ def parse_override(text: str) -> tuple[list[str | int], Any]:
     if not key or pos != len(key) or not tokens or not isinstance(tokens[0], str):
         raise ConfigError(SET_SOURCE, key, f"got {text!r}, expected key.path=value (e.g. psi.stress_weight=2)")
     try:
-        value = yaml.safe_load(raw) if raw.strip() else None
+        value = load_yaml(raw) if raw.strip() else None
     except yaml.YAMLError:
         # not YAML (a glob such as *.ply: a star starts an alias): the words as they are; the schema then says
         # whether a string may go there

@@ -263,6 +263,8 @@ def _problem(error: dict, tree: Any, model: type[BaseModel], origin: Callable[[s
             return ConfigError(origin(key), key, f"got {_shown(node)}, expected a mapping of keys")
         if error["type"] == "missing":
             return ConfigError(origin(key), key, f"missing, expected {expected(model, part)}")
+        if error["type"] == "relation":  # a rule between keys (fields.params.refuse): its own words
+            return ConfigError(origin(key), key, f"got {_shown(node)}, expected {error['msg']}")
         return ConfigError(origin(key), key, f"got {_shown(node)}, expected {expected(model, part)}")
     where = prefix or "(top level)"
     return ConfigError(origin(prefix), where, f"got {_shown(tree)}, expected a mapping of keys")

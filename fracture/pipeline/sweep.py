@@ -41,7 +41,7 @@ import yaml
 
 from fracture.io import layout
 from fracture.io.atomic import atomic_write_text, staged_directory
-from fracture.pipeline.config import dump_config, load_config
+from fracture.pipeline.config import dump_config, load_config, load_yaml
 from fracture.errors import ConfigError
 
 GRID_SOURCE = "--grid"
@@ -81,7 +81,7 @@ def parse_grid(texts: Iterable[str]) -> dict[str, list]:
         if key in grid:
             raise ConfigError(GRID_SOURCE, key, "given twice; expected each key once")
         try:
-            values = [yaml.safe_load(v) for v in _split_values(raw)]
+            values = [load_yaml(v) for v in _split_values(raw)]
         except yaml.YAMLError:
             raise ConfigError(GRID_SOURCE, key, f"cannot read the values {raw!r} as YAML") from None
         grid[key] = values
