@@ -75,6 +75,7 @@ def _parser() -> argparse.ArgumentParser:
     e.add_argument("run_dir", type=Path, metavar="RUN_DIR")
     e.add_argument("--format", default="usd", choices=["usd"], help="output format (default: usd)")
     e.add_argument("--out", type=Path, help="output file (default: RUN_DIR/animation/pieces.usdc)")
+    e.add_argument("--force", action="store_true", help="replace --out if it exists")
 
     v = sub.add_parser("view", help="open the research viewer on a run directory or a config")
     v.add_argument("target", type=Path, metavar="CONFIG_OR_RUN_DIR",
@@ -89,7 +90,7 @@ def _parser() -> argparse.ArgumentParser:
     d = sub.add_parser("render", help="render figures (PNG) and videos (MP4) of a run with no window")
     d.add_argument("run_dir", type=Path, metavar="RUN_DIR")
     d.add_argument("--what", action="append", choices=["slices", "iterations", "animation", "compare", "turntable"],
-                   help="what to render (repeatable; default: slices, iterations, animation)")
+                   help="what to render (repeatable; default: those of slices, iterations, animation the run has)")
     d.add_argument("--out", type=Path, help="output directory (default: RUN_DIR/renders)")
     d.add_argument("--width", type=int, default=1280, help="figure width in pixels (compare: both halves)")
     d.add_argument("--height", type=int, default=720)
@@ -244,7 +245,7 @@ def _main(argv: list[str] | None) -> int:
         if args.command == "export":
             from fracture.pipeline.export import export_run
 
-            print(f"wrote {export_run(args.run_dir, args.format, args.out)}")
+            print(f"wrote {export_run(args.run_dir, args.format, args.out, args.force)}")
             return 0
         if args.command == "view":
             return _view(args)
@@ -301,19 +302,22 @@ def _render(args) -> int:
     flags = {"field": args.field, "axis": args.axis, "level": args.level, "cutaway": args.cutaway,
              "color_by": args.color_by, "overlay_coarse": args.overlay_coarse}
     view = replace(state.view, **{k: v for k, v in flags.items() if v is not None})
-    whats = tuple(args.what or DEFAULT_WHAT)
+    whats = tuple(args.what or ())
     if args.frame is not None:
         view = replace(view, frame=args.frame - 1)
     elif {"compare", "turntable"} & set(whats) and args.camera is None and view.frame == 0:
         view = replace(view, frame=-1)  # the last: the pieces apart
     timing = Timing(args.fps, args.image_seconds, args.hold)
-    done = render(args.run_dir, whats, args.out, args.width, args.height, timing, view, args.quiet,
+    done = render(args.run_dir, whats or None, args.out, args.width, args.height, timing, view, args.quiet,
                   args.supersample, args.transparent, args.turntable_seconds, state.cameras)
     for what, files in done.items():
         pngs = [f for f in files if f.suffix == ".png"]
         videos = [f for f in files if f.suffix == ".mp4"]
         print(f"{what}: " + ", ".join(([f"{len(pngs)} images"] if pngs else []) + [str(v) for v in videos]
                                      + ([str(pngs[0])] if len(pngs) == 1 else [])))
+    for what in DEFAULT_WHAT if not whats else ():
+        if what not in done:
+            print(f"{what}: not in this run (it stopped before the stage that makes it)")
     return 0
 
 

@@ -3,7 +3,6 @@
 import os
 import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
 import pytest
@@ -121,27 +120,6 @@ def test_a_changed_tolerance_reaches_the_compiled_kernels(tmp_path):
     assert "tol.delaunay = 1e-12" in text
     tolerances.write_text(text.replace("tol.delaunay = 1e-12", "tol.delaunay = 1e9"))
     assert flips() == 0
-
-
-@pytest.mark.slow
-def test_compile_fills_the_kernel_cache_of_a_fresh_install(tmp_path):
-    """`fracref compile` (which `make install` runs) compiles the kernels a run needs, so that the first run
-    does not wait for them: in a copy of the package with nothing compiled, the cache holds them after it."""
-    import shutil
-
-    root = Path(__file__).resolve().parents[1]
-    for package in ("fracture", "fields", "fracref"):
-        shutil.copytree(root / package, tmp_path / package, ignore=shutil.ignore_patterns("__pycache__"))
-    env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "NUMBA_DISABLE_JIT")}
-    env["PYTHONPATH"] = str(tmp_path)
-    check = [sys.executable, "-c", "from fracture.refine import kernels_cached; print(kernels_cached())"]
-    assert subprocess.run(check, cwd=tmp_path, env=env, capture_output=True, text=True).stdout.strip() == "False"
-    done = subprocess.run([sys.executable, "-m", "fracref", "compile"], cwd=tmp_path, env=env, capture_output=True,
-                          text=True)
-    assert done.returncode == 0, done.stderr[-2000:]
-    assert "kernels compiled and cached in" in done.stdout
-    assert subprocess.run(check, cwd=tmp_path, env=env, capture_output=True, text=True).stdout.strip() == "True"
-    assert not list(Path(tempfile.gettempdir()).glob("fracref-compile-*"))  # its run directory is gone
 
 
 def test_the_command_line_runs_the_kernels_on_gnu_openmp_with_a_thread_per_core(tmp_path, small_config):

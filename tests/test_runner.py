@@ -451,3 +451,42 @@ def test_a_refined_surface_that_makes_no_sound_pieces_is_refined_again_with_othe
     fm = json.loads((first / "manifest.json").read_text())
     refined = [f for f in fm["files"] if f.startswith("refined/")]
     assert refined and any(fm["files"][f] != pm["files"][f] for f in refined)
+
+
+def test_a_run_that_has_nothing_to_do_says_so(tmp_path, small_config):
+    """A uniform material, no flow step and no room to split: each said in a note, and the run still made."""
+    plain = ("strength.layers=[{kind: radial, inner: 0.5, outer: 0.5}]")
+    out = runner.run(load_config(small_config, [plain]), tmp_path / "plain", until="fields", progress=False)
+    notes = json.loads((out / "manifest.json").read_text())["notes"]
+    assert [n for n in notes if n.startswith("fields:")] == [
+        "fields: the strength layers give zeta = 0 everywhere: the material has no weak places for the cracks to "
+        "find; they follow the stress alone (the coarse surface, smoothed)"]
+    notes = json.loads((runner.run(load_config(small_config), tmp_path / "marble", until="fields", progress=False)
+                        / "manifest.json").read_text())["notes"]
+    assert not [n for n in notes if n.startswith("fields:")]
+    out = runner.run(load_config(small_config, ["refine.iterations=0", "refine.max_triangles=10",
+                                                "refine.search=none"]),
+                     tmp_path / "still", until="refine", progress=False)
+    manifest = json.loads((out / "manifest.json").read_text())
+    coarse = manifest["counts"]["coarse_fracture_triangles"]
+    assert [n for n in manifest["notes"] if n.startswith("refine:")] == [
+        "refine: refine.iterations is 0: no flow step ran; the coarse surface is the result",
+        f"refine: refine.max_triangles (10) is not above the coarse surface's {coarse} triangles: nothing was split"]
+    assert manifest["counts"]["refined_fracture_triangles"] == coarse
+
+
+def test_a_refinement_that_ends_higher_than_it_began_says_so():
+    from types import SimpleNamespace
+
+    from fracture.pipeline.stages.refine import _outcome_notes
+    from fracture.refine.params import RefineParams
+
+    params = RefineParams()
+    lower = SimpleNamespace(sampled=(0.66, 0.61), functional=[0.7, 0.6])
+    assert _outcome_notes(params, lower, 100, searched=True) == []
+    higher = SimpleNamespace(sampled=(0.658, 0.693), functional=[0.7, 0.6])
+    assert _outcome_notes(params, higher, 100, searched=True) == [
+        "refine: the refined surface scores higher on the functional than the coarse one (0.693 against 0.658, "
+        "sampled alike); the flow lowered it as it measures it (psi at the vertices), not on dense samples"]
+    assert "as it measures it" not in _outcome_notes(params, SimpleNamespace(sampled=(0.6, 0.7), functional=[0.6, 0.7]),
+                                                     100, searched=False)[0]

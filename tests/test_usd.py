@@ -516,6 +516,7 @@ def test_a_usd_in_centimetres_at_30_fps_from_frame_1001_comes_back_so(tmp_path):
     from fracture.coarse.mesh_sequence import read_sequence
     from fracture.pipeline import runner
     from fracture.pipeline.config import load_config
+    from fracture.errors import InputError
     from fracture.pipeline.export import export_run
 
     frames = read_sequence(SAMPLE)[:12]
@@ -543,6 +544,13 @@ def test_a_usd_in_centimetres_at_30_fps_from_frame_1001_comes_back_so(tmp_path):
         lo, hi = P.min(axis=0), P.max(axis=0)
         np.testing.assert_allclose(lo, 100.0 * frames[11].V[vids].min(axis=0), atol=10.0)
         np.testing.assert_allclose(hi, 100.0 * frames[11].V[vids].max(axis=0), atol=10.0)
+    # an existing file elsewhere is replaced only when asked; the run's own file is written again from its outputs
+    kept = (tmp_path / "again.usda").read_bytes()
+    with pytest.raises(InputError, match="again.usda exists; choose another --out or pass --force to replace it"):
+        export_run(out, out=tmp_path / "again.usda")
+    assert (tmp_path / "again.usda").read_bytes() == kept
+    assert export_run(out, out=tmp_path / "again.usda", force=True) == tmp_path / "again.usda"
+    assert export_run(out) == out / "animation/pieces.usdc"
     # a frame rate in the config wins over the input's
     cfg24 = load_config(cfg_path, ["refine.max_triangles=3000", "refine.iterations=2", "animate.check_samples=1000",
                                    "animate.fps=24"])

@@ -101,6 +101,25 @@ def test_render_rejects_bad_requests_clearly(run_dir, tmp_path):
     assert not list(tmp_path.glob("*.png"))
 
 
+def test_render_without_what_renders_what_a_run_stopped_early_has(small_config, tmp_path):
+    coarse, refined = tmp_path / "coarse", tmp_path / "refined"
+    runner.run(load_config(small_config), coarse, until="coarse", progress=False)
+    runner.run(load_config(small_config, ["refine.iterations=2"]), refined, until="refine", progress=False)
+    r = _cli(["render", str(coarse), "--quiet"])
+    assert r.returncode == 2 and "nothing to render: the run stopped after its coarse stage" in r.stderr, r.stderr
+    r = _cli(["render", str(coarse), "--what", "slices", "--quiet"])
+    assert r.returncode == 2 and "no fields to render slices of" in r.stderr, r.stderr
+    assert not (coarse / "renders").exists()
+    r = _cli(["render", str(refined), "--width", "160", "--height", "120", "--quiet"])
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert r.stdout.startswith("slices: 9 images") and "iterations: 3 images" in r.stdout, r.stdout
+    assert "animation: not in this run" in r.stdout
+    assert "OpenGL" not in r.stdout + r.stderr and "EGL" not in r.stdout + r.stderr  # --quiet: no greetings
+    assert sorted(p.name for p in (refined / "renders").glob("*.mp4")) == ["iterations_psi.mp4", "slices_psi_z.mp4"]
+    r = _cli(["render", str(refined), "--what", "animation"])
+    assert r.returncode == 2 and "no animation to render" in r.stderr
+
+
 def _window(scenario: str, run_dir: Path, out: Path) -> dict:
     xvfb = shutil.which("xvfb-run")
     if xvfb is None:

@@ -1,5 +1,6 @@
-"""The package installed from its wheel works away from the checkout: a config outside the repository names a
-built-in scene and a strength preset by name, runs to the end and is exported.
+"""The package installed from its wheel works away from the checkout: its kernels compile into the fresh install's
+cache, and a config outside the repository names a built-in scene and a strength preset by name, runs to the end
+and is exported.
 
 The wheel is built from the checkout and installed, without its dependencies, into a fresh virtual
 environment in a temporary directory; the dependencies (numpy, Open3D, usd-core, ...: gigabytes that
@@ -12,10 +13,12 @@ checkout is on the path: what is not in the wheel (the presets, the meshes they 
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import subprocess
 import sys
 import sysconfig
+import tempfile
 import textwrap
 import venv
 from pathlib import Path
@@ -48,8 +51,13 @@ def installed(tmp_path_factory) -> Path:
     return env / "bin"
 
 
+# the installed package's own numba cache (beside its modules), compiled for real
+_ENV = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "NUMBA_DISABLE_JIT")}
+
+
 def _run(bin_dir: Path, cwd: Path, *args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([str(bin_dir / "fracref"), *args], capture_output=True, text=True, cwd=cwd, timeout=900)
+    return subprocess.run([str(bin_dir / "fracref"), *args], capture_output=True, text=True, cwd=cwd, timeout=900,
+                          env=_ENV)
 
 
 @pytest.mark.slow
@@ -58,6 +66,15 @@ def test_the_wheel_runs_a_scene_with_a_preset_by_name_and_exports_it(installed, 
                             "print(fields.__file__)"], capture_output=True, text=True, cwd=tmp_path)
     assert where.returncode == 0, where.stderr
     assert all(str(installed.parent) in line for line in where.stdout.split()), where.stdout  # not the checkout's
+
+    # `fracref compile` (which `make install` runs) fills the kernel cache of the fresh install, so that its
+    # first run does not wait for the compilation
+    cached = [str(installed / "python"), "-c", "from fracture.refine import kernels_cached; print(kernels_cached())"]
+    assert subprocess.run(cached, capture_output=True, text=True, cwd=tmp_path, env=_ENV).stdout.strip() == "False"
+    compiled = _run(installed, tmp_path, "compile")
+    assert compiled.returncode == 0 and "kernels compiled and cached in" in compiled.stdout, compiled.stderr[-2000:]
+    assert subprocess.run(cached, capture_output=True, text=True, cwd=tmp_path, env=_ENV).stdout.strip() == "True"
+    assert not list(Path(tempfile.gettempdir()).glob("fracref-compile-*"))  # its run directory is gone
 
     listed = _run(installed, tmp_path, "presets")
     assert listed.returncode == 0 and "strength/marble" in listed.stdout and "bunny" in listed.stdout, listed.stderr

@@ -115,6 +115,10 @@ class RunData:
 
     # -- fields ---------------------------------------------------------------------------
 
+    @property
+    def has_fields(self) -> bool:
+        return self.has(layout.GRID) and self.has(layout.PYRAMID)
+
     @cached_property
     def grid(self) -> Grid:
         return Grid.from_dict(json.loads(self._require(layout.GRID, "the fields").read_text()))

@@ -19,8 +19,10 @@ written with a transparent background (PNG; the videos are composited on white).
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
+import sys
 import tempfile
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -72,10 +74,33 @@ class Timing:
         return counts
 
 
+@contextlib.contextmanager
+def _silent(quiet: bool):
+    """With ``quiet``, the process's stdout and stderr (file descriptors 1 and 2, where C++ libraries write)
+    sent to the null device for the block, and restored after it."""
+    if not quiet:
+        yield
+        return
+    sys.stdout.flush()
+    sys.stderr.flush()
+    kept = [os.dup(1), os.dup(2)]
+    null = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(null, 1)
+        os.dup2(null, 2)
+        yield
+    finally:
+        os.dup2(kept[0], 1)
+        os.dup2(kept[1], 2)
+        for fd in kept + [null]:
+            os.close(fd)
+
+
 class Renderer:
     """One offscreen renderer of the figure's size (times the supersampling), reused for every image."""
 
-    def __init__(self, width: int, height: int, supersample: int = 1, transparent: bool = False):
+    def __init__(self, width: int, height: int, supersample: int = 1, transparent: bool = False,
+                 quiet: bool = False):
         from open3d.visualization import rendering
 
         if not isinstance(supersample, (int, np.integer)) or not 1 <= supersample <= MAX_SUPERSAMPLE:
@@ -88,7 +113,8 @@ class Renderer:
         # environment before its first offscreen renderer is made (here: a renderer is what needs it)
         if not os.environ.get("DISPLAY"):
             os.environ.setdefault("EGL_PLATFORM", "surfaceless")
-        self.r = rendering.OffscreenRenderer(width * self.k, height * self.k)
+        with _silent(quiet):  # Filament's greetings (EGL, OpenGL versions) go to the process's own stdout
+            self.r = rendering.OffscreenRenderer(width * self.k, height * self.k)
         self.r.scene.view.set_post_processing(True)
 
     @property
@@ -259,19 +285,19 @@ def contact_sheet(run_dirs: list[Path], captions: list[str], out: str | Path, ti
     return out
 
 
-def render(run_dir: str | Path, what: str | tuple[str, ...] = DEFAULT_WHAT, out: str | Path | None = None,
+def render(run_dir: str | Path, what: str | tuple[str, ...] | None = None, out: str | Path | None = None,
            width: int = 1280, height: int = 720, timing: Timing | None = None, view: View | None = None,
            quiet: bool = False, supersample: int = 1, transparent: bool = False,
            turntable_seconds: float = 6.0, cameras: dict | None = None) -> dict[str, list[Path]]:
     """Render each view ``what`` of a run into ``out`` (default ``RUN_DIR/renders``): PNGs and an MP4
     (slices, iterations, animation), a PNG (compare) or an MP4 (turntable), reading the run and
-    making the renderer once. ``cameras`` (per panel name, as in a view file)
+    making the renderer once. ``what`` None: those of :data:`DEFAULT_WHAT` the run has (:func:`available`). ``cameras`` (per panel name, as in a view file)
     replace the fitted cameras: ``material`` for slices, ``iterations``, ``animation`` for the
     animation and the comparison.
 
     Returns the files written, per view.
     """
-    whats = (what,) if isinstance(what, str) else tuple(what)
+    whats = () if what is None else (what,) if isinstance(what, str) else tuple(what)
     for w in whats:
         if w not in WHAT:
             raise InputError(f"--what must be one of {', '.join(WHAT)}, got {w!r}")
@@ -280,7 +306,15 @@ def render(run_dir: str | Path, what: str | tuple[str, ...] = DEFAULT_WHAT, out:
     if not 0.5 <= turntable_seconds <= 600:
         raise InputError(f"turntable seconds must be in 0.5..600, got {turntable_seconds}")
     run = RunData(run_dir)
+    if what is None:
+        whats = available(run)
+        if not whats:
+            raise InputError(f"{run.dir}: nothing to render: the run stopped after its "
+                             f"{_last_stage(run)} stage (the slices need the fields stage)")
     view = (view or View()).check(run)
+    if "slices" in whats and not run.has_fields:
+        raise InputError(f"{run.dir}: no fields to render slices of (the run stopped after its "
+                         f"{_last_stage(run)} stage)")
     needs_animation = [w for w in whats if w in ("animation", "compare", "turntable")]
     if needs_animation and not run.has_animation:
         raise InputError(f"{run.dir}: no animation to render for {', '.join(needs_animation)} "
@@ -291,7 +325,8 @@ def render(run_dir: str | Path, what: str | tuple[str, ...] = DEFAULT_WHAT, out:
         raise InputError(f"frame must be in 1..{run.n_frames}, got {view.frame + 1}")
     out = Path(out) if out is not None else run.dir / "renders"
     cameras = cameras or {}
-    renderer = Renderer(width, height, supersample, transparent)  # one per process: Open3D's are not independent
+    # one per process: Open3D's are not independent
+    renderer = Renderer(width, height, supersample, transparent, quiet)
     done = {}
     for w in whats:
         if w == "compare":
@@ -303,6 +338,17 @@ def render(run_dir: str | Path, what: str | tuple[str, ...] = DEFAULT_WHAT, out:
         else:
             done[w] = _render_one(run, w, view, renderer, out, timing, quiet, turntable_seconds, cameras)
     return done
+
+
+def available(run: RunData) -> tuple[str, ...]:
+    """The views of :data:`DEFAULT_WHAT` a run has the outputs of (a run stopped early has fewer)."""
+    has = {"slices": run.has_fields, "iterations": run.has_iterations, "animation": run.has_animation}
+    return tuple(w for w in DEFAULT_WHAT if has[w])
+
+
+def _last_stage(run: RunData) -> str:
+    stages = list(run.manifest.get("stages", {}))
+    return stages[-1] if stages else "first"
 
 
 def _render_one(run: RunData, what: str, view: View, renderer: Renderer, out: Path, timing: Timing,

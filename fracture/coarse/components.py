@@ -18,7 +18,7 @@ from scipy import ndimage
 
 from fracture.errors import InputError
 from fracture.coarse.surface import flood_fill_patches
-from fracture.mesh.exterior import Exterior, fast_winding
+from fracture.mesh.exterior import Exterior
 from fracture.tolerances import tol
 from fracture.mesh.topology import (boundary_edges, diagonal, directed_edges, edge_keys, edge_outward, face_frames,
                                unique_edges)
@@ -266,9 +266,9 @@ def label_components(BV: np.ndarray, BF: np.ndarray, V: np.ndarray, F: np.ndarra
     h = float((hi - lo).max()) / resolution
     origin = lo - h
     shape = np.ceil((hi - lo) / h).astype(int) + 3
-    axes = [origin[k] + h * np.arange(shape[k]) for k in range(3)]
-    P = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
-    inside = fast_winding(BV, BF, P) > 0.5
+    # winding numbers asked near B and once per region of the nodes away from it (Exterior.grid_nodes): the
+    # same answers as asking every node, which took 0.7-1.4 s of a small object's import
+    inside = Exterior(BV, BF).grid_nodes(origin, h, shape, 0.0, near=False)[0].ravel()
     free = inside.copy()
     WV, WF = _with_skirt(BV, BF, V, F, h)
     near = _near_surface(np.flatnonzero(inside), shape, origin, h, WV, WF, 0.6 * h)

@@ -395,6 +395,10 @@ def _in_closed_slit(pieces, X: np.ndarray, owner: np.ndarray, other: np.ndarray,
     return np.where(other >= 0, nearer, bridged)
 
 
+# the share of the smaller piece's volume above which an overlap is the same piece twice
+_TWIN = 0.9
+
+
 def _check_tiling(label, overlap, gaps, names, h, where) -> str | None:
     """Refuse pieces that overlap by more than :data:`_OVERLAP` cells on average (the overlap's volume
     over the smaller piece's volume to the power 2/3, an area); returns a note on the widest slit that
@@ -409,20 +413,28 @@ def _check_tiling(label, overlap, gaps, names, h, where) -> str | None:
                              f"them, over {holds[q] / count.sum():.0%} of the object): is the unfractured object "
                              "exported with its pieces? Export the pieces alone (Blender: select them, Selection "
                              "Only)")
+    # a piece's own volume: the nodes it was labelled with and those it lost to a piece it overlaps (a piece
+    # exported twice loses every node to its twin)
+    inside = count + (np.bincount(overlap.ravel(), minlength=len(names)) if len(overlap) else 0)
     note = None
-    for what, pairs in (("overlap by", overlap), ("leave a slit of", gaps)):
+    for what, pairs in (("overlap", overlap), ("slit", gaps)):
         if not len(pairs):
             continue
         pairs, n = np.unique(pairs, axis=0, return_counts=True)
-        thick = n / np.maximum(np.minimum(count[pairs[:, 0]], count[pairs[:, 1]]), 1.0) ** (2 / 3)
+        smaller = np.maximum(np.minimum(inside[pairs[:, 0]], inside[pairs[:, 1]]), 1.0)
+        thick = n / smaller ** (2 / 3)
         worst = int(np.argmax(thick))
         a, b = pairs[worst]
-        said = (f"pieces {names[a]!r} and {names[b]!r} {what} about {n[worst] * h ** 3:.3g} cubic units (on "
-                f"average {thick[worst] * h:.3g} thick)")
-        if what == "overlap by" and thick[worst] > _OVERLAP and n[worst] >= _OVERLAP_NODES:
-            raise InputError(f"{where}{said}; the pieces must tile the object in the rest pose (is a piece moved?)")
-        if what != "overlap by":
-            note = said
+        if what == "overlap" and thick[worst] > _OVERLAP and n[worst] >= _OVERLAP_NODES:
+            twice = n[worst] >= _TWIN * smaller[worst]
+            raise InputError(
+                f"{where}pieces {names[a]!r} and {names[b]!r} overlap by {thick[worst] * h:.3g} on average "
+                f"({n[worst] * h ** 3:.3g} cubic units, {n[worst] / smaller[worst]:.0%} of the smaller piece); "
+                "the pieces must tile the object in the rest pose " + (
+                    "(is a piece exported twice?)" if twice else "(is a piece moved?)"))
+        if what == "slit":
+            note = (f"between pieces {names[a]!r} and {names[b]!r}, {thick[worst] * h:.3g} wide on average "
+                    f"({n[worst] * h ** 3:.3g} cubic units)")
     return note
 
 
@@ -522,6 +534,9 @@ def label_tiling(V: np.ndarray, polygons: list[list[np.ndarray]], names: list[st
                      "ends just inside")
     if not closed_oriented(BF):
         raise AssertionError(f"{where}marching tetrahedra gave an outer surface that is not a closed 2-manifold")
+    if len(kept) == 1:
+        raise InputError(f"{where}one piece ({names[kept[0]]!r}): no crack to refine; expected the pieces of a "
+                         "fractured object")
     if not len(FF):
         raise InputError(f"{where}no two pieces touch: nothing to refine (is this a fractured object?)")
     renumber = np.full(len(pieces), -1)

@@ -77,11 +77,11 @@ class Exterior:
     def distance(self, P: np.ndarray) -> np.ndarray:
         return np.sqrt(self.closest(P)[0])
 
-    def grid_nodes(self, origin, spacing, shape, within: float, asked: np.ndarray | None = None
-                   ) -> tuple[np.ndarray, np.ndarray]:
+    def grid_nodes(self, origin, spacing, shape, within: float, asked: np.ndarray | None = None,
+                   near: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
         """Which nodes of a grid (``origin``, ``spacing``, ``shape``) are inside B, and which lie within
-        ``within`` (less than a cell) of B, both ``shape``; only the nodes ``asked`` (a mask of
-        ``shape``, default all) are answered, the others are False.
+        ``within`` (less than a cell) of B, both ``shape`` (the second None unless ``near``); only the
+        nodes ``asked`` (a mask of ``shape``, default all) are answered, the others are False.
 
         Only the nodes of the cells that B's triangles' bounding boxes meet are
         asked (winding number and distance); every other node lies in a region
@@ -114,10 +114,11 @@ class Exterior:
         idx = np.flatnonzero(touched & asked)
         P = origin + np.stack(np.unravel_index(idx, shape), 1) * spacing
         inside = np.zeros(shape, bool)
-        on_b = np.zeros(shape, bool)
+        on_b = np.zeros(shape, bool) if near else None
         if len(idx):
             inside.flat[idx] = self.inside(P)
-            on_b.flat[idx] = self.closest(P)[0] < within * within
+            if near:
+                on_b.flat[idx] = self.closest(P)[0] < within * within
         regions, n = ndimage.label(~touched)
         if n:
             _, first = np.unique(regions.ravel(), return_index=True)  # a node of each region (0: the touched)

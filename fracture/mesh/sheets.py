@@ -19,6 +19,7 @@ import numpy as np
 from fracture.mesh.edges import edge_table
 from fracture.mesh.intersect import self_intersections
 from fracture.mesh.topology import unique_edges
+from fracture.tolerances import tol
 
 # A coarsened curved sheet keeps about one triangle per this many cells of its area.
 _CELLS_PER_TRIANGLE = 2.0
@@ -39,7 +40,12 @@ def _simplify_sheet(X: np.ndarray, FF: np.ndarray, cell: float | None) -> tuple[
         target = max(target, int(area / (_CELLS_PER_TRIANGLE * cell * cell)))
     if target >= len(local):
         return None
-    VD, FD = (_collapse_curved if cell is not None else _collapse_flat)(X[used], local, target)
+    # the collapse on the sheet scaled to about unit size by a power of two (exact both ways: the kept points
+    # come back bit for bit): the libraries' tolerances are absolute, and a cut a ten-thousandth of a unit
+    # across kept twice the triangles of the same cut a unit across
+    scale = 2.0 ** -np.round(np.log2(max(float(np.ptp(X[used], axis=0).max()), tol.zero)))
+    VD, FD = (_collapse_curved if cell is not None else _collapse_flat)(X[used] * scale, local, target)
+    VD = np.asarray(VD, np.float64) / scale
     # kept vertices sit exactly where they were: back to their ids, the others are new
     _, inv = np.unique(np.concatenate([X[used], VD]), axis=0, return_inverse=True)
     inv = inv.ravel()

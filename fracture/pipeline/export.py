@@ -46,10 +46,11 @@ def _reading(run: Path, rel: str):
                          "write it whole") from None
 
 
-def export_run(run: str | Path, fmt: str = "usd", out: str | Path | None = None) -> Path:
+def export_run(run: str | Path, fmt: str = "usd", out: str | Path | None = None, force: bool = False) -> Path:
     """Write the run's pieces and animation as ``fmt``; returns the file written.
 
-    ``out`` defaults to ``RUN/animation/pieces.usdc``.
+    ``out`` defaults to ``RUN/animation/pieces.usdc`` (the run's own file, written again from the same
+    outputs); another file that exists is replaced only with ``force``.
     """
     from fracture.io.ply import read_ply
     from fracture.pieces.transfer import frame_points, load_transfer, rest_points
@@ -87,5 +88,7 @@ def export_run(run: str | Path, fmt: str = "usd", out: str | Path | None = None)
         raise InputError(f"export: {out}: a USD file name ends in .usd, .usdc or .usda")
     if not out.parent.is_dir():
         raise InputError(f"export: {out.parent} is not a directory")
+    if out.exists() and not force and out.resolve() != (run / layout.USD).resolve():
+        raise InputError(f"export: {out} exists; choose another --out or pass --force to replace it")
     return write_pieces_usd(out, names, faces, exterior, frame_points(transfer), rest=rest_points(transfer),
                             size=transfer.size, up_axis="Y" if up == "y" else "Z", **timing)

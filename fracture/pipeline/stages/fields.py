@@ -71,6 +71,9 @@ def fields_stage(ctx: RunContext) -> None:
         if ctx.cache is not None and name not in known:
             ctx.cache.keep(name, known_key(ctx, name), fs.field(name))
     ctx.products.fields = fs
+    plain = _uniform_material(cfg, fs.field("zeta"))
+    if plain:
+        ctx.notes.append(plain)
 
     ctx.save_json(layout.GRID, fs.grid.to_dict())
     for name in PREVIEW_FIELDS:
@@ -87,6 +90,23 @@ def fields_stage(ctx: RunContext) -> None:
         "grid_shape": list(fs.grid.shape),
         **{f"{n}_range": [float(fs.field(n).min()), float(fs.field(n).max())] for n in PREVIEW_FIELDS},
     }
+
+
+def _uniform_material(cfg: Config, zeta: np.ndarray) -> str | None:
+    """A note when the material gives the refinement nothing to find: zeta the same everywhere, or weighed 0."""
+    if cfg.psi.strength_weight == 0:
+        why = "psi.strength_weight is 0"
+    elif float(np.ptp(zeta)) <= _UNIFORM * max(1.0, float(np.abs(zeta).max())):
+        why = f"the strength layers give zeta = {float(zeta.flat[0]):.6g} everywhere"
+    else:
+        return None
+    grain = any(layer.kind == "grain" for layer in cfg.strength.layers)
+    return (f"fields: {why}: the material has no weak places for the cracks to find; they follow the stress "
+            + ("and the grain's fibres alone" if grain else "alone (the coarse surface, smoothed)"))
+
+
+# zeta's range, relative to its size, below which the material is one strength
+_UNIFORM = 1e-9
 
 
 def known_key(ctx: RunContext, name: str) -> str:

@@ -107,6 +107,27 @@ def refine_stage(ctx: RunContext) -> None:
         ctx.notes.extend(log.search.notes)
     if crossed:
         ctx.notes.append(f"refine: {crossed} pairs of refined triangles crossed each other; relaxed apart")
+    ctx.notes.extend(_outcome_notes(params, log, len(cf.F), refiner.searched))
+
+
+def _outcome_notes(params, log, coarse_triangles: int, searched: bool) -> list[str]:
+    """What a user should know of a refinement that did not do what its config suggests: no flow step, no room
+    to split, a result the functional scores worse than the coarse surface."""
+    notes = []
+    start = "searched" if searched else "coarse"
+    if params.iterations == 0:
+        notes.append(f"refine: refine.iterations is 0: no flow step ran; the {start} surface is the result")
+    if params.max_triangles <= coarse_triangles:
+        notes.append(f"refine: refine.max_triangles ({params.max_triangles}) is not above the coarse surface's "
+                     f"{coarse_triangles} triangles: nothing was split")
+    coarse, refined = log.sampled
+    if refined > coarse:
+        own = log.functional[-1] < log.functional[0]
+        notes.append(f"refine: the refined surface scores higher on the functional than the coarse one ({refined:.6g} "
+                     f"against {coarse:.6g}, sampled alike)" + (
+                         "; the flow lowered it as it measures it (psi at the vertices), not on dense samples"
+                         if own else ""))
+    return notes
 
 
 class _CachedBand:
