@@ -215,7 +215,7 @@ def test_a_grid_beyond_the_memory_limit_is_refused_before_it_is_allocated(tmp_pa
 @pytest.mark.slow
 @pytest.mark.parametrize("path", sorted(CONFIGS.glob("*.yaml")), ids=lambda p: p.name)
 def test_every_experiment_runs_shrunk(tmp_path, path):
-    cfg = load_config(path, ["grid.resolution=16", "pyramid.levels=2"])
+    cfg = load_config(path, ["grid.resolution=16", "pyramid.levels=2", "refine.max_triangles=5000"])
     out = runner.run(cfg, tmp_path / "run", progress=False)
     manifest = json.loads((out / "manifest.json").read_text())
     assert list(manifest["stages"]) == runner.available_stages()

@@ -26,6 +26,35 @@ def fast_winding(V: np.ndarray, F: np.ndarray, P: np.ndarray) -> np.ndarray:
                                    np.ascontiguousarray(np.asarray(P, np.float64).reshape(-1, 3) - centre))
 
 
+# A triangle is split for a grid's query while its box holds more than this many times the nodes near it
+# (its area and its spans in cells: a slanted triangle; an axis-aligned one's box is a slab of two layers) ...
+_BOX_OVER_AREA = 8.0
+# ... and spans more than this many cells along an axis.
+_PIECE_CELLS = 2.0
+
+
+def _small_pieces(T: np.ndarray, spacing: np.ndarray) -> np.ndarray:
+    """Triangles ``T`` (``(m, 3, 3)``: corners) split into four at their edges' midpoints, again and again,
+    while their boxes on the grid of ``spacing`` hold many nodes far from them (:data:`_BOX_OVER_AREA`,
+    :data:`_PIECE_CELLS`); their union is the union of ``T``."""
+    out = []
+    cell = float(np.prod(spacing)) ** (1.0 / 3.0)
+    for _ in range(32):  # each round halves a piece's span: 32 rounds reach any span a float can hold
+        span = (T.max(axis=1) - T.min(axis=1)) / spacing
+        nodes = np.prod(np.floor(span) + 2.0, axis=1)
+        area = 0.5 * np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1) / (cell * cell)
+        big = (span.max(axis=1) > _PIECE_CELLS) & (nodes > _BOX_OVER_AREA * (area + span.sum(axis=1) + 1.0))
+        out.append(T[~big])
+        T = T[big]
+        if not len(T):
+            break
+        a, b, c = T[:, 0], T[:, 1], T[:, 2]
+        ab, bc, ca = 0.5 * (a + b), 0.5 * (b + c), 0.5 * (c + a)
+        T = np.concatenate([np.stack(q, 1) for q in ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))])
+    out.append(T)
+    return np.concatenate(out)
+
+
 def _centre(V: np.ndarray) -> np.ndarray:
     return 0.5 * (V.min(axis=0) + V.max(axis=0)) if len(V) else np.zeros(3)
 
@@ -88,10 +117,13 @@ class Exterior:
         of such nodes joined by grid edges that B does not cross (a triangle
         across an edge would have marked both its ends), so one winding number
         per region answers for all of it. On the collapsing wall's search band
-        0.04 s against 0.40 s for asking every node."""
+        0.04 s against 0.40 s for asking every node. A triangle larger than a
+        few cells is split first (:func:`_small_pieces`): the box of a large
+        slanted one holds mostly nodes far from it (a prism's six faces marked
+        every node of its grid)."""
         origin, spacing = np.asarray(origin, np.float64), np.asarray(spacing, np.float64)
         shape = tuple(int(n) for n in shape)
-        T = self.V[self.F]
+        T = _small_pieces(self.V[self.F], spacing)
         lo = np.floor((T.min(axis=1) - within - origin) / spacing).astype(np.int64)
         hi = np.floor((T.max(axis=1) + within - origin) / spacing).astype(np.int64) + 1  # the box's last node
         lo = np.clip(lo, 0, np.array(shape) - 1)
