@@ -326,6 +326,7 @@ def _winding_crossing(pieces, h: float, by_slit: np.ndarray | None = None, origi
     creases crossed the refined cracks' traces when Cell Fracture's margin left slits a fifth of a cell wide.
     """
     boxes = [(PV.min(axis=0) - 2 * h, PV.max(axis=0) + 2 * h) for PV, _ in pieces]
+    solids = [Exterior(PV, PF) for PV, PF in pieces]  # each piece's hierarchy built once for every bisection
 
     def crossing(U, W, la, lb):
         inner_u = la > 0  # bisect from the end inside a piece
@@ -343,11 +344,11 @@ def _winding_crossing(pieces, h: float, by_slit: np.ndarray | None = None, origi
             mid = 0.5 * (lo + hi)
             X = P0 + mid[:, None] * (P1 - P0)
             w_in, w_out, total = np.zeros(n), np.zeros(n), np.zeros(n)
-            for p, (PV, PF) in enumerate(pieces):
+            for p in range(len(pieces)):
                 near = np.flatnonzero(np.all((X >= boxes[p][0]) & (X <= boxes[p][1]), axis=1))
                 if not len(near):
                     continue
-                w = fast_winding(PV, PF, X[near])
+                w = solids[p].winding(X[near])
                 total[near] += w
                 w_in[near[owner[near] == p]] = w[owner[near] == p]
                 w_out[near[other[near] == p]] = w[other[near] == p]

@@ -94,10 +94,14 @@ class Exterior:
         """Unit outward normals of B at the points of B closest to ``P``, ``(k, 3)``."""
         return self.normals[self.closest(P)[1]]
 
+    def winding(self, P: np.ndarray) -> np.ndarray:
+        """Winding numbers at points ``(k, 3)``: :func:`fast_winding`'s, from the hierarchy built once."""
+        return self._wn.winding_number(np.ascontiguousarray(np.asarray(P, np.float64).reshape(-1, 3)
+                                                            - self._centre))
+
     def inside(self, P: np.ndarray) -> np.ndarray:
         """Whether points are inside (winding number above one half)."""
-        return self._wn.winding_number(np.ascontiguousarray(np.asarray(P, np.float64).reshape(-1, 3)
-                                                            - self._centre)) > 0.5
+        return self.winding(P) > 0.5
 
     def closest(self, P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Squared distances, triangle ids and closest points on B of points ``(k, 3)``."""
