@@ -183,6 +183,11 @@ def choices(model: type[BaseModel], name: str) -> tuple | None:
     return None
 
 
+def _bound(x) -> str:
+    """A range's end as written: an integer in full (a seed's 4294967295, not 4.29497e+09), a number short."""
+    return str(x) if isinstance(x, int) else f"{x:g}"
+
+
 def expected(model: type[BaseModel], name: str) -> str:
     """What a field accepts, in words: ``a number in [0, 1]``, ``one of 'x', 'y', 'z' (or null)``."""
     meta = field_meta(model, name)
@@ -192,11 +197,11 @@ def expected(model: type[BaseModel], name: str) -> str:
     lo, hi = meta.get("lo"), meta.get("hi")
     if not words:
         if lo is not None and hi is not None:
-            out += f" in [{lo:g}, {hi:g}]"
+            out += f" in [{_bound(lo)}, {_bound(hi)}]"
         elif lo is not None:
-            out += f" >= {lo:g}"
+            out += f" >= {_bound(lo)}"
         elif hi is not None:
-            out += f" <= {hi:g}"
+            out += f" <= {_bound(hi)}"
     if nullable(model, name):
         out += " (or null)"
     return out

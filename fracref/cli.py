@@ -304,6 +304,10 @@ def _render(args) -> int:
     view = replace(state.view, **{k: v for k, v in flags.items() if v is not None})
     whats = tuple(args.what or ())
     if args.frame is not None:
+        if args.frame < 1:
+            from fracture.errors import InputError
+
+            raise InputError(f"--frame counts frames from 1; got {args.frame}")
         view = replace(view, frame=args.frame - 1)
     elif {"compare", "turntable"} & set(whats) and args.camera is None and view.frame == 0:
         view = replace(view, frame=-1)  # the last: the pieces apart

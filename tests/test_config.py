@@ -85,6 +85,7 @@ def _error(tmp_path, text, overrides=()):
     ("pyramid: {levels: 12}\n", "pyramid.levels", "got 12 (int), expected an integer in [1, 8]"),
     ("pyramid: {levels: 4.5}\n", "pyramid.levels", "expected an integer"),
     ("psi: {stress_weight: -1}\n", "psi.stress_weight", "expected a number in [0, 100]"),
+    ("seed: -1\n", "seed", "expected an integer in [0, 4294967295]"),
     ("psi: {stress_weight: .nan}\n", "psi.stress_weight", "expected a number"),
     ("strength: {normalize: 1}\n", "strength.normalize", "expected true or false"),
     ("preview: {axis: w}\n", "preview.axis", "expected one of 'x', 'y', 'z'"),

@@ -539,6 +539,25 @@ def test_missing_directory_and_no_frames(tmp_path):
         read_sequence(tmp_path / "nope")
     with pytest.raises(InputError, match="no frame files match"):
         read_sequence(tmp_path)
+    (tmp_path / "frac.0001.ply").write_text("ply\n")  # a PLY sequence read with the default glob: said how
+    with pytest.raises(InputError, match=r"no frame files match '\*\.obj'; it holds \.ply files: set input\.glob: '\*\.ply'"):
+        read_sequence(tmp_path)
+
+
+def test_houdini_names_its_preroll_frames_below_zero_and_may_start_a_file_with_a_bom(tmp_path):
+    """frac.-3.obj ... frac.36.obj (a pre-roll from frame -3) in order; cube-0007.obj is frame 7 (a hyphen
+    between name and number); a UTF-8 byte order mark does not rename the first piece."""
+    from fracture.coarse.mesh_sequence import frame_number
+
+    assert [frame_number(Path(n)) for n in ("frac.-3.obj", "frac_-12.obj", "cube-0007.obj", "frame12.obj")] == [
+        -3, -12, 7, 12]
+    d = _renamed_sample(tmp_path, lambda t: f"frac.{t - 5}.obj")
+    for path in d.glob("*.obj"):
+        path.write_bytes(b"\xef\xbb\xbf" + path.read_bytes())
+    frames = read_sequence(d)
+    want = read_sequence(SAMPLE)
+    assert [f.path.name for f in frames] == [f"frac.{t - 5}.obj" for t in range(1, 41)]
+    assert frames[0].names == want[0].names and np.array_equal(frames[7].V, want[7].V)
 
 
 def _renamed_sample(tmp_path, name_of):

@@ -153,3 +153,19 @@ def test_sweep_grids_are_read_from_the_command_line_or_the_config_and_checked_fi
     (config.parent / "with_grid.yaml").write_text(text)
     rc = main(["sweep", str(config.parent / "with_grid.yaml"), "--out", str(tmp_path / "g"), "--quiet", "--no-sheet"])
     assert rc == 0 and statuses(tmp_path / "g") == {"seed=7,psi.stress_weight=0.5": "ok"}
+
+
+def test_values_that_would_share_a_point_folder_are_refused_before_anything_runs():
+    with pytest.raises(ConfigError, match=r"the points input\.path = /data/a/b, seed = 0 and input\.path = /data/a_b, "
+                                          r"seed = 0 would share the folder 'input\.path=__data_a_b_,seed=0'"):
+        points({"input.path": ["/data/a/b", "/data/a_b"], "seed": [0]})
+
+
+def test_a_failed_point_says_what_went_wrong_in_the_users_words(tmp_path):
+    from fracture.pipeline.sweep import run_point
+
+    (tmp_path / "c.yaml").write_text("input: {kind: meshes, exterior: nowhere.obj}\n")
+    status = run_point(str(tmp_path / "c.yaml"), [], str(tmp_path / "run"), None, None, False)
+    assert status["status"] == "failed" and status["error"].startswith(str(tmp_path / "c.yaml")), status
+    assert "Error:" not in status["error"]
+

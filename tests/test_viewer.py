@@ -98,6 +98,10 @@ def test_render_rejects_bad_requests_clearly(run_dir, tmp_path):
     assert r.returncode == 2 and "field must be one of psi, zeta, xi" in r.stderr
     r = _cli(["render", str(tmp_path / "nothing"), "--what", "slices"])
     assert r.returncode == 2 and "no such run directory" in r.stderr
+    r = _cli(["render", str(run_dir), "--what", "compare", "--frame", "0", "--out", str(tmp_path)])
+    assert r.returncode == 2 and "--frame counts frames from 1; got 0" in r.stderr, r.stderr
+    r = _cli(["render", str(run_dir), "--what", "slices", "--frame", "999", "--out", str(tmp_path)])
+    assert r.returncode == 2 and "frame must be in 1..6, got 999" in r.stderr, r.stderr
     assert not list(tmp_path.glob("*.png"))
 
 

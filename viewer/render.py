@@ -321,7 +321,7 @@ def render(run_dir: str | Path, what: str | tuple[str, ...] | None = None, out: 
                          f"(the run stopped before the animate stage)")
     if "iterations" in whats and not run.has_iterations:
         raise InputError(f"{run.dir}: no iterations to render (run the refine stage with refine.snapshots: true)")
-    if {"compare", "turntable"} & set(whats) and not 0 <= view.frame < run.n_frames:
+    if ({"compare", "turntable"} & set(whats) or run.has_animation) and not 0 <= view.frame < run.n_frames:
         raise InputError(f"frame must be in 1..{run.n_frames}, got {view.frame + 1}")
     out = Path(out) if out is not None else run.dir / "renders"
     cameras = cameras or {}

@@ -219,9 +219,18 @@ def read_frame(path: str | Path, rest: MeshFrame | None = None) -> MeshFrame:
     return frame
 
 
+# A frame number: a run of digits, negative after a dot or an underscore (Houdini's pre-roll: frac.-3.obj)
+_NUMBER = re.compile(r"(?:(?<=[._])-)?\d+")
+
+
 def frame_number(path: Path) -> int:
-    """The frame number in a frame file's name: its last run of digits (``frame_0012.obj``, ``frame12.obj``)."""
-    return int(re.findall(r"\d+", path.stem)[-1])
+    """The frame number in a frame file's name: its last run of digits (``frame_0012.obj``, ``frame12.obj``),
+    negative after a dot or an underscore (``frac.-3.obj``; ``cube-0003.obj`` is frame 3)."""
+    return int(_NUMBER.findall(path.stem)[-1])
+
+
+# The suffixes of frame files a sequence may hold (said when the glob finds none).
+_MESH_SUFFIXES = (".obj", ".ply")
 
 
 def frame_paths(directory: Path, pattern: str) -> list[Path]:
@@ -234,7 +243,9 @@ def frame_paths(directory: Path, pattern: str) -> list[Path]:
     """
     paths = [p for p in directory.glob(pattern) if p.is_file()]
     if not paths:
-        raise InputError(f"{directory}: no frame files match {pattern!r}")
+        others = sorted({p.suffix.lower() for p in directory.iterdir() if p.is_file()} & set(_MESH_SUFFIXES))
+        hint = "".join(f"; it holds {s} files: set input.glob: '*{s}'" for s in others[:1])
+        raise InputError(f"{directory}: no frame files match {pattern!r}{hint}")
     numbered = []
     for p in paths:
         digits = re.findall(r"\d+", p.stem)

@@ -170,7 +170,7 @@ def read_obj_objects(path: Path, what: str | None = None) -> tuple[list[str], np
     verts: list[list[float]] = []
     names: list[str] = []
     polys: list[list[np.ndarray]] = []
-    with open(path, encoding="utf-8", errors="replace") as f:
+    with open(path, encoding="utf-8-sig", errors="replace") as f:
         for lineno, line in enumerate(f, 1):
             parts = line.split()
             if not parts:

@@ -30,6 +30,7 @@ import io
 import itertools
 import json
 import re
+import signal
 import tarfile
 import tempfile
 import time
@@ -112,7 +113,15 @@ def points(grid: dict[str, list]) -> list[Point]:
             if text in seen:
                 raise ConfigError(GRID_SOURCE, k, f"the value {text} is given twice; expected distinct values")
             seen.add(text)
-    return [Point(tuple(zip(keys, combo))) for combo in itertools.product(*(grid[k] for k in keys))]
+    out = [Point(tuple(zip(keys, combo))) for combo in itertools.product(*(grid[k] for k in keys))]
+    named: dict[str, Point] = {}
+    for point in out:  # two values whose folder names are one (characters a path cannot hold become _)
+        if point.name in named:
+            raise ConfigError(GRID_SOURCE, ",".join(keys), f"the points {named[point.name].label} and {point.label} "
+                              f"would share the folder {point.name!r}; expected values that differ in letters, "
+                              "digits or . = , - [ ] :")
+        named[point.name] = point
+    return out
 
 
 def check_points(config: Path, base: list[str], pts: list[Point]) -> dict[str, str]:
@@ -160,8 +169,19 @@ def run_point(config: str, overrides: list[str], out: str, until: str | None, ca
                    cache=StageCache(cache_dir) if use_cache else None)
         return {"status": "ok", "seconds": round(time.perf_counter() - start, 3)}
     except Exception as exc:  # noqa: BLE001 - a failed point is reported, the others go on
-        return {"status": "failed", "error": f"{type(exc).__name__}: {exc}",
-                "seconds": round(time.perf_counter() - start, 3)}
+        return {"status": "failed", "error": _said(exc), "seconds": round(time.perf_counter() - start, 3)}
+
+
+def _said(exc: BaseException) -> str:
+    """A failed point's error in the user's words: the project's own errors as they are, anything else with
+    its kind (it is not one the project foresaw)."""
+    from fracture.errors import ResultError, StageError
+    from fracture.io.atomic import OutputError, RunDirectoryExists
+    from fields.errors import InputError
+
+    if isinstance(exc, (ConfigError, InputError, StageError, ResultError, OutputError, RunDirectoryExists)):
+        return str(exc)
+    return f"{type(exc).__name__}: {exc}"
 
 
 def run_point_archived(config: str, overrides: list[str], until: str | None, cache_dir: str | None,
@@ -197,15 +217,31 @@ def _local(tasks: list[tuple[Point, tuple]], jobs: int) -> Iterator[tuple[Point,
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
-    from fracture.process import cores, prepare_process
+    from fracture.process import cores
 
     # fresh interpreters (spawn: nothing of this process's threads), each set up as the command line is,
     # its kernels on its share of the cores
-    setup = functools.partial(prepare_process, threads=max(1, cores() // jobs))
-    with ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context("spawn"), initializer=setup) as pool:
+    setup = functools.partial(_worker_setup, threads=max(1, cores() // jobs))
+    pool = ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context("spawn"), initializer=setup)
+    try:
         futures = {pool.submit(run_point, *args): p for p, args in tasks}
         for f in as_completed(futures):
             yield futures[f], f.result()
+    except BaseException:  # Ctrl-C, a signal, the caller gone: the points still running are stopped, not awaited
+        for proc in list((getattr(pool, "_processes", None) or {}).values()):
+            proc.terminate()
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    pool.shutdown()
+
+
+def _worker_setup(threads: int) -> None:
+    """A sweep worker: set up as the command line is; Ctrl-C is the sweep's to answer (it stops its workers),
+    not each worker's (each printed a traceback of wherever it was)."""
+    from fracture.process import prepare_process
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    prepare_process(threads=threads)
 
 
 def _ray_start(jobs: int, address: str | None) -> bool:
@@ -245,7 +281,7 @@ def _ray(tasks: list[tuple[Point, tuple]], started: bool, root: Path) -> Iterato
             try:
                 status, archive = ray.get(done[0])
             except Exception as exc:  # noqa: BLE001 - a lost worker fails its point only
-                status, archive = {"status": "failed", "error": f"{type(exc).__name__}: {exc}"}, b""
+                status, archive = {"status": "failed", "error": _said(exc)}, b""
             if status["status"] == "ok":
                 unpack_run(archive, root / p.name, replace[p.name])
             yield p, status
