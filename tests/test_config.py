@@ -95,6 +95,7 @@ def _error(tmp_path, text, overrides=()):
     ("strength: {layers: [{kind: bricks, brick_size: 1}]}\n", "strength.layers[0].brick_size", "unknown key"),
     ("strength: {layers: [{kind: radial, axis: w}]}\n", "strength.layers[0].axis", "one of 'x', 'y', 'z'"),
     ("input: {exterior: nowhere.obj}\n", "input.exterior", "file not found: 'nowhere.obj'"),
+    ("input: {exterior: .}\n", "input.exterior", "a directory, expected a file: '.'"),
     ("input: 3\n", "input", "expected a mapping"),
     ("name: ../../elsewhere\n", "name", "is not a plain name"),
     ("name: /tmp/elsewhere\n", "name", "is not a plain name"),

@@ -261,9 +261,11 @@ def _finish(merged: _Merged, name: str, in_files: bool = True) -> Config:
         from_cwd = not in_files or source.startswith(SET_SOURCE) or source == "defaults"
         target = ((Path.cwd() if from_cwd else Path(source).parent) / value).resolve()
         if kind == "dir" and not target.is_dir():
-            raise ConfigError(source, key, f"directory not found: {value!r} (resolved to {target})")
+            what = "a file, expected a directory" if target.is_file() else "directory not found"
+            raise ConfigError(source, key, f"{what}: {value!r} (resolved to {target})")
         if kind == "path" and not target.is_file():
-            raise ConfigError(source, key, f"file not found: {value!r} (resolved to {target})")
+            what = "a directory, expected a file" if target.is_dir() else "file not found"
+            raise ConfigError(source, key, f"{what}: {value!r} (resolved to {target})")
         return str(target)
 
     cfg = resolve_paths(validate(merged.tree, merged.origin), resolve)
