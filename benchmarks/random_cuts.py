@@ -42,7 +42,7 @@ def main(argv=None) -> None:
     import cutgen
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--cases", type=int, default=len(cutgen.EXTERIORS) * len(cutgen.CUTS))
+    ap.add_argument("--cases", type=int, default=cutgen.SYSTEMATIC)
     ap.add_argument("--jobs", type=int, default=2)
     args = ap.parse_args(argv)
     with mp.get_context("spawn").Pool(args.jobs, initializer=_init) as pool:

@@ -126,12 +126,26 @@ def cut(kind: str, center, rng: np.random.Generator) -> tuple[np.ndarray, np.nda
     return _merge(halves, L)
 
 
+# Cases 0 to SYSTEMATIC - 1 are every combination of object and cut kind; later ones draw the cut kind.
+SYSTEMATIC = len(EXTERIORS) * len(CUTS)
+
+
+def seed_of(ext_kind: int, cut_kind: int) -> int:
+    """The case of object kind ``ext_kind`` cut by cut kind ``cut_kind`` (indices into EXTERIORS and CUTS)."""
+    return cut_kind * len(EXTERIORS) + ext_kind
+
+
+def covering_seeds() -> list[int]:
+    """Each cut kind through two objects half the objects apart: every object cut at least three ways."""
+    n = len(EXTERIORS)
+    return sorted(seed_of(e, c) for c in range(len(CUTS)) for e in {c % n, (c + n // 2) % n})
+
+
 def case(seed: int) -> tuple[str, str, tuple, tuple]:
-    """The object kind, cut kind, object mesh and cut mesh of random case ``seed``."""
+    """The object kind, cut kind, object mesh and cut mesh of random case ``seed`` (:func:`seed_of`)."""
     rng = np.random.default_rng(seed)
     ext_kind = EXTERIORS[seed % len(EXTERIORS)]
-    cut_kind = CUTS[(seed // len(EXTERIORS)) % len(CUTS)] if seed < len(EXTERIORS) * len(CUTS) else \
-        CUTS[int(rng.integers(len(CUTS)))]
+    cut_kind = CUTS[seed // len(EXTERIORS)] if seed < SYSTEMATIC else CUTS[int(rng.integers(len(CUTS)))]
     BV, BF = exterior(ext_kind, rng)
     center = 0.5 * (BV.min(axis=0) + BV.max(axis=0))
     if ext_kind == "torus":  # through the ring, not its hole
