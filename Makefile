@@ -25,7 +25,7 @@ demo: install
 # Test files run on every core (one worker per file: a file's fixtures are made once, and the
 # viewer's windows under Xvfb open one at a time).
 test: install
-	$(BIN)/python -m pytest -n auto --dist loadfile
+	$(BIN)/python -m pytest -n auto --dist loadfile --no-loadscope-reorder
 
 bench: install
 	$(BIN)/python benchmarks/bench_fields.py

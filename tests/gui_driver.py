@@ -225,7 +225,7 @@ def main() -> None:
     app = gui.Application.instance
     app.initialize()
     sweep = read_sweep(run_dir) if (run_dir / "sweep.json").is_file() else None
-    size = (1800, 900) if scenario == "views" else (1500, 800)  # views: the default size
+    size = (1800, 900) if scenario == "views" else (1000, 600)  # views: the default size; else small: quick to draw
     v = Viewer(RunData(sweep[0].dir) if sweep else RunData(run_dir), *size, sweep=sweep)
     for _ in range(10):
         app.run_one_tick()
