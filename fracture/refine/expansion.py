@@ -50,11 +50,28 @@ class PottsGraph:
     @cached_property
     def _by_node(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The edges by their first node, then by their second: the order and the two row pointers."""
-        by_p = np.argsort(self.p, kind="stable")
-        by_q = np.argsort(self.q, kind="stable")
-        ptr_p = np.searchsorted(self.p[by_p], np.arange(self.n + 1))
-        ptr_q = np.searchsorted(self.q[by_q], np.arange(self.n + 1))
+        by_p, ptr_p = _grouped(np.asarray(self.p, np.int64), self.n)
+        by_q, ptr_q = _grouped(np.asarray(self.q, np.int64), self.n)
         return np.stack([by_p, by_q]), ptr_p, ptr_q
+
+
+@numba.njit(cache=True)
+def _grouped(keys, n):
+    """The positions of ``keys`` (each in ``0..n-1``) grouped by key, in their order within a group (a
+    stable counting sort), and the row pointers of the groups: what a stable argsort and a search of
+    the sorted keys give, in linear time (on the collapsing wall's graphs 0.08 s of the search's cut
+    went to those two argsorts)."""
+    ptr = np.zeros(n + 1, np.int64)
+    for k in keys:
+        ptr[k + 1] += 1
+    for i in range(n):
+        ptr[i + 1] += ptr[i]
+    at = ptr[:-1].copy()
+    order = np.empty(len(keys), np.int64)
+    for e in range(len(keys)):
+        order[at[keys[e]]] = e
+        at[keys[e]] += 1
+    return order, ptr
 
 
 @dataclass
