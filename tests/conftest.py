@@ -53,6 +53,12 @@ def pytest_configure(config):
 
     import numba
 
+    import cutgen
+
+    try:  # a wrong FRACREF_RANDOM_CUTS stops the session in one line, not at the test file's collection
+        cutgen.seeds_asked(os.environ.get("FRACREF_RANDOM_CUTS", "0"))
+    except ValueError as e:
+        raise pytest.UsageError(str(e)) from None
     os.environ["NUMBA_THREADING_LAYER"] = "workqueue"
     numba.config.THREADING_LAYER = "workqueue"
     if not hasattr(config, "workerinput"):

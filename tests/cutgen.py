@@ -141,6 +141,18 @@ def covering_seeds() -> list[int]:
     return sorted(seed_of(e, c) for c in range(len(CUTS)) for e in {c % n, (c + n // 2) % n})
 
 
+def seeds_asked(asked: str) -> list[int]:
+    """The cases a test run asks for: "all" every combination, a number N the covering cases and N random
+    ones (FRACREF_RANDOM_CUTS, tests/test_random_cuts.py); ValueError for anything else."""
+    asked = asked.strip()
+    if asked == "all":
+        return list(range(SYSTEMATIC))
+    if not asked.isdigit():
+        raise ValueError(f"FRACREF_RANDOM_CUTS={asked!r}: expected 'all' or a number of random cases to add "
+                         "(0, 1, 2, ...)")
+    return covering_seeds() + list(range(SYSTEMATIC, SYSTEMATIC + int(asked)))
+
+
 def case(seed: int) -> tuple[str, str, tuple, tuple]:
     """The object kind, cut kind, object mesh and cut mesh of random case ``seed`` (:func:`seed_of`)."""
     rng = np.random.default_rng(seed)

@@ -20,9 +20,8 @@ import pytest
 import cutgen
 from fracture.mesh.topology import signed_volume
 
-_ASKED = os.environ.get("FRACREF_RANDOM_CUTS", "0")
-SEEDS = list(range(cutgen.SYSTEMATIC)) if _ASKED == "all" else \
-    cutgen.covering_seeds() + list(range(cutgen.SYSTEMATIC, cutgen.SYSTEMATIC + int(_ASKED)))
+
+SEEDS = cutgen.seeds_asked(os.environ.get("FRACREF_RANDOM_CUTS", "0"))  # checked in conftest
 # words of the implementation that a refusal must not use
 INTERNAL = re.compile(r"\bon B\b|\bcomponent\b|Traceback|\bS\b")
 
