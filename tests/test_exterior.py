@@ -84,3 +84,18 @@ def test_winding_numbers_far_from_the_origin_tell_inside_from_outside(offset):
     clear = np.all(np.abs(P - 0.5) < 0.499, axis=1) | np.any(np.abs(P - 0.5) > 0.501, axis=1)
     assert np.array_equal((fast_winding(V + away, F, P + away) > 0.5)[clear], inside[clear])
     assert np.array_equal(Exterior(V + away, F).inside(P + away)[clear], inside[clear])
+
+
+def test_no_triangles_wind_about_no_point_and_an_empty_piece_is_checked_without_crashing():
+    """A piece left without faces (random cut case 99 once) is measured, not a crash: libigl's fast winding
+    number read memory it never wrote for no triangles (garbage, or a crash), its manifold test failed."""
+    from fracture.mesh.exterior import fast_winding
+    from fracture.pieces.assembly import mesh_checks
+
+    V, P = np.random.default_rng(1).random((10, 3)), np.random.default_rng(2).random((3000, 3))
+    none = np.zeros((0, 3), np.int64)
+    for _ in range(5):
+        assert np.array_equal(fast_winding(V, none, P), np.zeros(3000))
+        assert np.array_equal(fast_winding(np.zeros((0, 3)), none, P), np.zeros(3000))
+    checks = mesh_checks(V, none)
+    assert checks["volume"] == 0.0 and checks["triangles"] == 0 and checks["self_intersections"] == 0

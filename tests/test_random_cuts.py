@@ -7,7 +7,8 @@ clear line; nothing crashes. At least 90 % of these cuts, all valid, must succee
 ``make test`` runs each of the eleven cut kinds (among them a sheet with a slight kink, an incomplete
 cut and a Y junction with a dangling wing) through two of the six objects (an incomplete cut through the staircase among them), so that every object is cut
 at least three ways (22 cases); ``FRACREF_RANDOM_CUTS=all`` runs every combination (66), and
-``FRACREF_RANDOM_CUTS=N`` adds N random cases to them. ``python benchmarks/random_cuts.py`` prints the table of
+``FRACREF_RANDOM_CUTS=N`` adds N random cases to them (random cases that once failed run every time:
+``cutgen.REGRESSIONS``). ``python benchmarks/random_cuts.py`` prints the table of
 outcomes that docs/import.md shows.
 """
 

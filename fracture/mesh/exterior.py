@@ -19,7 +19,10 @@ from fracture.mesh.topology import face_frames
 def fast_winding(V: np.ndarray, F: np.ndarray, P: np.ndarray) -> np.ndarray:
     """libigl's fast winding numbers at points ``P`` of the triangles ``(V, F)``, taken about the centre of
     ``V``'s box: its hierarchy holds single-precision coordinates, and about the origin an object far from
-    it is off by up to a half (a cube at (1e5, -5e4, 0) took 12 of 2,000 points inside for outside)."""
+    it is off by up to a half (a cube at (1e5, -5e4, 0) took 12 of 2,000 points inside for outside).
+    No triangles wind about no point (libigl reads memory it never wrote then, and may crash)."""
+    if not len(F):
+        return np.zeros(len(np.asarray(P).reshape(-1, 3)))
     V = np.asarray(V, np.float64)
     centre = _centre(V)
     return igl.fast_winding_number(np.ascontiguousarray(V - centre), np.ascontiguousarray(F, np.int64),

@@ -247,7 +247,7 @@ def _resolve_all(pieces: Pieces) -> tuple[Pieces, list[int]]:
     failed = []
     for c, (ids, V, F) in enumerate(pieces.parts):
         pairs = crossing_pairs(V, F)
-        pinched = not np.asarray(igl.is_vertex_manifold(np.ascontiguousarray(F, np.int64))).all()
+        pinched = not manifold_vertices(F).all()
         if not (pairs or pinched):
             continue
         out = resolve_crossings(V, F, pieces.exterior[c], boolean=bool(pairs))
@@ -405,7 +405,7 @@ def split_pinches(V: np.ndarray, F: np.ndarray, nudge: float = 1e-3) -> tuple[np
     (pymeshlab's ``meshing_repair_non_manifold_vertices`` does the same, on
     its own copy of the mesh and without saying which vertex became which.)
     """
-    bad = np.flatnonzero(~np.asarray(igl.is_vertex_manifold(np.ascontiguousarray(F, np.int64))).ravel())
+    bad = np.flatnonzero(~manifold_vertices(F))
     if not len(bad):
         return V, F
     V, F = list(V), F.copy()
@@ -453,13 +453,21 @@ def crossing_pairs(V: np.ndarray, F: np.ndarray) -> int:
     return int(len(out[2]))
 
 
+def manifold_vertices(F: np.ndarray) -> np.ndarray:
+    """Per vertex of the faces ``F``, whether the faces around it form one fan (libigl); none for no faces
+    (libigl's test fails on them: an empty piece is refused for its volume)."""
+    if not len(F):
+        return np.zeros(0, bool)
+    return np.asarray(igl.is_vertex_manifold(np.ascontiguousarray(F, np.int64)), bool).ravel()
+
+
 def mesh_checks(V: np.ndarray, F: np.ndarray, intersections: bool = True) -> dict:
     """Closedness, manifoldness, orientation, volume and self-intersections of one mesh.
 
     ``closed_oriented``: every directed edge appears once and its reverse
     once (closed, edge-manifold and consistently oriented together).
     """
-    vertex_manifold = bool(np.asarray(igl.is_vertex_manifold(np.ascontiguousarray(F, np.int64))).all())
+    vertex_manifold = bool(manifold_vertices(F).all())
     out = {"closed_oriented": closed_oriented(F), "vertex_manifold": vertex_manifold,
            "volume": signed_volume(V, F), "triangles": int(len(F)), "vertices": int(len(V))}
     if intersections:
