@@ -153,3 +153,25 @@ def test_meshes_input_extends_an_incomplete_cut(tmp_path):
     left = cf.exterior_component[np.argmin(cf.exterior_V[cf.exterior_F].mean(axis=1)[:, 0])]
     right = cf.exterior_component[np.argmax(cf.exterior_V[cf.exterior_F].mean(axis=1)[:, 0])]
     assert left != right
+
+
+def test_a_region_no_crack_bounds_joins_the_piece_beside_it_on_b():
+    """Labels as the labelling grid once gave them (random cut case 99): a cut between pieces 0 and 2 only,
+    and a region 1 of B that no crack bounds beside piece 0. It joins 0 (most shared edges); a region on a
+    shell of its own (a second box) has no piece beside it and stays."""
+    from fracture.coarse.components import join_uncut
+    from fracture.mesh.primitives import box
+
+    V, F = box(np.zeros(3), np.ones(3), (4, 4, 4))
+    centres = V[F].mean(axis=1)
+    ext = np.where(centres[:, 0] > 0.75, 2, np.where(centres[:, 1] > 0.75, 1, 0))
+    sides = np.array([[0, 2]] * 5)
+    out_sides, out_ext, n, joined = join_uncut(F, sides, ext, 3)
+    assert (n, joined) == (2, 1)
+    assert (out_sides == [0, 1]).all()
+    assert np.array_equal(out_ext, np.where(ext == 2, 1, 0))
+    # a second shell, all region 3: nothing beside it on B
+    V2, F2 = box(np.full(3, 2.0), np.full(3, 3.0))
+    both = np.concatenate([F, F2 + len(V)])
+    out_sides, out_ext, n, joined = join_uncut(both, sides, np.r_[ext, np.full(len(F2), 3)], 4)
+    assert (n, joined) == (3, 1) and (out_ext[len(F):] == 2).all() and (out_sides == [0, 1]).all()

@@ -353,3 +353,42 @@ def join_slivers(BV: np.ndarray, BF: np.ndarray, V: np.ndarray, F: np.ndarray, s
     renumber = np.full(n, -1, np.int64)
     renumber[used] = np.arange(len(used))
     return F[kept], renumber[sides[kept]], renumber[exterior_component], len(used), kept, joined
+
+
+def join_uncut(BF: np.ndarray, sides: np.ndarray, exterior_component: np.ndarray, n: int):
+    """Join pieces that no fracture triangle bounds to the piece beside them on B.
+
+    Where the cut's rim comes within a voxel of the object's surface, the
+    band around the cut that the labelling grid leaves out can seal off a
+    region that no crack separates from the rest (random cut case 99: most
+    of an L-shape's arm, beside the cut). On B it meets its neighbours with
+    no crack between: it joins the one it shares most of B's edges with. A
+    piece alone on a shell of B (an object of several parts) has no such
+    neighbour and stays.
+
+    Returns ``sides, exterior_component, n`` renumbered and the number of pieces joined.
+    """
+    bounded = np.zeros(n, bool)
+    bounded[sides.ravel()] = True
+    if bounded.all():
+        return sides, exterior_component, n, 0
+    TT = np.asarray(igl.triangle_triangle_adjacency(np.ascontiguousarray(BF, np.int64))[0])
+    ext = exterior_component.copy()
+    joined = 0
+    for _ in range(n):  # a region beside uncut ones only joins once one of them has
+        moved = 0
+        for c in np.flatnonzero(~bounded):
+            mine = ext == c
+            across = TT[mine][TT[mine] >= 0]
+            beside = ext[across][bounded[ext[across]]]
+            if len(beside):
+                ext[mine] = int(np.argmax(np.bincount(beside, minlength=n)))
+                moved += 1
+        joined += moved
+        if not moved:
+            break
+    used = np.unique(np.r_[ext, sides.ravel()])
+    renumber = np.full(n, -1, np.int64)
+    renumber[used] = np.arange(len(used))
+    return renumber[sides], renumber[ext], len(used), joined
+

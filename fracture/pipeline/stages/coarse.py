@@ -22,7 +22,7 @@ def coarse_from_meshes(inp: InputSection | Mapping) -> CoarseFracture:
     Incomplete cuts are extended (virtual fracture) and the components found
     by flood fill; the animation is the rest pose alone.
     """
-    from fracture.coarse.components import join_slivers, label_components
+    from fracture.coarse.components import join_slivers, join_uncut, label_components
     from fracture.errors import InputError
     from fracture.mesh.topology import orient_sheets
     from fracture.coarse.animation import exterior_points, lattice_animation
@@ -71,6 +71,11 @@ def coarse_from_meshes(inp: InputSection | Mapping) -> CoarseFracture:
         notes.append(f"input.fracture: {joined} sliver piece{'s' if joined > 1 else ''} between the cut and the "
                      "object's surface, too thin for the labelling grid, joined to the neighbour across the cut "
                      f"({int((~kept).sum())} triangles dropped)")
+    sides, ext, n, uncut = join_uncut(BF, sides, ext, n)
+    if uncut:
+        notes.append(f"input.fracture: {uncut} region{'s' if uncut > 1 else ''} of the object that no crack "
+                     "separates from the rest (the labelling grid had cut it off) joined to the piece beside "
+                     f"{'them' if uncut > 1 else 'it'}")
     enclosed = [c for c in range(n) if not (ext == c).any()]
     if enclosed:
         faces = np.flatnonzero((sides == enclosed[0]).any(axis=1) & ~virtual)
