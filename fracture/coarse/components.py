@@ -360,8 +360,8 @@ def join_uncut(BF: np.ndarray, sides: np.ndarray, exterior_component: np.ndarray
 
     Where the cut's rim comes within a voxel of the object's surface, the
     band around the cut that the labelling grid leaves out can seal off a
-    region that no crack separates from the rest (random cut case 99: most
-    of an L-shape's arm, beside the cut). On B it meets its neighbours with
+    region that no crack separates from the rest (random cut case 99: a
+    ninth of an L-shape's surface, beside the cut). On B it meets its neighbours with
     no crack between: it joins the one it shares most of B's edges with. A
     piece alone on a shell of B (an object of several parts) has no such
     neighbour and stays.
@@ -391,4 +391,3 @@ def join_uncut(BF: np.ndarray, sides: np.ndarray, exterior_component: np.ndarray
     renumber = np.full(n, -1, np.int64)
     renumber[used] = np.arange(len(used))
     return renumber[sides], renumber[ext], len(used), joined
-
