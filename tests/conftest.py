@@ -42,6 +42,17 @@ def pytest_collection_modifyitems(items):
     items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
 
 
+def random_cuts_asked() -> str:
+    """``FRACREF_RANDOM_CUTS``: "all" or a number of random cases to add (tests/test_random_cuts.py)."""
+    import os
+
+    asked = os.environ.get("FRACREF_RANDOM_CUTS", "0").strip()
+    if asked != "all" and not asked.isdigit():
+        raise pytest.UsageError(f"FRACREF_RANDOM_CUTS={asked!r}: expected 'all' or a number of random cases to "
+                                "add (0, 1, 2, ...)")
+    return asked
+
+
 def pytest_configure(config):
     """Stale compiled kernels are cleared once, by the main process (not by each xdist worker); the tests
     run the parallel kernels on numba's work queue, whose threads sleep between kernels (the command
@@ -53,12 +64,7 @@ def pytest_configure(config):
 
     import numba
 
-    import cutgen
-
-    try:  # a wrong FRACREF_RANDOM_CUTS stops the session in one line, not at the test file's collection
-        cutgen.seeds_asked(os.environ.get("FRACREF_RANDOM_CUTS", "0"))
-    except ValueError as e:
-        raise pytest.UsageError(str(e)) from None
+    random_cuts_asked()  # a wrong value stops the session in one line, not at the test file's collection
     os.environ["NUMBA_THREADING_LAYER"] = "workqueue"
     numba.config.THREADING_LAYER = "workqueue"
     if not hasattr(config, "workerinput"):

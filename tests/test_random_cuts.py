@@ -5,24 +5,23 @@ manifold, uncrossed, volumes by winding number) and hold the object's volume, or
 clear line; nothing crashes. At least 90 % of these cuts, all valid, must succeed.
 
 ``make test`` runs each of the eleven cut kinds (among them a sheet with a slight kink, an incomplete
-cut and a Y junction with a dangling wing) through two of the six objects (an incomplete cut through the staircase among them), so that every object is cut
-at least three ways (22 cases); ``FRACREF_RANDOM_CUTS=all`` runs every combination (66), and
-``FRACREF_RANDOM_CUTS=N`` adds N random cases to them (random cases that once failed run every time:
-``cutgen.REGRESSIONS``). ``python benchmarks/random_cuts.py`` prints the table of
-outcomes that docs/import.md shows.
+cut and a Y junction with a dangling wing) through two of the six objects (an incomplete cut through the
+staircase among them), so that every object is cut at least three ways (22 cases);
+``FRACREF_RANDOM_CUTS=all`` runs every combination (66), and ``FRACREF_RANDOM_CUTS=N`` adds N random
+cases to them (random cases that once failed run every time: ``cutgen.REGRESSIONS``).
+``python benchmarks/random_cuts.py`` prints the table of outcomes that docs/import.md shows.
 """
 
 import json
-import os
 import re
 
 import pytest
 
 import cutgen
+from conftest import random_cuts_asked
 from fracture.mesh.topology import signed_volume
 
-
-SEEDS = cutgen.seeds_asked(os.environ.get("FRACREF_RANDOM_CUTS", "0"))  # checked in conftest
+SEEDS = cutgen.seeds_asked(random_cuts_asked())
 # words of the implementation that a refusal must not use
 INTERNAL = re.compile(r"\bon B\b|\bcomponent\b|Traceback|\bS\b")
 

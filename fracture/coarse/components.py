@@ -349,10 +349,16 @@ def join_slivers(BV: np.ndarray, BF: np.ndarray, V: np.ndarray, F: np.ndarray, s
         sides[sides == c] = k
         joined += 1
     kept = sides[:, 0] != sides[:, 1]
-    used = np.unique(np.r_[exterior_component, sides[kept].ravel()])
+    sides, exterior_component, n = _renumbered(sides[kept], exterior_component, n)
+    return F[kept], sides, exterior_component, n, kept, joined
+
+
+def _renumbered(sides: np.ndarray, exterior_component: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """The pieces that some triangle still names, numbered from 0 in their order; and how many."""
+    used = np.unique(np.r_[exterior_component, sides.ravel()])
     renumber = np.full(n, -1, np.int64)
     renumber[used] = np.arange(len(used))
-    return F[kept], renumber[sides[kept]], renumber[exterior_component], len(used), kept, joined
+    return renumber[sides], renumber[exterior_component], len(used)
 
 
 def join_uncut(BF: np.ndarray, sides: np.ndarray, exterior_component: np.ndarray, n: int):
@@ -387,7 +393,4 @@ def join_uncut(BF: np.ndarray, sides: np.ndarray, exterior_component: np.ndarray
         joined += moved
         if not moved:
             break
-    used = np.unique(np.r_[ext, sides.ravel()])
-    renumber = np.full(n, -1, np.int64)
-    renumber[used] = np.arange(len(used))
-    return renumber[sides], renumber[ext], len(used), joined
+    return (*_renumbered(sides, ext, n), joined)

@@ -486,12 +486,10 @@ def _graph(sub: _BoxGrid, near, moving, shifted, node_weights, stride: int = 1) 
     two halves' costs: the thin weak layer a coarse edge jumps over is still seen."""
     index = np.full(sub.size, -1, np.int64)
     index[near] = np.arange(len(near))
-    spacing = np.asarray(sub.spacing, np.float64) * stride
-    per_node = node_weights is not None
-    weights = np.zeros((0, len(OFFSETS))) if per_node else area_weights(spacing)[None, :]
+    weights = area_weights(np.asarray(sub.spacing, np.float64) * stride)[None, :] if node_weights is None else \
+        np.ascontiguousarray(node_weights, np.float64)
     p, q, w = _lattice_edges(index.reshape(sub.shape), np.asarray(moving, np.bool_), shifted[near],
-                             shifted.reshape(sub.shape), OFFSETS, int(stride),
-                             np.ascontiguousarray(node_weights, np.float64) if per_node else weights, per_node,
+                             shifted.reshape(sub.shape), OFFSETS, int(stride), weights, node_weights is not None,
                              _NODE_GAP)
     return PottsGraph(len(near), p, q, w)
 
