@@ -42,8 +42,11 @@ when it has settled: an iteration moved the surface by less than
 10^-4 of it) and split at most half a percent of the triangles (the paper's
 test, "the surface change in one iteration is sufficiently small"), once the
 triangle budget is full when an iteration lowers the functional by less than
-1 % (full-size iterations are the dearest and gain the least), or after
-``stage_iterations``.
+1 % (full-size iterations are the dearest and gain the least), when no
+step lowers the functional even at the least ``tau`` (the surface is at a
+minimum of it: the next iterations would only split flat triangles and
+flip their edges; the branch's polish spent its last three iterations, 60 %
+of its time, so), or after ``stage_iterations``.
 
 One iteration:
 
@@ -213,6 +216,7 @@ class Refiner:
         # the boundary constraint on B: owns B's answers about the vertices, the boundary and what is off B
         self.onb = BoundaryOnB(mesh, self.state, self.B, self.h, params, collisions)
         self.full = False  # the triangle budget has stopped a wanted split
+        self.at_minimum = False  # the last iteration's step lowered the functional at no tau: the stage has settled
         self._ordered = 0  # vertex count when the mesh was last put in spatial order
 
     # -- schedule -------------------------------------------------------------------------
@@ -369,6 +373,7 @@ class Refiner:
         s.hold = np.maximum(s.hold - 1, 0)
         closed = closed_vertices(m.F, len(m.V), table)  # for the collision step and the flips
         X1, grid, after, retries, stopped = m.V, None, before, 0, np.zeros(len(m.V), bool)
+        self.at_minimum = False
         L = cotangent_weights(m.V, m.F, wf, table)
         for attempt in range(_ATTEMPTS):
             tau = self.step.tau
@@ -411,6 +416,7 @@ class Refiner:
             retries += 1
             grid = None  # the collision grid of a rejected trial does not fit the surface
             if self.step.at_least:
+                self.at_minimum = True
                 break  # no descent at the smallest step: the surface is at a minimum
             self.step.rejected()
         s.hold[stopped] = p.hold
@@ -516,7 +522,7 @@ class Refiner:
                 # plane: the cut's surface a seventh of a cell off it ended after 4 iterations, its
                 # functional 6 % above the flow's alone)
                 small = gain < little or (move < p.tolerance and not self.searched)
-                settled = small and (made <= _FEW_SPLITS * len(self.mesh.F) or self.full)
+                settled = (small and (made <= _FEW_SPLITS * len(self.mesh.F) or self.full)) or self.at_minimum
                 off_b = self.onb.error(self.onb.boundary)
                 if settled and off_b > self.onb.on_b:
                     off_b = self.onb.settle()
