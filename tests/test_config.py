@@ -170,6 +170,9 @@ def test_set_overrides(tmp_path, small_config):
                        ("typo.key=1", "--set typo.key=1: typo: unknown key"),
                        ("psi.typo.key=1", "--set psi.typo.key=1: psi.typo: unknown key"),
                        ("strength.layers[3].weight=1", "no such list item"),
+                       ("strength.layers.0.weight=1", "strength.layers is a list; name an item of it by its index in "
+                                                      "brackets, e.g. strength.layers[0]"),
+                       ("psi.stress_weight.x=1", "psi.stress_weight is a value (0.4), not a mapping: it has no key 'x'"),
                        ("a..b=1", "expected key.path=value")]:
         with pytest.raises(ConfigError) as err:
             load_config(small_config, [bad])

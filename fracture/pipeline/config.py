@@ -202,8 +202,14 @@ def _apply_override(merged: _Merged, text: str) -> None:
         if isinstance(tok, int):
             if not isinstance(node, list) or not -len(node) <= tok < len(node):
                 raise ConfigError(source, path, "no such list item")
+        elif isinstance(node, list):  # layers.2.ratio for layers[2].ratio
+            parent = path.rsplit(".", 1)[0]
+            example = f"{parent}[{tok}]" if tok.isdigit() else f"{parent}[0]"
+            raise ConfigError(source, path, f"{parent} is a list; name an item of it by its index in brackets, "
+                              f"e.g. {example}")
         elif not isinstance(node, dict):
-            raise ConfigError(source, path, "the parent key is not a mapping")
+            parent = path.rsplit(".", 1)[0]
+            raise ConfigError(source, path, f"{parent} is a value ({node!r}), not a mapping: it has no key {tok!r}")
         if last:
             node[tok] = value
             merged.origins[path] = source
