@@ -385,7 +385,8 @@ def join_uncut(BF: np.ndarray, sides: np.ndarray, exterior_component: np.ndarray
         moved = 0
         for c in np.flatnonzero(~bounded):
             mine = ext == c
-            across = TT[mine][TT[mine] >= 0]
+            across = TT[mine]
+            across = across[across >= 0]  # B's triangles beside the region's (-1: none, an open edge)
             beside = ext[across][bounded[ext[across]]]
             if len(beside):
                 ext[mine] = int(np.argmax(np.bincount(beside, minlength=n)))

@@ -25,13 +25,13 @@ the object, and libigl's decimation stops at a face count, not a length.
 
 from __future__ import annotations
 
-import igl
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
 from fracture.mesh.intersect import self_intersections
-from fracture.mesh.topology import closed_oriented, diagonal, face_frames, signed_volume, unique_edges
+from fracture.mesh.topology import (closed_oriented, diagonal, face_frames, manifold_vertices, signed_volume,
+                                    unique_edges)
 from fracture.tolerances import tol
 
 
@@ -93,7 +93,7 @@ def collapse_short_edges(V: np.ndarray, F: np.ndarray, length: float) -> tuple[n
     used, inverse = np.unique(G, return_inverse=True)
     W, G = W[used], inverse.reshape(-1, 3).astype(np.int64)
     volume = signed_volume(V, F)
-    if (not len(G) or not closed_oriented(G) or not np.all(igl.is_vertex_manifold(G))
+    if (not len(G) or not closed_oriented(G) or not manifold_vertices(G).all()
             or abs(signed_volume(W, G) - volume) > tol.closure * max(abs(volume), diagonal(V) ** 3)
             or self_intersections(W, G)):
         return V, F, 0

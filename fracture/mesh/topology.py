@@ -38,6 +38,14 @@ def closed_oriented(F: np.ndarray) -> bool:
     return bool((count == 1).all() and np.isin(rev, uniq, assume_unique=False).all())
 
 
+
+def manifold_vertices(F: np.ndarray) -> np.ndarray:
+    """Per vertex of the faces ``F``, whether the faces around it form one fan (libigl); none for no faces
+    (libigl's test fails on them: it raised MemoryError on an empty piece)."""
+    if not len(F):
+        return np.zeros(0, bool)
+    return np.asarray(igl.is_vertex_manifold(np.ascontiguousarray(F, np.int64)), bool).ravel()
+
 def barycentric_weights(P: np.ndarray, T: np.ndarray) -> np.ndarray:
     """Barycentric coordinates ``(k, 3)`` of points ``P`` on triangles ``T (k, 3, 3)`` (libigl), as weights:
     negative coordinates (rounding, a point just off its triangle) become 0 and each row sums to 1."""

@@ -37,7 +37,6 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from functools import cached_property
 
-import igl
 import igl.copyleft.cgal as igl_cgal
 import numpy as np
 import scipy.sparse as sp
@@ -47,8 +46,8 @@ from fracture.pieces.imprint import Imprint
 from fracture.mesh.intersect import self_intersections
 from fracture.mesh.exterior import fast_winding
 from fracture.mesh.fracture_surface import FractureSurface
-from fracture.mesh.topology import (barycentric_weights, closed_oriented, diagonal, directed_edge_face, signed_volume,
-                               weld)
+from fracture.mesh.topology import (barycentric_weights, closed_oriented, diagonal, directed_edge_face,
+                                    manifold_vertices, signed_volume, weld)
 
 # Jittered attempts after the plain one (seeds 1, 2, ...), each moving the positions by up to this much of B's
 # diagonal (see the module doc): the smallest first; a larger one clears slivers that a tiny one leaves where
@@ -451,14 +450,6 @@ def crossing_pairs(V: np.ndarray, F: np.ndarray) -> int:
     out = igl_cgal.remesh_self_intersections(np.ascontiguousarray(V, np.float64), np.ascontiguousarray(F, np.int64),
                                              detect_only=True, cutoff=np.iinfo(np.int32).max)
     return int(len(out[2]))
-
-
-def manifold_vertices(F: np.ndarray) -> np.ndarray:
-    """Per vertex of the faces ``F``, whether the faces around it form one fan (libigl); none for no faces
-    (libigl's test fails on them: an empty piece is refused for its volume)."""
-    if not len(F):
-        return np.zeros(0, bool)
-    return np.asarray(igl.is_vertex_manifold(np.ascontiguousarray(F, np.int64)), bool).ravel()
 
 
 def mesh_checks(V: np.ndarray, F: np.ndarray, intersections: bool = True) -> dict:

@@ -486,16 +486,17 @@ def _graph(sub: _BoxGrid, near, moving, shifted, node_weights, stride: int = 1) 
     two halves' costs: the thin weak layer a coarse edge jumps over is still seen."""
     index = np.full(sub.size, -1, np.int64)
     index[near] = np.arange(len(near))
-    weights = area_weights(np.asarray(sub.spacing, np.float64) * stride)[None, :] if node_weights is None else \
-        np.ascontiguousarray(node_weights, np.float64)
-    p, q, w = _lattice_edges(index.reshape(sub.shape), np.asarray(moving, np.bool_), shifted[near],
-                             shifted.reshape(sub.shape), OFFSETS, int(stride), weights, node_weights is not None,
-                             _NODE_GAP)
+    if node_weights is None:  # one area weight per offset, for every node
+        weights = area_weights(np.asarray(sub.spacing, np.float64) * stride)[None, :]
+    else:
+        weights = np.ascontiguousarray(node_weights, np.float64)
+    p, q, w = _lattice_edges(index.reshape(sub.shape), np.asarray(moving, np.bool_), shifted.reshape(sub.shape),
+                             OFFSETS, int(stride), weights, node_weights is not None, _NODE_GAP)
     return PottsGraph(len(near), p, q, w)
 
 
 @numba.njit(cache=True)
-def _lattice_edges(index, moving, psi, vol, offsets, stride, weights, per_node, gap):
+def _lattice_edges(index, moving, vol, offsets, stride, weights, per_node, gap):
     """:func:`_graph`'s edges: per offset, the box's nodes in order, the edge to the node ``stride``
     offsets on when both are band nodes (``index`` >= 0) and one of them moves; two passes, a count and
     the fill (as NumPy, two masked copies of the box per offset, it took 0.15-0.2 s of the collapsing
@@ -525,7 +526,7 @@ def _lattice_edges(index, moving, psi, vol, offsets, stride, weights, per_node, 
                                 area = 0.5 * (weights[a, k] + weights[b, k])
                             else:
                                 area = weights[0, k]
-                            pa, pb = psi[a], psi[b]
+                            pa, pb = vol[i, j, l], vol[i + sx, j + sy, l + sz]  # (shifted) psi at the ends
                             if stride == 1:
                                 c = _crossing_psi(pa, pb, gap)
                             else:  # the cheaper half of the edge, through the node at its middle
