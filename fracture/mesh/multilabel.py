@@ -90,6 +90,18 @@ class _FaceKeys:
         return a, a + self.offsets[(keys // 16) % 16], a + self.offsets[keys % 16]
 
 
+class _NodePoints:
+    """The points of grid nodes by flat id, ``nodes[ids]`` of any shape (``ids.shape + (3,)``): a box's
+    nodes are many more than the contour asks about."""
+
+    def __init__(self, origin, spacing, shape):
+        self.origin, self.spacing = np.asarray(origin, np.float64), np.asarray(spacing, np.float64)
+        self.shape = shape
+
+    def __getitem__(self, ids) -> np.ndarray:
+        return self.origin + np.stack(np.unravel_index(ids, self.shape), -1) * self.spacing
+
+
 _PAIRS = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]
 _FACES = [(0, 1, 2), (0, 1, 3), (0, 2, 3), (1, 2, 3)]
 
@@ -189,8 +201,7 @@ def contour_labels(label: np.ndarray, origin, spacing, crossing, pieces_only: bo
     faces = _FaceKeys(shape)
     tet, A, B, kind, val = _interfaces(tets, lab, n_nodes, faces)
     edge_keys, face_keys, tet_ids = (np.unique(val[kind == k]) for k in range(3))
-    grid = np.stack(np.unravel_index(np.arange(n_nodes), shape), 1)
-    nodes = np.asarray(origin, np.float64) + grid * np.asarray(spacing, np.float64)
+    nodes = _NodePoints(origin, spacing, shape)
     PE, PF, PT = _positions(crossing, nodes, lab, edge_keys, face_keys, tet_ids, tets, n_nodes, faces)
     X = np.concatenate([PE, PF, PT])
     index = np.empty(len(val), np.int64)

@@ -579,15 +579,7 @@ def _cut(sub: _BoxGrid, near, keep, labels, shifted, node_weights, reach_of
     cshape = tuple((n + 1) // 2 for n in sub.shape)
     lattice = np.full(cshape, -1, np.int64)
     lattice[tuple((ijk[even] // 2).T)] = coarse_labels
-    # the coarse cell's corners of every node (flat indices of the coarse lattice)
-    top = np.array(cshape) - 1
-    corners = np.stack([np.ravel_multi_index(tuple(np.minimum((ijk + corner) // 2, top).T), cshape)
-                        for corner in np.array(list(np.ndindex(2, 2, 2)))], 1)
-    agreed = np.full(len(near), -2, np.int64)  # -2: no coarse corner yet, -1: corners disagree
-    for c in lattice.ravel()[corners].T:
-        has = c >= 0
-        agreed = np.where(has & (agreed == -2), c, agreed)
-        agreed = np.where(has & (agreed >= 0) & (agreed != c), -1, agreed)
+    agreed = _agreed(ijk, lattice)
     unsure = np.zeros(sub.size, bool)
     unsure[near[agreed < 0]] = True
     unsure = _cube_dilation(unsure.reshape(sub.shape), _FINE_BAND).ravel()
@@ -608,6 +600,28 @@ def _cut(sub: _BoxGrid, near, keep, labels, shifted, node_weights, reach_of
     out, log = expand(graph.among(moving), start_labels, moving, fine_reach, cycles=_CYCLES)
     log.energy = [start, graph.energy(out)]
     return out, graph, log
+
+
+@numba.njit(cache=True)
+def _agreed(ijk, lattice):
+    """Per node ``ijk`` of the full grid, the label the labelled corners of the coarse cell it lies in
+    (``lattice``, -1 where unlabelled) agree on: -2 where none is labelled, -1 where they disagree."""
+    out = np.empty(len(ijk), np.int64)
+    for n in range(len(ijk)):
+        agreed = -2
+        for di in range(2):
+            i = min((ijk[n, 0] + di) // 2, lattice.shape[0] - 1)
+            for dj in range(2):
+                j = min((ijk[n, 1] + dj) // 2, lattice.shape[1] - 1)
+                for dk in range(2):
+                    c = lattice[i, j, min((ijk[n, 2] + dk) // 2, lattice.shape[2] - 1)]
+                    if c >= 0:
+                        if agreed == -2:
+                            agreed = c
+                        elif agreed >= 0 and agreed != c:
+                            agreed = -1
+        out[n] = agreed
+    return out
 
 
 def _free_reach(reach_of, ids: np.ndarray, free: np.ndarray) -> dict:
