@@ -18,6 +18,16 @@ def _graph(rng, n=9, density=0.5):
     return PottsGraph(n, p, q, rng.random(len(p)))
 
 
+def test_the_potts_energy_is_the_weight_of_the_edges_between_labels():
+    rng = np.random.default_rng(5)
+    g = _graph(rng, n=40)
+    for _ in range(5):
+        labels = rng.integers(0, 4, g.n)
+        assert g.energy(labels) == pytest.approx(sum(w for p, q, w in zip(g.p, g.q, g.w) if labels[p] != labels[q]),
+                                                 rel=1e-12)
+    assert g.energy(np.zeros(g.n, np.int64)) == 0.0
+
+
 @pytest.mark.parametrize("seed", range(6))
 def test_an_expansion_move_is_the_best_move_of_its_label(seed):
     rng = np.random.default_rng(seed)

@@ -270,6 +270,9 @@ def test_a_coarsened_sheet_that_folds_two_triangles_together_keeps_its_triangles
     from conftest import grid_sheet
 
     assert list(sheets._same_corners(np.array([[0, 1, 2], [1, 3, 2], [2, 1, 0], [3, 4, 5]]))) == [0, 2]
+    # ... with ids too large to pack three into one integer, the same answer by the rows themselves
+    big = 1 << 22
+    assert list(sheets._same_corners(np.array([[0, 1, big], [1, 3, big], [big, 1, 0], [3, 4, 5]]))) == [0, 2]
     V, F = grid_sheet(6, 0.0)
     sides = np.tile([0, 1], (len(F), 1))
     # a collapse that leaves a fold: its last triangle twice, once each way
@@ -401,3 +404,26 @@ def test_rim_moves_that_make_rims_cross_on_b_are_taken_back_and_the_others_kept(
     assert close_pairs(out, E2, normal_at)[1].sum() == before
     np.testing.assert_array_equal(out[[3, 4]], V2[[3, 4]])
     np.testing.assert_array_equal(out[8], X2[8])
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_each_node_takes_the_label_its_coarse_corners_agree_on(seed):
+    """The coarse-to-fine cut's start on the full grid: a node takes the label of the labelled corners of
+    the coarse cell it lies in when they agree, -1 when they disagree, -2 when none is labelled (against
+    the corners looked up one by one)."""
+    from fracture.refine.search import _agreed
+
+    rng = np.random.default_rng(seed)
+    shape = (7, 6, 5)
+    lattice = rng.integers(-1, 3, tuple((n + 1) // 2 for n in shape))
+    lattice[0] = 1  # a slab where every corner agrees
+    lattice[1, :, :] = -1  # and one where none is labelled
+    ijk = np.stack(np.unravel_index(np.arange(np.prod(shape)), shape), 1)
+    expected = []
+    for node in ijk:
+        labels = {int(lattice[tuple(np.minimum((node + c) // 2, np.array(lattice.shape) - 1))])
+                  for c in np.ndindex(2, 2, 2)} - {-1}
+        expected.append(-2 if not labels else labels.pop() if len(labels) == 1 else -1)
+    got = _agreed(ijk, lattice)
+    assert np.array_equal(got, expected)
+    assert {-2, -1, 1} <= set(got.tolist())

@@ -35,8 +35,9 @@ value: a vertex where grad psi has its root mean square over the grid moves
 speeds, which vanish as it settles). It grows by a quarter after an accepted
 step (up to four times its start) and is halved when a step would raise the
 minimised functional (the engine retries, then rejects the step), down to
-1/64 of its start: a step that raises the functional even then means that
-the surface is at a minimum of the discrete functional.
+1/64 of its start: an iteration whose every attempt raises the functional
+means that the surface is at a minimum of what the step reaches (the stage
+has settled).
 """
 
 from __future__ import annotations
