@@ -8,7 +8,7 @@ from fields.grid import Grid
 from fields.pyramid import StrengthPyramid
 from fracture.mesh.primitives import box, sheet
 from fracture.refine.boundary import clearance
-from fracture.refine.engine import RefineParams, Refiner
+from fracture.refine.engine import SEARCH_STAGE, RefineParams, Refiner
 from fracture.refine.remesh import plan_splits, split_folds
 from fracture.mesh.fracture_surface import FractureSurface
 from fracture.tolerances import tol
@@ -340,12 +340,9 @@ def test_the_clearance_bound_is_the_same_on_one_thread_and_two():
         np.testing.assert_allclose(bound, expect, rtol=0, atol=1e-12)
 
 
-def test_a_stage_whose_step_raises_the_functional_at_every_tau_ends_without_spending_its_iterations():
+def _climbing_refiner(search=None):
     """A flow that climbs psi (its field term turned around) on a flat sheet, which has no area term to
-    lower: every step raises the functional, at each of an iteration's attempts. The stage has settled
-    after that first iteration (the surface is at a minimum of what the step can reach), though the split
-    rule splits every iteration (before, the first stage went on splitting flat triangles for 9
-    iterations, until no edge was left to split)."""
+    lower, with a split rule that always splits: every step raises the functional."""
     from fracture.refine.flow import PsiFlow
     from fracture.refine.remesh import LongEdgeSplits
 
@@ -353,19 +350,45 @@ def test_a_stage_whose_step_raises_the_functional_at_every_tau_ends_without_spen
         def gradient(self, grad):
             return -grad
 
-    pyramid = two_weak_sheets()
     BV, BF = box([0, 0, 0], [1, 1, 1], (8, 8, 8))
     mesh = flat_cut()
     params = RefineParams(stage_iterations=10, iterations=100, max_triangles=100000)
-    r = Refiner(mesh, pyramid, BV, BF, params, np.random.default_rng(0), search=None, flow=Climbing(),
-                splits=LongEdgeSplits(0.02))
+    return mesh, Refiner(mesh, two_weak_sheets(), BV, BF, params, np.random.default_rng(0), search=search,
+                         flow=Climbing(), splits=LongEdgeSplits(0.02))
+
+
+def test_a_stage_whose_step_raises_the_functional_at_every_tau_ends_without_spending_its_iterations():
+    """Every step of the climbing flow raises the functional, halved down to the least tau. The stage has
+    settled there (the surface is at a minimum of what the step can reach), though the split rule still
+    splits every iteration (before, the first stage went on splitting flat triangles for 9 iterations,
+    until no edge was left to split)."""
+    mesh, r = _climbing_refiner()
     stages = len(r.stages())
     assert stages > 1
     log = r.run()
     per_stage = np.bincount(np.asarray(log.stage[1:]) - min(log.stage[1:]))
-    assert len(per_stage) == stages and per_stage.max() == 1
-    assert all(s > 0 for s in log.splits[1:])  # the split rule split in every one of them
-    assert all(r == 4 for r in log.retries[1:])  # ... and the step was tried at four taus
+    assert len(per_stage) == stages and per_stage.max() <= 3  # the least tau after two iterations' halvings
+    assert per_stage.max() > 1  # a flow from the coarse surface goes on after its first rejected iteration
+    assert all(s > 0 for s in log.splits[1:])  # the split rule still split in every one of them
     assert log.stop == "settled"
     assert np.array_equal(log.functional, log.functional_before)  # no step was taken ...
     assert np.allclose(mesh.V[:, 0], 0.52)  # ... and the sheet stayed where it was
+
+
+def test_the_polish_of_a_searched_surface_settles_at_its_first_iteration_that_no_attempt_descends():
+    """On a searched surface (here the search gives back the coarse sheet) the polish has settled after the
+    first iteration whose four attempts all raise the functional: the search puts the sheets on psi's
+    valley floors, where the step cannot descend."""
+    from fracture.refine.search import SearchResult
+
+    def search(mesh, pyramid, B):
+        copy = FractureSurface.from_coarse(mesh.V.copy(), mesh.F.copy(), mesh.sides.copy())
+        return SearchResult(copy, travel=np.zeros(len(copy.V)), functional=(1.0, 1.0))
+
+    mesh, r = _climbing_refiner(search)
+    log = r.run()
+    assert log.stage[1] == SEARCH_STAGE and r.searched
+    polish = np.asarray(log.stage[2:])
+    assert len(polish) == 1 and log.retries[2] == 4 and log.splits[2] > 0  # one iteration, four attempts
+    assert log.stop == "settled"
+    assert np.allclose(mesh.V[:, 0], 0.52)
