@@ -35,9 +35,10 @@ value: a vertex where grad psi has its root mean square over the grid moves
 speeds, which vanish as it settles). It grows by a quarter after an accepted
 step (up to four times its start) and is halved when a step would raise the
 minimised functional (the engine retries, then rejects the step), down to
-1/64 of its start: an iteration whose every attempt raises the functional
-means that the surface is at a minimum of what the step reaches (the stage
-has settled).
+1/64 of its start: a step that raises the functional even then means that
+the surface is at a minimum of what the step reaches (the stage has
+settled; on a searched surface already when every attempt of one iteration
+raises it: :mod:`fracture.refine.engine`).
 """
 
 from __future__ import annotations
