@@ -111,9 +111,11 @@ def _same_corners(F: np.ndarray) -> np.ndarray:
     """The triangles that share their three vertices with another."""
     S = np.sort(F, axis=1)
     n = int(S.max(initial=0)) + 1
-    if n < 1 << 21:  # the sorted corners packed into one integer: a unique of rows (axis=0) sorts them as
-        S = (S[:, 0] * n + S[:, 1]) * n + S[:, 2]  # bytes, five times as long on the collapsing wall
-    _, inverse, count = np.unique(S, axis=0 if S.ndim == 2 else None, return_inverse=True, return_counts=True)
+    if n < 1 << 21:  # the sorted corners packed into one integer (a unique of the rows themselves sorts them
+        key = (S[:, 0] * n + S[:, 1]) * n + S[:, 2]  # as bytes: five times as long on the collapsing wall)
+        _, inverse, count = np.unique(key, return_inverse=True, return_counts=True)
+    else:
+        _, inverse, count = np.unique(S, axis=0, return_inverse=True, return_counts=True)
     return np.flatnonzero(count[inverse.ravel()] > 1)
 
 
