@@ -198,17 +198,16 @@ def _apply_override(merged: _Merged, text: str) -> None:
     path = ""
     for i, tok in enumerate(tokens):
         last = i == len(tokens) - 1
+        parent = path  # the key that holds ``node``
         path = f"{path}[{tok}]" if isinstance(tok, int) else (f"{path}.{tok}" if path else tok)
         if isinstance(tok, int):
             if not isinstance(node, list) or not -len(node) <= tok < len(node):
                 raise ConfigError(source, path, "no such list item")
         elif isinstance(node, list):  # layers.2.ratio for layers[2].ratio
-            parent = path.rsplit(".", 1)[0]
             example = f"{parent}[{tok}]" if tok.isdigit() else f"{parent}[0]"
             raise ConfigError(source, path, f"{parent} is a list; name an item of it by its index in brackets, "
                               f"e.g. {example}")
         elif not isinstance(node, dict):
-            parent = path.rsplit(".", 1)[0]
             raise ConfigError(source, path, f"{parent} is a value ({node!r}), not a mapping: it has no key {tok!r}")
         if last:
             node[tok] = value
