@@ -2,7 +2,8 @@ import numpy as np
 import pytest
 
 from fracture.mesh.primitives import box
-from fracture.mesh.topology import directed_edge_face, directed_edges, fan, orient_sheets, signed_volume, unique_edges
+from fracture.mesh.topology import (corner_groups, directed_edge_face, directed_edges, fan, orient_sheets, signed_volume,
+                                    unique_edges)
 
 
 def test_directed_edge_face_finds_the_owner_or_minus_one():
@@ -98,3 +99,14 @@ def test_nearly_coplanar_triangles_side_by_side_do_not_cross():
     c = V[:3].mean(axis=0)  # a triangle through the first one's middle, across its plane: crossing
     V[3:] = c + np.array([[1e-3, 0.0, -2e-3], [-1e-3, 0.0, -2e-3], [0.0, 0.0, 2e-3]])
     assert self_intersections(V, np.array([[0, 1, 2], [3, 4, 5]])) == 1
+
+
+def test_corner_groups_are_the_unique_sorted_rows_with_or_without_packing():
+    rng = np.random.default_rng(3)
+    for n in (6, 1 << 22):  # ids packed into one integer, and too large to pack
+        F = rng.integers(0, n, (300, 3))
+        F = np.vstack([F, F[:40, ::-1], F[40:60, [1, 2, 0]]])  # the same corners, either orientation
+        _, inverse, count = np.unique(np.sort(F, axis=1), axis=0, return_inverse=True, return_counts=True)
+        group, size = corner_groups(F)
+        assert np.array_equal(group, inverse.ravel()) and np.array_equal(size, count)
+        assert (size[group[:60]] >= 2).all()

@@ -30,8 +30,8 @@ import scipy.sparse as sp
 from scipy.sparse import csgraph
 
 from fracture.mesh.intersect import self_intersections
-from fracture.mesh.topology import (closed_oriented, diagonal, face_frames, manifold_vertices, signed_volume,
-                                    unique_edges)
+from fracture.mesh.topology import (closed_oriented, corner_groups, diagonal, face_frames, manifold_vertices,
+                                    signed_volume, unique_edges)
 from fracture.tolerances import tol
 
 
@@ -88,8 +88,8 @@ def collapse_short_edges(V: np.ndarray, F: np.ndarray, length: float) -> tuple[n
     W /= np.bincount(group, minlength=k)[:, None]
     G = group[F]
     G = G[(G[:, 0] != G[:, 1]) & (G[:, 1] != G[:, 2]) & (G[:, 2] != G[:, 0])]
-    _, inverse, count = np.unique(np.sort(G, axis=1), axis=0, return_inverse=True, return_counts=True)
-    G = G[count[inverse.ravel()] == 1]  # a flattened bump leaves its two sides on the same corners
+    group, size = corner_groups(G)
+    G = G[size[group] == 1]  # a flattened bump leaves its two sides on the same corners
     used, inverse = np.unique(G, return_inverse=True)
     W, G = W[used], inverse.reshape(-1, 3).astype(np.int64)
     volume = signed_volume(V, F)

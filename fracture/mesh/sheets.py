@@ -19,7 +19,7 @@ from scipy.spatial import cKDTree
 
 from fracture.mesh.edges import edge_table
 from fracture.mesh.intersect import self_intersections
-from fracture.mesh.topology import unique_edges
+from fracture.mesh.topology import corner_groups, unique_edges
 from fracture.tolerances import tol
 
 # A coarsened curved sheet keeps about one triangle per this many cells of its area.
@@ -109,14 +109,8 @@ def _simplify_sheets(X: np.ndarray, FF: np.ndarray, sides: np.ndarray, cell: flo
 
 def _same_corners(F: np.ndarray) -> np.ndarray:
     """The triangles that share their three vertices with another."""
-    S = np.sort(F, axis=1)
-    n = int(S.max(initial=0)) + 1
-    if n < 1 << 21:  # the sorted corners packed into one integer (a unique of the rows themselves sorts them
-        key = (S[:, 0] * n + S[:, 1]) * n + S[:, 2]  # as bytes: five times as long on the collapsing wall)
-        _, inverse, count = np.unique(key, return_inverse=True, return_counts=True)
-    else:
-        _, inverse, count = np.unique(S, axis=0, return_inverse=True, return_counts=True)
-    return np.flatnonzero(count[inverse.ravel()] > 1)
+    group, size = corner_groups(F)
+    return np.flatnonzero(size[group] > 1)
 
 
 def _sheet_pinches(F: np.ndarray, sides: np.ndarray) -> np.ndarray:

@@ -38,13 +38,26 @@ def closed_oriented(F: np.ndarray) -> bool:
     return bool((count == 1).all() and np.isin(rev, uniq, assume_unique=False).all())
 
 
-
 def manifold_vertices(F: np.ndarray) -> np.ndarray:
     """Per vertex of the faces ``F``, whether the faces around it form one fan (libigl); none for no faces
     (libigl's test fails on them: it raised MemoryError on an empty piece)."""
     if not len(F):
         return np.zeros(0, bool)
     return np.asarray(igl.is_vertex_manifold(np.ascontiguousarray(F, np.int64)), bool).ravel()
+
+
+def corner_groups(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Triangles grouped by their three corners in any order: per triangle its group ``(m,)`` (groups in the
+    lexicographic order of the sorted corners) and per group its size."""
+    S = np.sort(np.asarray(F, np.int64).reshape(-1, 3), axis=1)
+    n = int(S.max(initial=0)) + 1
+    if n < 1 << 21:  # the sorted corners packed into one integer, (a n + b) n + c, in the same order (a
+        key = (S[:, 0] * n + S[:, 1]) * n + S[:, 2]  # unique of the rows themselves sorts them as bytes: five
+        _, inverse, count = np.unique(key, return_inverse=True, return_counts=True)  # times as long)
+    else:  # the packed key would overflow 64 bits
+        _, inverse, count = np.unique(S, axis=0, return_inverse=True, return_counts=True)
+    return inverse.ravel(), count
+
 
 def barycentric_weights(P: np.ndarray, T: np.ndarray) -> np.ndarray:
     """Barycentric coordinates ``(k, 3)`` of points ``P`` on triangles ``T (k, 3, 3)`` (libigl), as weights:

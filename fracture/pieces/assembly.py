@@ -46,8 +46,8 @@ from fracture.pieces.imprint import Imprint
 from fracture.mesh.intersect import self_intersections
 from fracture.mesh.exterior import fast_winding
 from fracture.mesh.fracture_surface import FractureSurface
-from fracture.mesh.topology import (barycentric_weights, closed_oriented, diagonal, directed_edge_face,
-                                    manifold_vertices, signed_volume, weld)
+from fracture.mesh.topology import (barycentric_weights, closed_oriented, corner_groups, diagonal,
+                                    directed_edge_face, manifold_vertices, signed_volume, weld)
 
 # Jittered attempts after the plain one (seeds 1, 2, ...), each moving the positions by up to this much of B's
 # diagonal (see the module doc): the smallest first; a larger one clears slivers that a tiny one leaves where
@@ -355,9 +355,7 @@ def _cancelling(F: np.ndarray) -> np.ndarray:
     triangle there face to face; the two bound nothing and both go.
     """
     S = np.sort(F, axis=1)
-    # by rows: one integer per triple of ids, (a n + b) n + c, overflows 64 bits beyond two million vertices
-    _, inv, count = np.unique(S, axis=0, return_inverse=True, return_counts=True)
-    inv = inv.ravel()
+    inv, count = corner_groups(F)
     twin = np.flatnonzero(count[inv] == 2)
     out = np.zeros(len(F), bool)
     if len(twin):
