@@ -8,11 +8,18 @@ benchmarks (importing any module of the package changes nothing).
 - :func:`~fracture.allocator.keep_freed_memory`: glibc keeps freed large
   blocks for reuse (process-wide; see :mod:`fracture.allocator`).
 - the threading layer of numba's parallel kernels (:data:`THREADING_LAYER`):
-  GNU OpenMP, whose threads wait for the next kernel spinning: a kernel
-  starts in 2 us, against 120-130 us for numba's own work queue on the
-  project's 2-core machine, and the refinement runs thousands of small
-  kernels (the bunny's refinement 4.0 s against 5.1 s, the Jell-O's 1.35 s
-  against 1.96 s; `docs/design-measurements.md`). GNU OpenMP hangs in a
+  GNU OpenMP: a kernel starts in microseconds, against 120-130 us for
+  numba's own work queue on the project's 2-core machine, and the
+  refinement runs thousands of small kernels (the bunny's refinement 4.0 s
+  against 5.1 s, the Jell-O's 1.35 s against 1.96 s;
+  `docs/design-measurements.md`). Its threads sleep between kernels
+  (:data:`WAIT_POLICY`, unless ``OMP_WAIT_POLICY`` is set): spinning, they
+  start a kernel in 1.4 us instead of 9-11, but when another program keeps a
+  core busy, every kernel waits for a thread that cannot run, and the
+  Jell-O's refinement took 7.8-9.7 s instead of 1.2-1.7 s (the bunny's 28.7 s
+  against 5.0 s on one thread). GNU OpenMP reads it when it is loaded, so
+  this is called before anything loads it (the command line does so first
+  of all). GNU OpenMP hangs in a
   process forked after a kernel ran: the project's own workers are started
   with ``spawn`` (sweeps, the viewer's re-run process, the benchmarks). A
   layer named in ``NUMBA_THREADING_LAYER`` is kept (the test suite's
@@ -31,6 +38,9 @@ import os
 # numba's threading layer for the parallel kernels (see the module notes).
 THREADING_LAYER = "omp"
 
+# How GNU OpenMP's threads wait for the next kernel (``OMP_WAIT_POLICY``; see the module notes).
+WAIT_POLICY = "passive"
+
 
 def cores() -> int:
     """The cores this process may run on."""
@@ -47,6 +57,7 @@ def prepare_process(*, allocator: bool = True, threads: int | None = None) -> No
 
     if "NUMBA_THREADING_LAYER" not in os.environ:
         numba.config.THREADING_LAYER = THREADING_LAYER
+    os.environ.setdefault("OMP_WAIT_POLICY", WAIT_POLICY)  # read by GNU OpenMP when numba loads it, below
     numba.set_num_threads(max(1, min(threads or cores(), numba.config.NUMBA_NUM_THREADS)))
     clear_stale_numba_cache()
     if allocator:

@@ -142,7 +142,24 @@ def test_the_command_line_runs_the_kernels_on_gnu_openmp_with_a_thread_per_core(
 
         return json.loads((tmp_path / name / "manifest.json").read_text())["threads"]
 
+    env.pop("OMP_WAIT_POLICY", None)
     assert THREADING_LAYER == "omp"
-    assert run("all") == {"threads": cores(), "layer": "omp"}
-    assert run("one", pinned=True) == {"threads": 1, "layer": "omp"}
+    assert run("all") == {"threads": cores(), "layer": "omp", "wait": "passive"}
+    assert run("one", pinned=True) == {"threads": 1, "layer": "omp", "wait": "passive"}
     assert run("kept", NUMBA_THREADING_LAYER="workqueue")["layer"] == "workqueue"
+    assert run("spinning", OMP_WAIT_POLICY="ACTIVE")["wait"] == "active"
+
+
+def test_gnu_openmp_reads_the_wait_policy_the_process_set_up_chose():
+    """The policy reaches GNU OpenMP only if it is in the environment before the library is loaded:
+    prepare_process sets it first, and the library's own report of its settings shows it."""
+    from fracture.process import WAIT_POLICY
+
+    env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_THREADING_LAYER", "OMP_WAIT_POLICY")}
+    code = ("from fracture.process import prepare_process; prepare_process(allocator=False)\n"
+            "import numba; print(numba.threading_layer())")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         env={**env, "OMP_DISPLAY_ENV": "TRUE"})
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split() == ["omp"]
+    assert f"OMP_WAIT_POLICY = '{WAIT_POLICY.upper()}'" in out.stderr

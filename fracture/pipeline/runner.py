@@ -14,6 +14,7 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
+import os
 import platform
 import time
 from concurrent.futures import Executor, Future, ThreadPoolExecutor
@@ -221,14 +222,18 @@ def _run_stage(ctx: RunContext, stage: Stage, keep_products: bool, out: Path, wr
 
 
 def _threads() -> dict:
-    """The parallel kernels' threads and threading layer (``none``: no parallel kernel ran in this process)."""
+    """The parallel kernels' threads and threading layer (``none``: no parallel kernel ran in this process),
+    and on GNU OpenMP how its threads wait between kernels (:data:`fracture.process.WAIT_POLICY`)."""
     import numba
 
     try:
         layer = numba.threading_layer()
     except ValueError:  # numba starts its threading layer with the first parallel kernel
         layer = "none"
-    return {"threads": numba.get_num_threads(), "layer": layer}
+    threads = {"threads": numba.get_num_threads(), "layer": layer}
+    if layer == "omp":
+        threads["wait"] = os.environ.get("OMP_WAIT_POLICY", "default").lower()
+    return threads
 
 
 def _stored(entry: Path | None) -> str:
