@@ -371,6 +371,29 @@ def test_a_second_round_reaches_a_tilted_sheet_beyond_the_first_rounds_cores(mon
     assert flat.search.pressed < 0.5 and not any("rounds" in note for note in flat.search.notes)
 
 
+def test_a_piece_a_cell_thin_over_its_whole_crack_is_not_searched_away():
+    """A weak sheet a cell under B's face, the cut 4 cells inside it: the first search moves the crack onto the
+    sheet and leaves the piece beyond it a cell thin; from that surface the piece holds a node or two (its
+    nodes lie on the sheet's other side or on B), and a search from there took it away with its whole crack
+    (0.6 % of the area left). That round is not kept: the crack stays on the sheet, whole."""
+    case = weak_sheet_case("flat", 0.0)
+    x = case.grid.points()[:, 0]
+    face = case.BV[:, 0].max()
+    sheet = face - 0.95 * case.h
+    case.zeta = (1.0 - 0.9 * np.exp(-0.5 * ((x - sheet) / case.h) ** 2)).reshape(case.grid.shape)
+    case.cut_V = case.cut_V.copy()
+    case.cut_V[:, 0] = sheet - 4.0 * case.h
+    r, log = _refine(case, max_triangles=12000)
+
+    def area(V, F):
+        return 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1).sum()
+
+    assert area(r.mesh.V, r.mesh.F) > 0.95 * area(case.cut_V, case.cut_F)
+    assert np.mean(np.abs(area_samples(r.mesh.V, r.mesh.F)[:, 0] - sheet) < case.h) > 0.99
+    assert any("thinner than a cell over most of it" in note and "round 2's surface is kept" in note
+               for note in log.search.notes), log.search.notes
+
+
 def test_rim_moves_that_make_rims_cross_on_b_are_taken_back_and_the_others_kept():
     """Rim edges on the plane z = 0 (B's normal there is z): two vertices of one curve moved past each other
     make its edges cross on B, and go back; a move elsewhere that crosses nothing stays. A pair that crossed

@@ -40,7 +40,12 @@ pieces is a labelling of space by piece. On the field grid:
    area, and so a lower functional, and would drop cracks the animation has).
 3. **Pieces stay whole.** A region of a piece that the cut separates from
    the piece's kept nodes (an island) joins the piece around it; a piece
-   that would vanish keeps the coarse surface. What was done is said.
+   that would vanish keeps the coarse surface. A band in which a piece holds
+   fewer nodes than a tenth of the cells its fracture surface covers is not
+   searched: the piece is thinner than a cell over most of its crack (a
+   search from a searched surface that put the crack on a weak layer a cell
+   under B's face), and with hardly a node to keep, the cut would take it
+   away with its crack. What was done is said.
 4. **Surface.** The labels are contoured by multi-material marching
    tetrahedra (:mod:`fracture.mesh.multilabel`: an edge between two pieces
    is crossed where psi is least along it, within the cell the cut resolved;
@@ -127,6 +132,11 @@ _FINE_BAND = 2
 # bunny the most, the clay 17 %), the other weak sheets 0-12 % (docs/design-measurements.md).
 _PRESSED = 0.5
 _MOST_ROUNDS = 4
+# A piece holding fewer band nodes than this share of the cells its fracture surface covers is thinner than a
+# cell over most of it: the band is not searched (_thin_pieces). A piece a cell thick between two cracks holds
+# about half (a Suzanne export's thinnest piece at 40 cells: 0.50), one a cell under B's face searched again
+# from a searched surface 0.0007.
+_THIN = 0.1
 # Rounds of joining islands to the pieces around them.
 _ISLAND_ROUNDS = 3
 # The sheets' vertices move along their normals to where psi is least within this much of a cell (_to_valley) ...
@@ -221,8 +231,26 @@ def search_band(mesh: FractureSurface, grid, B: Exterior, band: float, core: flo
         return SearchBand(box, near, coarse, keep, empty=(
             f"search: piece{'s' if len(missing) > 1 else ''} {_named(missing, names)} "
             f"hold{'' if len(missing) > 1 else 's'} no grid node "
-            "(thinner than a cell): the coarse surface is kept"))
+            "(thinner than a cell); the coarse surface is kept"))
+    thin = _thin_pieces(V0, F0, S0, coarse, n_pieces, grid.spacing)
+    if len(thin):
+        return SearchBand(box, near, coarse, keep, empty=(
+            f"search: piece{'s' if len(thin) > 1 else ''} {_named(thin.tolist(), names)} "
+            f"hold{'' if len(thin) > 1 else 's'} fewer grid nodes than a tenth of the cells of "
+            f"{'their' if len(thin) > 1 else 'its'} fracture surface (thinner than a cell over most of it); the "
+            "coarse surface is kept"))
     return SearchBand(box, near, coarse, keep)
+
+
+def _thin_pieces(V, F, sides, coarse, n_pieces, spacing) -> np.ndarray:
+    """The pieces that hold fewer band nodes (``coarse``: each node's piece) than :data:`_THIN` of the grid
+    cells their fracture surface covers: on the grid they are thinner than a cell over most of it, and the
+    cut, with hardly a node of theirs to keep, would take them away (a crack on a weak layer a cell under
+    B's face, searched again: the piece beyond it holds a node or two and its whole crack went)."""
+    area = np.bincount(sides.ravel(), np.repeat(face_frames(V, F)[0], 2), n_pieces)
+    cell = float(np.prod(spacing)) ** (2.0 / 3.0)
+    held = np.bincount(coarse, minlength=n_pieces)
+    return np.flatnonzero((area > 0.0) & (held < _THIN * area / cell))
 
 
 def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, tension: float,
@@ -365,8 +393,12 @@ def search_in_rounds(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
                    for k in result.seconds.keys() | again.seconds.keys()}
         if again.surface is None:
             result.seconds = seconds
-            result.notes.append(f"search: round {kept + 1} did not lower the functional further; round {kept}'s "
-                                "surface is kept (refine.search_rounds)")
+            # refused for its functional (the last thing measured), or before: its own note says why, calling
+            # the surface it started from the coarse one
+            why_not = ("it did not lower the functional further" if again.sampled != (0.0, 0.0) else
+                       again.notes[-1].removeprefix("search: ").replace("; the coarse surface is kept", ""))
+            result.notes.append(f"search: round {kept + 1} was not kept ({why_not}); round {kept}'s surface is "
+                                "kept (refine.search_rounds)")
             break
         result = SearchResult(again.surface, travel=again.travel, free_nodes=result.free_nodes,
                               labels_changed=result.labels_changed + again.labels_changed,
