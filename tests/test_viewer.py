@@ -105,6 +105,22 @@ def test_render_rejects_bad_requests_clearly(run_dir, tmp_path):
     assert not list(tmp_path.glob("*.png"))
 
 
+@pytest.mark.parametrize("damaged, what", [("fields/psi.npy", "slices"), ("refined/iterations.npz", "iterations"),
+                                           ("pieces/piece_000.ply", "animation")])
+def test_a_damaged_run_file_is_named_in_one_line_and_the_render_leaves_nothing(run_dir, tmp_path, damaged, what):
+    """A run's file cut short (a copy in part, a disk that filled): one line naming it, no traceback, and the
+    render's folders, made for it, go again."""
+    run = tmp_path / "run"
+    shutil.copytree(run_dir, run)
+    path = run / damaged
+    path.write_bytes(path.read_bytes()[:300])
+    out = tmp_path / "renders" / "deep"
+    r = _cli(["render", str(run), "--what", what, "--width", "160", "--height", "120", "--quiet", "--out", str(out)])
+    assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
+    assert damaged in r.stderr.strip().splitlines()[-1] and "frames have been written" not in r.stderr, r.stderr
+    assert not (tmp_path / "renders").exists()
+
+
 def test_render_without_what_renders_what_a_run_stopped_early_has(small_config, tmp_path):
     coarse, refined = tmp_path / "coarse", tmp_path / "refined"
     runner.run(load_config(small_config), coarse, until="coarse", progress=False)

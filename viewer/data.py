@@ -89,11 +89,18 @@ class RunData:
                              f"(stages run: {stages})")
         return p
 
+    def _read(self, rel: str, what: str, load):
+        """``load(path)`` of the run's file ``rel``, which ``what`` needs: a file that is missing or cannot be
+        read (a run copied in part, a disk that filled) is said in one line."""
+        path = self._require(rel, what)
+        with layout.reading(self.dir, rel, f"cannot show {what}"):
+            return load(path)
+
     @cached_property
     def config(self) -> dict:
         import yaml
 
-        return yaml.safe_load(self._require(layout.CONFIG, "the config").read_text(encoding="utf-8"))
+        return self._read(layout.CONFIG, "the config", lambda p: yaml.safe_load(p.read_text(encoding="utf-8")))
 
     @property
     def up_axis(self) -> str:
@@ -121,11 +128,11 @@ class RunData:
 
     @cached_property
     def grid(self) -> Grid:
-        return Grid.from_dict(json.loads(self._require(layout.GRID, "the fields").read_text()))
+        return self._read(layout.GRID, "the fields", lambda p: Grid.from_dict(json.loads(p.read_text())))
 
     @cached_property
     def _pyramid(self) -> np.ndarray:
-        return np.load(self._require(layout.PYRAMID, "the strength pyramid"), mmap_mode="r")
+        return self._read(layout.PYRAMID, "the strength pyramid", lambda p: np.load(p, mmap_mode="r"))
 
     @property
     def pyramid_levels(self) -> int:
@@ -145,7 +152,7 @@ class RunData:
                     raise InputError(f"pyramid level must be in 0..{self.pyramid_levels - 1}, got {level}")
                 values = np.asarray(self._pyramid[level])
             else:
-                values = np.load(self._require(layout.field(name), f"the {name} field"))
+                values = self._read(layout.field(name), f"the {name} field", np.load)
             self._memo[name, level] = values
         return self._memo[name, level]
 
@@ -172,7 +179,7 @@ class RunData:
     def exterior(self) -> Surface:
         from fracture.io.ply import read_ply
 
-        V, F, _, fd = read_ply(self._require(layout.EXTERIOR, "the exterior"))
+        V, F, _, fd = self._read(layout.EXTERIOR, "the exterior", read_ply)
         return Surface(V, F, {"component": fd.get("component", np.zeros(len(F), np.int64))})
 
     @cached_property
@@ -186,7 +193,7 @@ class RunData:
     def coarse_fracture(self) -> Surface:
         from fracture.io.ply import read_ply
 
-        V, F, _, _ = read_ply(self._require(layout.COARSE_SURFACE, "the coarse fracture surface"))
+        V, F, _, _ = self._read(layout.COARSE_SURFACE, "the coarse fracture surface", read_ply)
         return Surface(V, F)
 
     @cached_property
@@ -195,16 +202,16 @@ class RunData:
 
         if not self.has(layout.REFINED_SURFACE):
             return None
-        V, F, _, _ = read_ply(self._path(layout.REFINED_SURFACE))
+        V, F, _, _ = self._read(layout.REFINED_SURFACE, "the refined fracture surface", read_ply)
         return Surface(V, F)
 
     @cached_property
     def coarse_animation(self):
         from fracture.coarse.animation import CoarseAnimation
 
-        return CoarseAnimation(lo=np.load(self._require(layout.ANIMATION_LO, "the coarse animation")),
-                               hi=np.load(self._require(layout.ANIMATION_HI, "the coarse animation")),
-                               nodes=np.load(self._require(layout.ANIMATION_NODES, "the coarse animation")))
+        lo, hi, nodes = (self._read(rel, "the coarse animation", np.load)
+                         for rel in (layout.ANIMATION_LO, layout.ANIMATION_HI, layout.ANIMATION_NODES))
+        return CoarseAnimation(lo=lo, hi=hi, nodes=nodes)
 
     @cached_property
     def coarse_parts(self) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -248,8 +255,7 @@ class RunData:
     def iterations(self) -> list[dict]:
         from fracture.io.snapshots import load_snapshots
 
-        self._require(layout.ITERATIONS_INDEX, "the iteration view")
-        return load_snapshots(self.dir)
+        return self._read(layout.ITERATIONS_INDEX, "the iteration view", lambda _: load_snapshots(self.dir))
 
     @property
     def energy(self) -> list[float]:
@@ -285,7 +291,7 @@ class RunData:
     def transfer(self):
         from fracture.pieces.transfer import load_transfer
 
-        return load_transfer(self._require(layout.TRANSFER, "the animation view"))
+        return self._read(layout.TRANSFER, "the animation view", load_transfer)
 
     @cached_property
     def _piece_files(self) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
@@ -294,7 +300,7 @@ class RunData:
 
         out = []
         for c in range(len(self.transfer.offsets) - 1):
-            V, F, _, fd = read_ply(self._require(layout.piece(c), "the animation view"))
+            V, F, _, fd = self._read(layout.piece(c), "the animation view", read_ply)
             ext = np.asarray(fd.get("exterior", np.ones(len(F))), bool)
             out.append((V, F.astype(np.int64), ext))
         return out

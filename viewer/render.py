@@ -165,11 +165,12 @@ def _write_sequence(images, out: Path, stem: str, width: int, height: int, timin
     stage = Path(tempfile.mkdtemp(prefix=f".{stem}.partial-", dir=out))
     try:
         counts = timing.counts(total, pace)
-        video = Video(stage / f"{stem}.mp4", width, height, timing.fps)
-        written = []
+        video, written = None, []
         try:
             with _progress(total, stem, quiet) as bar:
                 for i, img in enumerate(images):
+                    if video is None:  # begun with the first image: a run's file that cannot be read stops
+                        video = Video(stage / f"{stem}.mp4", width, height, timing.fps)  # it before any
                     if pngs:
                         p = stage / f"{stem}_{i:04d}.png"
                         p.write_bytes(png_bytes(img))
@@ -179,8 +180,11 @@ def _write_sequence(images, out: Path, stem: str, width: int, height: int, timin
                         video.add(frame)
                     bar.update()
         except BaseException:
-            video.abort()
+            if video is not None:
+                video.abort()
             raise
+        if video is None:
+            raise ValueError(f"no images to write for {stem}")
         video.close()
         return _publish(stage, out, stem, written + [video.path])
     finally:
@@ -324,19 +328,28 @@ def render(run_dir: str | Path, what: str | tuple[str, ...] | None = None, out: 
     if ({"compare", "turntable"} & set(whats) or run.has_animation) and not 0 <= view.frame < run.n_frames:
         raise InputError(f"frame must be in 1..{run.n_frames}, got {view.frame + 1}")
     out = Path(out) if out is not None else run.dir / "renders"
+    made = [p for p in (out, *out.parents) if not p.exists()]  # the deepest first
     cameras = cameras or {}
     # one per process: Open3D's are not independent
     renderer = Renderer(width, height, supersample, transparent, quiet)
     done = {}
-    for w in whats:
-        if w == "compare":
-            img = compare_image(run, view.frame, renderer, cameras.get("animation"))
-            out.mkdir(parents=True, exist_ok=True)
-            p = out / f"compare_frame_{view.frame + 1:04d}.png"
-            atomic_write_bytes(p, png_bytes(img))
-            done[w] = [p]
-        else:
-            done[w] = _render_one(run, w, view, renderer, out, timing, quiet, turntable_seconds, cameras)
+    try:
+        for w in whats:
+            if w == "compare":
+                img = compare_image(run, view.frame, renderer, cameras.get("animation"))
+                out.mkdir(parents=True, exist_ok=True)
+                p = out / f"compare_frame_{view.frame + 1:04d}.png"
+                atomic_write_bytes(p, png_bytes(img))
+                done[w] = [p]
+            else:
+                done[w] = _render_one(run, w, view, renderer, out, timing, quiet, turntable_seconds, cameras)
+    except BaseException:
+        for p in made:  # the folders this render made and left empty go again
+            try:
+                p.rmdir()
+            except OSError:
+                break
+        raise
     return done
 
 

@@ -12,9 +12,14 @@ the run directory, with ``/`` as the separator.
 from __future__ import annotations
 
 import json
+import zipfile
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
+import yaml
+
+from fracture.errors import InputError
 
 MANIFEST = "manifest.json"
 CONFIG = "config.yaml"
@@ -58,6 +63,24 @@ def frame(number: int, suffix: str = ".ply") -> str:
     """All pieces at the frame numbered ``number`` as the input numbers it
     (:meth:`fracture.coarse.surface.SourceFrames.file_numbers`)."""
     return f"frames/frame_{number:04d}{suffix}"
+
+
+# What reading a damaged run file raises (a truncated array or archive, bad JSON or YAML, a missing key).
+READ_ERRORS = (OSError, ValueError, KeyError, TypeError, IndexError, EOFError, zipfile.BadZipFile, yaml.YAMLError)
+
+
+@contextmanager
+def reading(run: str | Path, rel: str, doing: str):
+    """Say in one line which of the run's files cannot be read while ``doing`` something, and why:
+    ``RUN: DOING, REL cannot be read (WHY); run the config again to write it whole``."""
+    try:
+        yield
+    except InputError:
+        raise
+    except READ_ERRORS as exc:
+        why = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise InputError(f"{run}: {doing}, {rel} cannot be read ({why}); run the config again to write it "
+                         "whole") from None
 
 
 def read_manifest(run: str | Path) -> dict:

@@ -44,14 +44,24 @@ class Snapshots:
 def load_snapshots(run_dir, stem: str = layout.ITERATIONS) -> list[dict]:
     """The snapshots of a run: per iteration a dict of positions, faces, psi, speed."""
     base = Path(run_dir) / stem
-    meta = json.loads(base.with_suffix(".json").read_text())
+    doing = "cannot read the refinement's iterations"
+    with layout.reading(run_dir, f"{stem}.json", doing):
+        meta = json.loads(base.with_suffix(".json").read_text())
     keys = ("positions", "faces", "psi", "speed")
     if base.with_suffix(".npz").is_file():
-        with np.load(base.with_suffix(".npz")) as z:
+        with layout.reading(run_dir, f"{stem}.npz", doing), np.load(base.with_suffix(".npz")) as z:
             arrays = {k: z[k] for k in keys}
     else:
-        arrays = {k: np.load(f"{base}_{k}.npy") for k in keys}
-    nv, nf = meta["vertex_offsets"], meta["face_offsets"]
+        arrays = {}
+        for k in keys:
+            with layout.reading(run_dir, f"{stem}_{k}.npy", doing):
+                arrays[k] = np.load(f"{base}_{k}.npy")
+    with layout.reading(run_dir, f"{stem}.json", doing):  # its offsets and count, against the arrays
+        nv, nf, count = meta["vertex_offsets"], meta["face_offsets"], int(meta["snapshots"])
+        if min(len(nv), len(nf)) <= count or nv[count] > len(arrays["positions"]) \
+                or nf[count] > len(arrays["faces"]):
+            raise ValueError(f"its offsets do not fit the arrays ({len(arrays['positions'])} positions, "
+                             f"{len(arrays['faces'])} faces)")
     return [{"positions": arrays["positions"][nv[i]:nv[i + 1]], "faces": arrays["faces"][nf[i]:nf[i + 1]],
              "psi": arrays["psi"][nv[i]:nv[i + 1]], "speed": arrays["speed"][nv[i]:nv[i + 1]]}
-            for i in range(meta["snapshots"])]
+            for i in range(count)]

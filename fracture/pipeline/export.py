@@ -11,8 +11,6 @@ file. The run itself writes the USD file already
 from __future__ import annotations
 
 import json
-import zipfile
-from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -32,18 +30,8 @@ def _need(run: Path, rel: str) -> Path:
     return p
 
 
-@contextmanager
 def _reading(run: Path, rel: str):
-    """Say which of the run's files cannot be read, and why, in one line."""
-    try:
-        yield
-    except InputError:
-        raise
-    except (OSError, ValueError, KeyError, TypeError, IndexError, EOFError, zipfile.BadZipFile,
-            yaml.YAMLError) as exc:
-        why = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise InputError(f"{run}: cannot export, {rel} cannot be read ({why}); run the config again to "
-                         "write it whole") from None
+    return layout.reading(run, rel, "cannot export")
 
 
 def export_run(run: str | Path, fmt: str = "usd", out: str | Path | None = None, force: bool = False) -> Path:
