@@ -131,7 +131,22 @@ def cache_from_args(args):
     """The stage cache the flags ask for, or None."""
     from fracture.pipeline.cache import StageCache
 
-    return None if args.no_cache else StageCache(args.cache_dir)
+    return None if args.no_cache else StageCache(checked_cache_dir(args))
+
+
+def checked_cache_dir(args) -> Path | None:
+    """``--cache-dir``, refused when a file stands where its folder would be (a cache that cannot be written is
+    otherwise only said in the manifest: asked for by name, it is said here)."""
+    from fracture.errors import InputError
+
+    d = args.cache_dir
+    if d is None or args.no_cache:
+        return d
+    blocked = next((p for p in (d, *d.parents) if p.exists() and not p.is_dir()), None)
+    if blocked is not None:
+        raise InputError(f"--cache-dir {d}: {blocked} is a file, not a folder; expected a folder for the stage "
+                         "cache (or --no-cache)")
+    return d
 
 
 class _Stopped(KeyboardInterrupt):
@@ -185,7 +200,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return _main(argv)
     except _Stopped as stop:
-        return _say_stopped(stop.code, argv)
+        return _say_stopped(stop.code, argv, getattr(stop, "run_in_place", None))
     except Exception:
         if _stopped_by:  # a kernel half compiled when the signal came, say: the stop, not what it broke
             return _say_stopped(128 + _stopped_by[0], argv)
@@ -202,11 +217,15 @@ def _on_main_thread() -> bool:
     return threading.current_thread() is threading.main_thread()
 
 
-def _say_stopped(code: int, argv: list[str] | None) -> int:
-    """One line on what a stop left: a sweep keeps its finished points, any other command writes nothing."""
+def _say_stopped(code: int, argv: list[str] | None, run_in_place: Path | None = None) -> int:
+    """One line on what a stop left: a sweep keeps its finished points, a run stopped while the run it replaced
+    was deleted is whole, any other command writes nothing."""
     words = list(sys.argv[1:] if argv is None else argv)
     how = "interrupted" if code == 130 else "terminated"
-    if words[:1] == ["sweep"]:
+    if run_in_place is not None and words[:1] != ["sweep"]:
+        print(f"fracref: {how} after the run was written whole to {run_in_place}; what is left of the run it "
+              "replaced goes with the next run there", file=sys.stderr)
+    elif words[:1] == ["sweep"]:
         print(f"fracref: {how}; the sweep's finished points are kept (run the same sweep again to resume)",
               file=sys.stderr)
     else:
@@ -337,7 +356,7 @@ def _sweep(args) -> int:
     runner.stages_until(args.until)
     out = args.out if args.out is not None else Path("runs") / f"{cfg.name}-sweep"
     state = run_sweep(args.config, grid, out, args.overrides, args.jobs, args.backend, args.address, args.until,
-                      args.cache_dir, not args.no_cache, progress=not args.quiet)
+                      checked_cache_dir(args), not args.no_cache, progress=not args.quiet)
     names = finished(state)
     failed = {n: p for n, p in state["points"].items() if p["status"] == "failed"}
     if names and not args.no_sheet and (args.until is None or args.until not in ("coarse", "fields")):

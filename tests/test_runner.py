@@ -12,6 +12,8 @@ from fields.grid import Grid
 from fracture.pipeline import runner
 import errno
 import os
+import shutil
+from pathlib import Path
 
 from fracture.io.atomic import OutputError, RunDirectoryExists, atomic_write_text, staged_directory
 from fracture.pipeline.config import load_config
@@ -176,6 +178,70 @@ def test_staging_of_killed_runs_is_removed_by_the_next_run(tmp_path, small_confi
         (d / "fields").mkdir()
     runner.run(load_config(small_config), tmp_path / "run", until="coarse", progress=False)
     assert not stale.exists() and live.exists()
+
+
+def test_a_run_killed_between_its_two_moves_gets_its_earlier_run_back(tmp_path):
+    """A run replacing another moves that one to ``.NAME.old-PID-XXXX``, then itself into place, then deletes
+    the old one: killed after the first move, no run is left at NAME, and the next run into the same place
+    moves the earlier one back first; killed after the second, the old one's remains are deleted."""
+    from fracture.io.atomic import remove_stale_staging
+
+    dead = int(subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True,
+                              text=True).stdout)
+    out = tmp_path / "run"
+    old = tmp_path / f".run.old-{dead}-abcd"
+    old.mkdir()
+    (old / "manifest.json").write_text("{}")
+    live = tmp_path / f".run.old-{os.getpid()}-efgh"  # a run still going: left alone
+    live.mkdir()
+    remove_stale_staging(out)
+    assert (out / "manifest.json").read_text() == "{}" and not old.exists() and live.exists()
+    old.mkdir()  # the new run in place, the old one's remains beside it
+    assert remove_stale_staging(out) == [old] and out.is_dir() and not old.exists() and live.exists()
+
+
+def test_a_stop_while_the_replaced_run_is_deleted_says_the_new_one_is_in_place(tmp_path, monkeypatch):
+    import fracture.io.atomic as atomic
+
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "manifest.json").write_text("old")
+    real = shutil.rmtree
+
+    def stopped(path, *a, **k):  # Ctrl-C while the replaced run is deleted
+        if ".run.old-" in str(path):
+            raise KeyboardInterrupt
+        return real(path, *a, **k)
+
+    monkeypatch.setattr(atomic.shutil, "rmtree", stopped)
+    with pytest.raises(KeyboardInterrupt) as stop:
+        with staged_directory(out, force=True) as staging:
+            (staging / "manifest.json").write_text("new")
+    assert stop.value.run_in_place == out.absolute() and (out / "manifest.json").read_text() == "new"
+    monkeypatch.undo()
+    # what is left of the old run, named after this process (still running: no later run takes it yet)
+    assert [p.name.split("-")[:2] for p in tmp_path.glob(".run.*")] == [[".run.old", str(os.getpid())]]
+
+
+def test_the_command_line_says_a_stop_after_the_run_was_written(capsys):
+    from fracref.cli import _say_stopped
+
+    assert _say_stopped(130, ["run", "c.yaml"], Path("/r/run")) == 130
+    assert capsys.readouterr().err == ("fracref: interrupted after the run was written whole to /r/run; what is left "
+                                       "of the run it replaced goes with the next run there\n")
+    _say_stopped(143, ["run", "c.yaml"])
+    assert capsys.readouterr().err == "fracref: terminated; nothing was written\n"
+
+
+def test_a_cache_folder_that_is_a_file_is_refused_by_name(tmp_path, small_config):
+    blocker = tmp_path / "afile.txt"
+    blocker.write_text("x")
+    for where in (blocker, blocker / "cache"):
+        out = subprocess.run([sys.executable, "-m", "fracref", "run", str(small_config), "--out", str(tmp_path / "r"),
+                              "--cache-dir", str(where), "--until", "coarse"], cwd=REPO, capture_output=True, text=True)
+        assert out.returncode == 2 and "Traceback" not in out.stderr
+        assert f"--cache-dir {where}: {blocker} is a file, not a folder" in out.stderr
+        assert not (tmp_path / "r").exists()
 
 
 def test_a_full_disk_leaves_nothing_and_says_so(tmp_path):

@@ -96,18 +96,36 @@ def process_alive(pid: int) -> bool:
     return True
 
 
-def remove_stale_staging(out: Path) -> list[Path]:
-    """Remove staging directories of earlier runs into ``out`` whose process is gone (killed runs).
+def _stale(out: Path, kind: str) -> list[Path]:
+    """The directories ``.NAME.KIND-PID-XXXX`` beside ``out`` whose process ``PID`` is gone."""
+    stale = []
+    for p in sorted(out.parent.glob(f".{glob.escape(out.name)}.{kind}-*")):
+        pid = p.name[len(out.name) + len(kind) + 3:].split("-")[0]
+        if p.is_dir() and pid.isdigit() and not process_alive(int(pid)):
+            stale.append(p)
+    return stale
 
-    Staging directories are named ``.NAME.partial-PID-XXXX``; one whose
-    process still runs is left alone. Returns the removed directories.
+
+def remove_stale_staging(out: Path) -> list[Path]:
+    """Remove what killed runs into ``out`` left beside it; returns the removed directories.
+
+    A run is staged in ``.NAME.partial-PID-XXXX`` and, when it replaces an
+    earlier run, moves that one to ``.NAME.old-PID-XXXX`` just before it
+    takes its place, and deletes it after. Those of a process that still
+    runs are left alone. A run killed between the two moves left no run at
+    ``out``: its old one is moved back there (the earlier run, whole), and
+    the others are deleted.
     """
     removed = []
-    for p in out.parent.glob(f".{glob.escape(out.name)}.partial-*"):
-        pid = p.name[len(out.name) + len(".partial-") + 1:].split("-")[0]
-        if p.is_dir() and pid.isdigit() and not process_alive(int(pid)):
-            shutil.rmtree(p, ignore_errors=True)
-            removed.append(p)
+    for p in _stale(out, "old"):
+        if not out.exists():
+            os.replace(p, out)
+            continue
+        shutil.rmtree(p, ignore_errors=True)
+        removed.append(p)
+    for p in _stale(out, "partial"):
+        shutil.rmtree(p, ignore_errors=True)
+        removed.append(p)
     return removed
 
 
@@ -116,13 +134,15 @@ def staged_directory(out: str | Path, force: bool = False, marker: str = RUN_MAR
     """Yield a fresh staging directory that becomes ``out`` on success.
 
     On any exception (including ``KeyboardInterrupt``) the staging directory
-    is deleted and ``out`` is left exactly as it was. An ``OSError`` while
+    is deleted and ``out`` is left exactly as it was; one while the run it
+    replaced is deleted, after the new one took its place, says so by its
+    ``run_in_place`` (the new run's directory). An ``OSError`` while
     making or filling it (disk full, a file in the way) becomes an
     :class:`OutputError` that says so in one line.
     """
     out = Path(out).absolute()
     check_run_directory(out, force, marker)
-    staging = None
+    staging = old = None
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
         remove_stale_staging(out)
@@ -130,15 +150,15 @@ def staged_directory(out: str | Path, force: bool = False, marker: str = RUN_MAR
         os.chmod(staging, 0o777 & ~_umask())  # mkdtemp creates 0700; give the usual directory mode
         yield staging
         check_run_directory(out, force, marker)  # something may have appeared meanwhile
-        old = None
         if out.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-", dir=out.parent))
+            old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-{os.getpid()}-", dir=out.parent))
             old.rmdir()
             os.replace(out, old)
         os.replace(staging, out)
-        if old is not None:
-            shutil.rmtree(old, ignore_errors=True)
+        staging = None  # the run is in place
     except BaseException as exc:
+        if old is not None and not out.exists():  # stopped between the two moves: the earlier run goes back
+            os.replace(old, out)
         if staging is not None:
             shutil.rmtree(staging, ignore_errors=True)
         if (not isinstance(exc, OSError) or isinstance(exc, RunDirectoryExists)
@@ -149,3 +169,9 @@ def staged_directory(out: str | Path, force: bool = False, marker: str = RUN_MAR
             what += f"; {shutil.disk_usage(out.parent).free / 2 ** 20:.1f} MB free there"
         raise OutputError(f"{out}: cannot write the run ({what}); nothing was written and an earlier run there "
                           "is untouched") from None
+    if old is not None:
+        try:
+            shutil.rmtree(old, ignore_errors=True)
+        except BaseException as exc:  # Ctrl-C while the replaced run goes: this one is whole and in place (what
+            exc.run_in_place = out  # is left of the other goes with the next run there: remove_stale_staging)
+            raise
