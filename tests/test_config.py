@@ -155,6 +155,11 @@ def test_yaml_problems(tmp_path):
         load_config(tmp_path / "nope.yaml")
     with pytest.raises(ConfigError, match="is a directory; expected a YAML config file"):
         load_config(tmp_path)
+    for empty in ("", "# nothing yet\n"):  # read as all defaults, the run would fail far from the file
+        with pytest.raises(ConfigError) as error:
+            load_config(write(tmp_path / "empty.yaml", empty))
+        assert str(error.value).startswith(f"{tmp_path / 'empty.yaml'}: holds no settings (the file is empty or "
+                                           "only comments)")
 
 
 def test_set_overrides(tmp_path, small_config):

@@ -183,13 +183,27 @@ def _twice(lines, name):
     return lines + copy
 
 
+def _piece_uses_a_new_vertex(lines, name):
+    """A vertex added at the end, which the piece's first face uses instead of its first corner."""
+    start, end = _object_lines(lines, name)
+    lines = list(lines)
+    count = sum(line.startswith("v ") for line in lines)
+    face = next(i for i in range(start, end) if lines[i].startswith("f "))
+    parts = lines[face].split()
+    lines[face] = " ".join(["f", str(count + 1), *parts[2:]])
+    return lines + ["v 0 0 0"]
+
+
 def _remove_object(lines, name):
     start, end = _object_lines(lines, name)
     return lines[:start] + lines[end:]
 
 
 @pytest.mark.parametrize("case, frames, edit, words", [
-    ("vertex count", [5], lambda l: l + ["v 0 0 0"], ["frame_0005.obj (frame 5)", "207 vertices", "206"]),
+    ("vertex count", [5], lambda l: l + ["v 0 0 0"], ["frame_0005.obj (frame 5)", "207 vertices", "206",
+                                                      "vertices no piece uses"]),
+    ("piece vertex count", [5], lambda l: _piece_uses_a_new_vertex(l, "source_cell.003"),
+     ["frame_0005.obj (frame 5)", "piece 'source_cell.003' has", "vertices, but", "in the rest pose"]),
     ("renamed piece", [3], lambda l: _rename(l, "source_cell.004", "chunk"), ["frame_0003.obj (frame 3)", "'source_cell.004'", "missing"]),
     ("missing piece", [2], lambda l: _remove_object(l, "source_cell.007"), ["frame_0002.obj", "'source_cell.007'", "missing"]),
     ("nan", [4], lambda l: _set_nan(l, "source_cell.003"), ["frame_0004.obj", "'source_cell.003'", "NaN"]),

@@ -37,7 +37,7 @@ def test_read_mesh_errors(tmp_path):
     (tmp_path / "points.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\n")
     (tmp_path / "open.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
     cases = [("missing.obj", "not found"), ("empty.obj", "empty"), ("mesh.xyz", "unsupported mesh format"),
-             ("nan.obj", "NaN"), ("points.obj", r"expected \(m, 3\) triangles"), ("open.obj", "closed surface")]
+             ("nan.obj", "NaN"), ("points.obj", "no faces found; expected a triangle mesh"), ("open.obj", "closed surface")]
     for name, match in cases:
         with pytest.raises(InputError, match=match) as err:
             read_mesh(tmp_path / name, "input.exterior", closed=True)
@@ -125,6 +125,17 @@ def test_an_unreadable_ply_names_its_file(tmp_path):
     (tmp_path / "bad.ply").write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nend_header\n\x00")
     with pytest.raises(InputError, match="bad.ply"):
         read_mesh(tmp_path / "bad.ply", "input.exterior")
+
+
+@pytest.mark.parametrize("name, content, words", [
+    ("garbage.obj", bytes(np.random.default_rng(5).integers(0, 256, 20000, dtype=np.uint8)), "no vertices found"),
+    ("points.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\n", "no faces found"),
+])
+def test_a_file_with_no_mesh_in_it_says_so_in_words(tmp_path, name, content, words):
+    (tmp_path / name).write_bytes(content)
+    with pytest.raises(InputError) as error:
+        read_mesh(tmp_path / name, "input.fracture")
+    assert f"input.fracture ({tmp_path / name}): {words}; expected a triangle mesh" in str(error.value)
 
 
 def test_ply_written_in_one_piece_is_what_plyfile_writes_and_reads_back(tmp_path):

@@ -662,6 +662,29 @@ def test_a_damaged_usd_is_refused_naming_the_piece_and_what_was_expected(tmp_pat
     assert words in str(error.value)
 
 
+@pytest.mark.parametrize("point, words", [("99", "a face uses point 99 of 4"),
+                                          ("nan", "NaN or infinite coordinates")])
+def test_a_damaged_usd_without_time_samples_names_the_default_time(tmp_path, point, words):
+    from fracture.errors import InputError
+    from fracture.coarse.usd_input import read_usd_frames
+
+    last, corner = ("(0, 0, 1)", point) if point == "99" else (f"({point}, 0, 1)", "3")
+    (tmp_path / "x.usda").write_text(f"""#usda 1.0
+def Xform "World"
+{{
+    def Mesh "pieceA"
+    {{
+        int[] faceVertexCounts = [3, 3, 3, 3]
+        int[] faceVertexIndices = [0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, {corner}]
+        point3f[] points = [(0, 0, 0), (1, 0, 0), (0, 1, 0), {last}]
+    }}
+}}
+""")
+    with pytest.raises(InputError) as error:
+        read_usd_frames(tmp_path / "x.usda")
+    assert f"piece 'pieceA' at the default time: {words}" in str(error.value)
+
+
 def test_a_usd_with_time_samples_and_no_range_reads_every_sampled_frame(tmp_path):
     from fracture.coarse.usd_input import read_usd_frames
 

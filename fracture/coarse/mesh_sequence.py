@@ -301,7 +301,7 @@ def read_sequence(directory: str | Path, pattern: str = "*.obj") -> list[MeshFra
         if frame.names != rest.names:  # the same pieces, written in another order: matched by name
             frame = _in_rest_order(frame, rest, where)
         if len(frame.V) != len(rest.V):
-            raise InputError(f"{where}: {len(frame.V)} vertices, but the rest pose ({rest.path.name}) has {len(rest.V)}")
+            raise _vertex_counts_differ(frame, rest, where)
         for p, name in enumerate(rest.names):
             a, b = rest.polygons[p], frame.polygons[p]
             if (len(a) != len(b) or not np.array_equal([len(x) for x in a], [len(y) for y in b])
@@ -311,13 +311,25 @@ def read_sequence(directory: str | Path, pattern: str = "*.obj") -> list[MeshFra
     return frames
 
 
+def _vertex_counts_differ(frame: MeshFrame, rest: MeshFrame, where: str) -> InputError:
+    """The error of a frame whose vertex count is not the rest pose's (the same pieces): the first piece, by
+    name, whose own count differs, else the vertices that no piece uses."""
+    for name in rest.names:
+        mine, theirs = (len(f.piece_vertices(f.names.index(name))) for f in (frame, rest))
+        if mine != theirs:
+            return InputError(f"{where}: piece {name!r} has {mine} vertices, but {theirs} in the rest pose "
+                              f"({rest.path.name})")
+    return InputError(f"{where}: {len(frame.V)} vertices, but the rest pose ({rest.path.name}) has {len(rest.V)} "
+                      "(the difference in vertices no piece uses)")
+
+
 def _in_rest_order(frame: MeshFrame, rest: MeshFrame, where: str) -> MeshFrame:
     """``frame``, whose pieces are those of ``rest`` in another order, with its pieces and vertices put in
     ``rest``'s order: each piece's vertices (ascending) take the places of the rest pose's vertices of the
     piece of that name (ascending), the vertices no piece uses the places left, in order."""
     where_in = {name: p for p, name in enumerate(frame.names)}
     if len(frame.V) != len(rest.V):
-        raise InputError(f"{where}: {len(frame.V)} vertices, but the rest pose ({rest.path.name}) has {len(rest.V)}")
+        raise _vertex_counts_differ(frame, rest, where)
     to_rest = np.full(len(frame.V), -1, np.int64)
     polygons = []
     for p, name in enumerate(rest.names):

@@ -141,6 +141,7 @@ def read_usd_frames(path: str | Path) -> UsdAnimation:
     cache = UsdGeom.XformCache()
     frames = []
     for t in times:
+        when = "the default time" if t.IsDefault() else f"frame {t.GetValue():g}"  # a stage without time samples
         cache.SetTime(t)
         V, polys, offset = [], [], 0
         placed = {}  # each instancer's instance transforms at this time
@@ -148,13 +149,11 @@ def read_usd_frames(path: str | Path) -> UsdAnimation:
             mesh = UsdGeom.Mesh(p)
             P = mesh.GetPointsAttr().Get(t)
             if P is None:
-                raise InputError(f"{path}: piece {name!r} ({p.GetPath()}) has no points at frame "
-                                 f"{'default' if t.IsDefault() else format(t.GetValue(), 'g')}: expected time "
+                raise InputError(f"{path}: piece {name!r} ({p.GetPath()}) has no points at {when}: expected time "
                                  "samples or a default value of its points")
             P = np.asarray(P, np.float64).reshape(-1, 3)
             if idx.max() >= len(P):
-                raise InputError(f"{path}: piece {name!r} at frame {t.GetValue():g}: a face uses point {idx.max()} "
-                                 f"of {len(P)}")
+                raise InputError(f"{path}: piece {name!r} at {when}: a face uses point {idx.max()} of {len(P)}")
             if instance is None:
                 M = np.asarray(cache.GetLocalToWorldTransform(p), np.float64)  # row vectors: x' = [x 1] M
             else:  # the mesh in its prototype's space, moved by the instance, in the instancer's world
@@ -167,7 +166,7 @@ def read_usd_frames(path: str | Path) -> UsdAnimation:
                     cache.GetLocalToWorldTransform(instancer), np.float64)
             X = P @ M[:3, :3] + M[3, :3]
             if not np.isfinite(X).all():
-                raise InputError(f"{path}: piece {name!r} at frame {t.GetValue():g}: NaN or infinite coordinates")
+                raise InputError(f"{path}: piece {name!r} at {when}: NaN or infinite coordinates")
             V.append(X)
             splits = np.split(idx + offset, np.cumsum(counts)[:-1])
             polys.append(splits)

@@ -35,9 +35,12 @@ def check_triangle_mesh(V, F, what: str, closed: bool = False) -> tuple[np.ndarr
     """
     V = np.asarray(V)
     F = np.asarray(F)
-    if V.ndim != 2 or V.shape[1] != 3 or V.shape[0] == 0:
+    if V.size == 0 or F.size == 0:  # a file of another kind read as a mesh, or one with no surface in it
+        raise InputError(f"{what}: no {'vertices' if V.size == 0 else 'faces'} found; expected a triangle mesh "
+                         "(is it a mesh file of this format?)")
+    if V.ndim != 2 or V.shape[1] != 3:
         raise InputError(f"{what}: vertices have shape {V.shape}, expected (n, 3) with n > 0")
-    if F.ndim != 2 or F.shape[1] != 3 or F.shape[0] == 0:
+    if F.ndim != 2 or F.shape[1] != 3:
         raise InputError(f"{what}: faces have shape {F.shape}, expected (m, 3) triangles with m > 0")
     if not np.issubdtype(V.dtype, np.number) or not np.issubdtype(F.dtype, np.integer):
         raise InputError(f"{what}: expected float vertices and integer faces, got {V.dtype} and {F.dtype}")

@@ -103,8 +103,9 @@ def read_yaml(path: Path) -> dict:
         raise ConfigError(where, "", f"invalid YAML: {problem}") from None
     except UnicodeDecodeError:
         raise ConfigError(str(path), "", "not a UTF-8 text file") from None
-    if data is None:
-        return {}
+    if data is None:  # read as all defaults, a run would fail far from here, not naming the file
+        raise ConfigError(str(path), "", "holds no settings (the file is empty or only comments); expected a mapping "
+                          "of keys (configs/example.yaml, say)")
     if not isinstance(data, dict):
         raise ConfigError(str(path), "", f"top level is a {type(data).__name__}, expected a mapping of keys")
     return data
