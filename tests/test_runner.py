@@ -194,7 +194,9 @@ def test_a_run_killed_between_its_two_moves_gets_its_earlier_run_back(tmp_path):
     (old / "manifest.json").write_text("{}")
     live = tmp_path / f".run.old-{os.getpid()}-efgh"  # a run still going: left alone
     live.mkdir()
-    remove_stale_staging(out)
+    with pytest.raises(RunDirectoryExists):  # a new run there without --force: the earlier one is back first
+        with staged_directory(out):
+            pass
     assert (out / "manifest.json").read_text() == "{}" and not old.exists() and live.exists()
     old.mkdir()  # the new run in place, the old one's remains beside it
     assert remove_stale_staging(out) == [old] and out.is_dir() and not old.exists() and live.exists()

@@ -141,11 +141,12 @@ def staged_directory(out: str | Path, force: bool = False, marker: str = RUN_MAR
     :class:`OutputError` that says so in one line.
     """
     out = Path(out).absolute()
+    with contextlib.suppress(OSError):  # first: a run killed between its two moves gets its earlier run back
+        remove_stale_staging(out)  # (a folder that cannot be read or written is said below)
     check_run_directory(out, force, marker)
     staging = old = None
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
-        remove_stale_staging(out)
         staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-{os.getpid()}-", dir=out.parent))
         os.chmod(staging, 0o777 & ~_umask())  # mkdtemp creates 0700; give the usual directory mode
         yield staging
