@@ -298,7 +298,7 @@ def _main(argv: list[str] | None) -> int:
         print(f"fracref: error: {exc.filename}: {exc.strerror}", file=sys.stderr)
         return 2
     except KeyboardInterrupt as stop:  # ours (Ctrl-C, SIGTERM), or Python's where ours was not set
-        return _say_stopped(getattr(stop, "code", 130), argv)
+        return _say_stopped(getattr(stop, "code", 130), argv, getattr(stop, "run_in_place", None))
 
 
 def _start_view(run_dir: Path, camera: Path | None):

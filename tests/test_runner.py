@@ -225,14 +225,28 @@ def test_a_stop_while_the_replaced_run_is_deleted_says_the_new_one_is_in_place(t
     assert [p.name.split("-")[:2] for p in tmp_path.glob(".run.*")] == [[".run.old", str(os.getpid())]]
 
 
-def test_the_command_line_says_a_stop_after_the_run_was_written(capsys):
-    from fracref.cli import _say_stopped
+def test_the_command_line_says_a_stop_after_the_run_was_written(tmp_path, small_config, capsys, monkeypatch):
+    """Ctrl-C while ``fracref run --force`` deletes the run it replaced: the new run is whole and in place,
+    and the command says so (not "nothing was written")."""
+    import fracture.io.atomic as atomic
+    from fracref.cli import main
 
-    assert _say_stopped(130, ["run", "c.yaml"], Path("/r/run")) == 130
-    assert capsys.readouterr().err == ("fracref: interrupted after the run was written whole to /r/run; what is left "
-                                       "of the run it replaced goes with the next run there\n")
-    _say_stopped(143, ["run", "c.yaml"])
-    assert capsys.readouterr().err == "fracref: terminated; nothing was written\n"
+    args = ["run", str(small_config), "--out", str(tmp_path / "run"), "--until", "coarse", "--quiet", "--force",
+            "--no-cache"]
+    assert main(args) == 0
+    real = shutil.rmtree
+
+    def stopped(path, *a, **k):
+        if ".run.old-" in str(path):
+            raise KeyboardInterrupt
+        return real(path, *a, **k)
+
+    monkeypatch.setattr(atomic.shutil, "rmtree", stopped)
+    capsys.readouterr()
+    assert main(args) == 130
+    assert capsys.readouterr().err == (f"fracref: interrupted after the run was written whole to {tmp_path / 'run'}; "
+                                       "what is left of the run it replaced goes with the next run there\n")
+    assert (tmp_path / "run" / "manifest.json").is_file()
 
 
 def test_a_cache_folder_that_is_a_file_is_refused_by_name(tmp_path, small_config):
