@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from conftest import BUDGETS, CONFIGS, SAMPLE, SCENE_CASES, scene_config
 
+from fracture.refine.engine import SEARCH_STAGE
 from fracture.pipeline import runner
 from fracture.pipeline.config import load_config
 from fracture.mesh.exterior import Exterior
@@ -456,11 +457,12 @@ def _refined_surface_is_clean(out, manifest: dict, name: str) -> None:
     assert stats["self_intersecting_pairs"] == 0
     assert stats["max_boundary_distance"] < 1e-6
     assert "seconds" in manifest["stages"]["refine"]
-    # no accepted step raises the functional the flow minimises
+    # no accepted step raises the functional the flow minimises (the search's entries are no flow steps: its
+    # surface, or a polish given back for it, is chosen on dense samples)
     E, before = np.array(stats["functional"]), np.array(stats["functional_before_step"])
-    assert (E <= before + tol.functional_rise * np.abs(before)).all()
-    assert stats["stopped_because"] == "settled" or stats["stopped_because"].startswith(("iterations",
-                                                                                         "stage iterations"))
+    step = np.array(stats["stage"]) != SEARCH_STAGE
+    assert (E <= before + tol.functional_rise * np.abs(before))[step].all()
+    assert stats["stopped_because"].startswith(("settled", "iterations", "stage iterations"))
 
     V, F, _, face = read_ply(out / "refined" / "fracture_surface.ply")
     assert self_intersections(V, F) == 0  # recounted from the file
