@@ -464,14 +464,10 @@ class Refiner:
         if result.surface is None:
             log.tick("search", clock)
             return result
-        self.mesh.replace(result.surface)
         self.searched = True
         self._searched = copy.deepcopy(result.surface)  # the polish edits the mesh's arrays in place
-        self.state = self.onb.state = VertexState.empty(len(self.mesh.V))
-        self._ordered = 0
-        self.onb.off_b = np.zeros(0, np.int64)
+        self._take(result.surface)
         self.begin_stage(*self.stages()[0])
-        self.onb.boundary = self.onb.vertices()
         # both on the polish's field (level 0): the coarse surface's functional there, and the new one's;
         # how far the surface went: the new vertices' distances to the coarse surface
         travel = result.travel
@@ -579,16 +575,21 @@ class Refiner:
             self._keep_searched(callback)
         return self.log
 
+    def _take(self, surface: FractureSurface) -> None:
+        """Replace the mesh by ``surface`` (in place) and start its per-vertex state and boundary afresh."""
+        self.mesh.replace(surface)
+        self.state = self.onb.state = VertexState.empty(len(self.mesh.V))
+        self._ordered = 0
+        self.onb.off_b = np.zeros(0, np.int64)
+        self.onb.boundary = self.onb.vertices()
+
     def _keep_searched(self, callback=None) -> None:
         """The search's surface again, as the log's last entry (its stage the search's, ``callback`` called):
         the polish raised the functional on dense samples, on which the search's surface was chosen (module
         notes: a flip across a crease of a valley floor)."""
         log, polished = self.log, self.log.sampled[1]
         before = self.functional()
-        self.mesh.replace(self._searched)
-        self.state = self.onb.state = VertexState.empty(len(self.mesh.V))
-        self._ordered = 0
-        self.onb.boundary = self.onb.vertices()
+        self._take(self._searched)
         self._record_step(before, self.functional(), 0.0)
         self._record(0.0, self.onb.error(self.onb.boundary), stage=SEARCH_STAGE)
         log.sampled = (log.sampled[0], log.search.sampled[1])
