@@ -380,6 +380,27 @@ def test_moves_that_make_triangles_cross_are_taken_back_and_the_others_kept():
     np.testing.assert_array_equal(out[free], X2[free])
 
 
+@pytest.mark.slow
+def test_a_cut_pressed_on_a_quarter_of_its_weight_is_searched_again(monkeypatch):
+    """A weak sheet turned 50 degrees from the cut, searched with a band of 20 cells: one search leaves the
+    sheet's far ends in the pieces' cores, its cut lying against them on under half but over a quarter of its
+    weight; a second search runs by itself from its surface, finds the sheet whole and ends lower."""
+    import fracture.refine.search as search
+
+    case = weak_sheet_case(TURNED, 4.0, angle=50.0)
+
+    def within(r):
+        return np.mean(np.abs(case.distance_to_sheet(area_samples(r.mesh.V, r.mesh.F))) < 1.0)
+
+    r, auto = _refine(case, band=20.0, core=0.5, max_triangles=20000)
+    monkeypatch.setattr(search, "_PRESSED", 2.0)  # no round by itself
+    r1, once = _refine(case, band=20.0, core=0.5, max_triangles=20000)
+    assert 0.25 <= once.search.pressed < 0.5
+    assert within(r1) < 0.97 and within(r) > 0.995
+    assert any("2 rounds" in note for note in auto.search.notes)
+    assert auto.sampled[1] < once.sampled[1]
+
+
 def test_a_second_round_reaches_a_tilted_sheet_beyond_the_first_rounds_cores(monkeypatch):
     """A weak sheet tilted up to 14.6 cells from a flat cut: one search leaves its far end beyond the pieces'
     cores (above the flow alone), its cut lying against them on over half its weight; so a second search

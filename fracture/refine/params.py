@@ -48,8 +48,8 @@ class RefineParams(Section):
     search_rounds: int = integer(1, 1, 4, "searches in all, each from the last one's surface while it lowers the "
                                  "functional: a crack may then travel several bands, and the pieces' cores shrink "
                                  "with them (each round costs a search); one more runs by itself, up to 4, while "
-                                 "the last one's cut lies against its band's limits on half its weight or more (a "
-                                 "tilted weak sheet beyond the first search's cores)")
+                                 "the last one's cut lies against its band's limits on a quarter of its weight or "
+                                 "more (a tilted weak sheet beyond the first search's cores)")
     polish_stages: int = integer(0, 0, 8, "after the search, the flow polishes its surface on this many stages of the "
                                  "coarse-to-fine schedule before the last one, on level 0 (0: level 0 alone, which "
                                  "keeps the thin weak layers the cut found, a brick wall's; 1: the surface also settles "
