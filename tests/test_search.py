@@ -88,6 +88,16 @@ def test_a_polish_that_raises_the_functional_on_dense_samples_gives_the_searched
     assert len(searched.functional) == len(searched.stage) == len(searched.triangles)
 
 
+def test_the_log_keeps_the_searched_surface_as_the_search_made_it():
+    """The polish edits the mesh's arrays in place; the log's search result keeps its own surface whole: its
+    triangles name only its own vertices, as many as the log's search entry counts."""
+    case = weak_sheet_case("flat", 4.0)
+    r, log = _refine(case, max_triangles=12000)
+    s = log.search.surface
+    assert log.stage[1] == SEARCH_STAGE and len(r.mesh.F) != len(s.F)  # the polish changed the mesh
+    assert s.F.max() < len(s.V) and len(s.F) == len(s.sides) == log.triangles[1]
+
+
 @pytest.mark.parametrize("kind", ["flat", "curved"])
 def test_the_searched_and_polished_surface_does_not_cross_itself(kind):
     case = weak_sheet_case(kind, 4.0)

@@ -221,7 +221,6 @@ class Refiner:
         self.stop_collisions = collisions
         self.search = default_search(params, grain=grain) if search == "default" else search
         self.searched = False  # the search's surface replaced the coarse one
-        self._searched: FractureSurface | None = None  # a copy of it, kept if the polish makes it worse
         self.h = float(np.min(pyramid.grid.spacing))
         self.log = IterationLog()
         self.B = Exterior(BV, BF)  # its AABB tree, built on the first query, serves every iteration
@@ -465,7 +464,6 @@ class Refiner:
             log.tick("search", clock)
             return result
         self.searched = True
-        self._searched = copy.deepcopy(result.surface)  # the polish edits the mesh's arrays in place
         self._take(result.surface)
         self.begin_stage(*self.stages()[0])
         # both on the polish's field (level 0): the coarse surface's functional there, and the new one's;
@@ -571,13 +569,14 @@ class Refiner:
         offset = self.shift(0, 1)  # the last stage's
         log.sampled = tuple(sampled_energy(V, F, self.pyramid.value, self.h, offset, self.grain)
                             for V, F in (coarse, (self.mesh.V, self.mesh.F)))
-        if self._searched is not None and 0.0 < log.search.sampled[1] < log.sampled[1]:  # 0: not measured
+        if self.searched and 0.0 < log.search.sampled[1] < log.sampled[1]:  # 0: not measured
             self._keep_searched(callback)
         return self.log
 
     def _take(self, surface: FractureSurface) -> None:
-        """Replace the mesh by ``surface`` (in place) and start its per-vertex state and boundary afresh."""
-        self.mesh.replace(surface)
+        """Replace the mesh by a copy of ``surface`` (in place; the iterations edit the mesh's arrays in place,
+        and the log keeps the search's surface as it was) and start its per-vertex state and boundary afresh."""
+        self.mesh.replace(copy.deepcopy(surface))
         self.state = self.onb.state = VertexState.empty(len(self.mesh.V))
         self._ordered = 0
         self.onb.off_b = np.zeros(0, np.int64)
@@ -589,7 +588,7 @@ class Refiner:
         notes: a flip across a crease of a valley floor)."""
         log, polished = self.log, self.log.sampled[1]
         before = self.functional()
-        self._take(self._searched)
+        self._take(log.search.surface)
         self._record_step(before, self.functional(), 0.0)
         self._record(0.0, self.onb.error(self.onb.boundary), stage=SEARCH_STAGE)
         log.sampled = (log.sampled[0], log.search.sampled[1])
