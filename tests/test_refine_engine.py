@@ -392,3 +392,50 @@ def test_the_polish_of_a_searched_surface_settles_at_its_first_iteration_that_no
     assert len(polish) == 1 and log.retries[2] == 4 and log.splits[2] > 0  # one iteration, four attempts
     assert log.stop == "settled"
     assert np.allclose(mesh.V[:, 0], 0.52)
+
+
+def _held_tilted_sheet():
+    """A weak sheet tilted from a flat cut 4 voxels off, with a stress term that holds the cut (psi lowered by
+    exp(-d / 2 cells) at distance d from it, as deep as the sheet): the coarser stages' blurred fields carry
+    the surface off the cone's valley, a fraction of a cell wide at level 0, toward the sheet."""
+    from fields.stress import distance_to_surface
+    from fracture.coarse.scenes.weak_sheets import weak_sheet_case
+
+    case = weak_sheet_case("tilted", 4.0)
+    d = distance_to_surface(case.grid.points(), case.cut_V, case.cut_F).reshape(case.grid.shape)
+    pyramid = StrengthPyramid(case.grid, case.zeta - np.exp(-d / (2.0 * case.h)), levels=5, sigma=1.0)
+    mesh = FractureSurface.from_coarse(case.cut_V, case.cut_F, np.tile([0, 1], (len(case.cut_F), 1)))
+    return Refiner(mesh, pyramid, case.BV, case.BF, RefineParams(search="none", max_triangles=12000),
+                   np.random.default_rng(0))
+
+
+def test_a_last_stage_that_ends_above_the_coarse_surface_runs_again_from_it():
+    r = _held_tilted_sheet()
+    log = r.run()
+    ended, start, again = r.again
+    assert ended > 1.05 * start and again < 1.01 * start  # 0.901 and 0.8257 against 0.825
+    assert "and ran again from it" in log.stop and log.stop.endswith(", kept")
+    assert abs(log.sampled[1] - again) < 1e-3 * again
+    assert len(log.functional) == len(log.stage) == len(log.triangles) == len(log.tau)
+    assert log.triangles[-1] == len(r.mesh.F)
+
+
+def test_a_last_stage_run_again_that_ends_higher_gives_the_first_end_back(monkeypatch):
+    """The stage run again is made to end far above (its surface moved two cells off): the first end is the
+    result, and the log's last entry."""
+    r = _held_tilted_sheet()
+    calls, real = [], Refiner._stage
+
+    def stage(self, iterations, done, callback=None):
+        out = real(self, iterations, done, callback)
+        calls.append(len(self.mesh.F))
+        if self.again is None and len(calls) == len(self.stages()) + 1:  # the stage run again
+            self.mesh.V = self.mesh.V + [2.0 * self.h, 0.0, 0.0]
+        return out
+
+    monkeypatch.setattr(Refiner, "_stage", stage)
+    log = r.run()
+    ended, start, again = r.again
+    assert again > ended > start and log.stop.endswith("not lower; the first kept")
+    assert len(r.mesh.F) == calls[-2] == log.triangles[-1]  # the first end's triangles
+    assert abs(log.sampled[1] - ended) < 1e-3 * ended

@@ -12,7 +12,9 @@ from fields.params import Section, choice, integer, number
 class RefineParams(Section):
     """Thresholds of the refinement (Sections 4.3, 4.4); see each field's description."""
 
-    iterations: int = integer(60, 0, 10000, "largest number of iterations of the flow, all stages")
+    iterations: int = integer(60, 0, 10000, "largest number of iterations of the flow, all stages (a last stage "
+                              "that ends above the coarse surface runs again from it, with stage_iterations of its "
+                              "own)")
     stage_iterations: int = integer(15, 1, 10000, "largest number of iterations of one stage of the coarse-to-fine "
                                     "schedule")
     coarse_levels: int = integer(2, 1, 8, "every stage follows the mean of this many consecutive pyramid levels: the "
