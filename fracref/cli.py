@@ -15,8 +15,7 @@ import os
 import sys
 from pathlib import Path
 
-from fracture.errors import ConfigError
-from fracture.io import layout
+from fracture.process import environment_problem  # imports nothing that loads numba (it reads the environment)
 
 
 # commands that refine or load refinement results (the others only read configs)
@@ -135,17 +134,31 @@ def cache_from_args(args):
 
 
 def checked_cache_dir(args) -> Path | None:
-    """``--cache-dir``, refused when a file stands where its folder would be (a cache that cannot be written is
-    otherwise only said in the manifest: asked for by name, it is said here)."""
+    """``--cache-dir``; the cache folder a user named (``--cache-dir`` or ``$FRACREF_CACHE_DIR``) is refused when
+    a file stands where it would be or it cannot be written (a cache that cannot be written is otherwise only
+    said in the manifest: asked for by name, it is said here), and so is a ``$FRACREF_CACHE_MAX_GB`` that is no
+    size."""
+    import os
+
     from fracture.errors import InputError
+    from fracture.pipeline.cache import default_max_bytes
 
     d = args.cache_dir
-    if d is None or args.no_cache:
+    if args.no_cache:
         return d
-    blocked = next((p for p in (d, *d.parents) if p.exists() and not p.is_dir()), None)
+    default_max_bytes()
+    named, by = (d, "--cache-dir") if d is not None else (os.environ.get("FRACREF_CACHE_DIR"), "FRACREF_CACHE_DIR=")
+    if not named:
+        return d
+    named = Path(named)
+    blocked = next((p for p in (named, *named.parents) if p.exists() and not p.is_dir()), None)
     if blocked is not None:
-        raise InputError(f"--cache-dir {d}: {blocked} is a file, not a folder; expected a folder for the stage "
-                         "cache (or --no-cache)")
+        raise InputError(f"{by}{'' if by.endswith('=') else ' '}{named}: {blocked} is a file, not a folder; expected "
+                         "a folder for the stage cache (or --no-cache)")
+    existing = next((p for p in (named, *named.parents) if p.exists()), None)
+    if existing is not None and not os.access(existing, os.W_OK | os.X_OK):
+        raise InputError(f"{by}{'' if by.endswith('=') else ' '}{named}: {existing} cannot be written; expected a "
+                         "folder the stage cache can be written to (or --no-cache)")
     return d
 
 
@@ -194,6 +207,10 @@ def main(argv: list[str] | None = None) -> int:
     """The command line; Ctrl-C and SIGTERM stop it with one line (the previous handlers are restored)."""
     import signal
 
+    problem = environment_problem()  # before anything loads numba, which refuses it with a traceback
+    if problem is not None:
+        print(f"fracref: error: {problem}", file=sys.stderr)
+        return 2
     signals = [signal.SIGINT, signal.SIGTERM] if _on_main_thread() else []
     previous = [signal.signal(s, _stop) for s in signals]
     _stopped_by.clear()
@@ -239,12 +256,13 @@ def _main(argv: list[str] | None) -> int:
     from fracture.process import prepare_process
     from fracture.io.atomic import OutputError, RunDirectoryExists
     from fracture.pipeline.config import dump_config, load_config
-    from fracture.errors import InputError, ResultError, StageError
+    from fracture.errors import ConfigError, InputError, ResultError, StageError
+    from fracture.io import layout
 
-    if args.command in _COMPUTING:
-        prepare_process()  # only where kernels run: config, stages and explain need none of it
     logging.basicConfig(level=args.log_level.upper(), format="%(name)s: %(message)s", stream=sys.stderr)
     try:
+        if args.command in _COMPUTING:
+            prepare_process()  # only where kernels run: config, stages and explain need none of it
         if args.command == "stages":
             print("\n".join(runner.available_stages()))
             return 0
@@ -306,6 +324,8 @@ def _start_view(run_dir: Path, camera: Path | None):
     from viewer.data import RunData
     from viewer.state import from_section, read_view_file
 
+    from fracture.io import layout
+
     if camera is not None:
         return read_view_file(camera)
     run = RunData(run_dir)
@@ -345,6 +365,7 @@ def _render(args) -> int:
 
 
 def _sweep(args) -> int:
+    from fracture.errors import ConfigError
     from fracture.pipeline import runner
     from fracture.pipeline.config import load_config
     from fracture.pipeline.sweep import finished, parse_grid, run_sweep

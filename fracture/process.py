@@ -47,9 +47,34 @@ def cores() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
+# The threading layers numba knows (NUMBA_THREADING_LAYER).
+_LAYERS = ("default", "safe", "threadsafe", "forksafe", "omp", "tbb", "workqueue")
+
+
+def environment_problem() -> str | None:
+    """What numba would refuse with a traceback in the environment (``NUMBA_NUM_THREADS``: a whole number of
+    threads from 1; ``NUMBA_THREADING_LAYER``: a layer it knows), said in one line, or None. It reads the first
+    when it is imported: the command line asks before it imports anything that imports numba (this module
+    imports nothing of the package)."""
+    count = os.environ.get("NUMBA_NUM_THREADS")
+    if count is not None and not (count.strip().isdigit() and int(count) >= 1):
+        return f"NUMBA_NUM_THREADS={count!r}: expected a whole number of threads from 1 (or unset: one per core)"
+    layer = os.environ.get("NUMBA_THREADING_LAYER")
+    if layer is not None and layer.strip().lower() not in _LAYERS:
+        return (f"NUMBA_THREADING_LAYER={layer!r}: expected one of {', '.join(_LAYERS)} (or unset: "
+                f"{THREADING_LAYER})")
+    return None
+
+
 def prepare_process(*, allocator: bool = True, threads: int | None = None) -> None:
     """Clear stale compiled kernels, choose the parallel kernels' threading layer and threads (default:
-    one per core the process may run on) and (with ``allocator``) tell glibc to keep freed memory."""
+    one per core the process may run on) and (with ``allocator``) tell glibc to keep freed memory. An
+    InputError (:func:`environment_problem`) when the environment asks numba for what it cannot do."""
+    problem = environment_problem()
+    if problem is not None:
+        from fracture.errors import InputError
+
+        raise InputError(problem)
     import numba
 
     from fracture.allocator import keep_freed_memory

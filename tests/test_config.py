@@ -162,6 +162,30 @@ def test_yaml_problems(tmp_path):
                                            "only comments)")
 
 
+def test_yaml_that_is_legal_but_no_config_is_said_in_one_line(tmp_path):
+    message, path = _error(tmp_path, "? [a, b]\n: 1\n")  # a complex key
+    assert message == f"{path}:1: invalid YAML: a key is a list; expected a name"
+    message, path = _error(tmp_path, "seed: " + "[" * 5000 + "]" * 5000 + "\n")  # PyYAML's parser recurses
+    assert message == f"{path}: nests values too deeply to be read; expected a config"
+    message, path = _error(tmp_path, "name: &x [*x]\n")  # a value that holds itself
+    assert message.startswith(f"{path}:1: invalid YAML: a value holds itself through an alias")
+    message, path = _error(tmp_path, "defaults: [/]\n")
+    assert message.startswith(f"{path}: defaults: got '/', expected the path of a config file or a preset's name")
+    # a merge key is YAML, and a key it brings may be given again beside it (not twice by hand)
+    merged = "strength:\n  layers:\n    - &base {kind: marble, weight: 0.5}\n    - {<<: *base, weight: 0.25}\n"
+    cfg = load_config(write(tmp_path / "merged.yaml", merged))
+    assert [(layer.kind, layer.weight) for layer in cfg.strength.layers] == [("marble", 0.5), ("marble", 0.25)]
+    message, _ = _error(tmp_path, merged.replace("weight: 0.25}", "weight: 0.25, weight: 0.3}"))
+    assert "key 'weight' given twice" in message
+
+
+def test_a_preset_name_is_the_whole_name(tmp_path):
+    """``strength/bricks.old`` is not the preset ``strength/bricks`` (a suffix taken for an extension)."""
+    message, _ = _error(tmp_path, "defaults: [strength/bricks.old]\n")
+    assert "included config 'strength/bricks.old' not found" in message
+    assert load_config(write(tmp_path / "ok.yaml", "defaults: [strength/bricks]\n")).strength.layers
+
+
 def test_set_overrides(tmp_path, small_config):
     cfg = load_config(small_config, ["psi.stress_weight=3", "grid.resolution=[8, 9, 10]",
                                      "strength.layers[0].grain_frequency=2.5", "name=other"])

@@ -86,6 +86,17 @@ def test_an_inside_out_exterior_is_turned_and_gives_the_same_pieces(tmp_path):
     np.testing.assert_array_equal(turned.sides, right.sides)
 
 
+def test_an_exterior_of_two_overlapping_solids_is_refused_naming_two_faces(tmp_path):
+    """Two cubes that overlap (one surface crossing itself): one would be taken for a cavity of the other, and
+    the object would hold no volume to cut."""
+    AV, AF = box([0, 0, 0], [1, 1, 1], (3, 3, 3))
+    BV, BF = box([0.5, 0.5, 0.5], [1.5, 1.5, 1.5], (3, 3, 3))
+    with pytest.raises(InputError, match=r"input\.exterior \(.*\): the surface crosses or touches itself \(\d+ pairs "
+                                         r"of faces, first faces \d+ and \d+, counted from 1\); expected the closed "
+                                         r"surface of one solid"):
+        coarse_from_meshes(_meshes(tmp_path, (np.r_[AV, BV], np.r_[AF, BF + len(AV)]), _plane(0.43, 0.0, 1.0)))
+
+
 def test_a_hollow_exterior_keeps_its_cavity_inward():
     OV, OF = box([0, 0, 0], [1, 1, 1], (2, 2, 2))
     IV, IF = box([0.3, 0.3, 0.3], [0.7, 0.7, 0.7])

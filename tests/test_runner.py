@@ -260,6 +260,28 @@ def test_a_cache_folder_that_is_a_file_is_refused_by_name(tmp_path, small_config
         assert not (tmp_path / "r").exists()
 
 
+@pytest.mark.parametrize("name, value, words", [
+    ("FRACREF_CACHE_DIR", "{blocker}", "FRACREF_CACHE_DIR={blocker}: {blocker} is a file, not a folder"),
+    ("FRACREF_CACHE_MAX_GB", "abc", "FRACREF_CACHE_MAX_GB='abc': expected the stage cache's size in gigabytes"),
+    ("FRACREF_CACHE_MAX_GB", "nan", "FRACREF_CACHE_MAX_GB='nan': expected the stage cache's size in gigabytes"),
+    ("NUMBA_NUM_THREADS", "0", "NUMBA_NUM_THREADS='0': expected a whole number of threads from 1"),
+    ("NUMBA_THREADING_LAYER", "bogus", "NUMBA_THREADING_LAYER='bogus': expected one of default, safe"),
+])
+def test_a_setting_of_the_environment_that_cannot_be_used_is_refused_by_name(tmp_path, small_config, name, value,
+                                                                              words):
+    """The cache a user named in the environment, as --cache-dir is; numba's settings, which numba refuses with a
+    traceback when it is imported (so the command line asks before it imports numba)."""
+    blocker = tmp_path / "afile.txt"
+    blocker.write_text("x")
+    env = {**os.environ, name: value.format(blocker=blocker)}
+    out = subprocess.run([sys.executable, "-m", "fracref", "run", str(small_config), "--out", str(tmp_path / "r"),
+                          "--until", "coarse"], cwd=REPO, capture_output=True, text=True, env=env)
+    assert out.returncode == 2 and "Traceback" not in out.stderr, out.stderr
+    assert out.stderr.startswith(f"fracref: error: {words.format(blocker=blocker)}"), out.stderr
+    assert len(out.stderr.strip().splitlines()) == 1, out.stderr
+    assert not (tmp_path / "r").exists()
+
+
 def test_a_full_disk_leaves_nothing_and_says_so(tmp_path):
     out = tmp_path / "run"
     with pytest.raises(OutputError, match=r"cannot write the run \(.*No space left on device.*\); nothing was written"):

@@ -29,6 +29,20 @@ def test_fan_triangulates_polygons():
     assert fan([])[0].shape == (0, 3)
 
 
+def test_a_polygon_with_a_corner_on_a_straight_edge_is_fanned_without_a_flat_triangle():
+    """An exporter's pentagon whose fifth corner lies on the edge from its first to its fourth: fanned from the
+    first corner one triangle has no area; fanned from where none is flat, the pentagon's area is kept."""
+    V = np.array([[0, 0, 0], [0, 1, 0], [1, 1, 0], [1, 0, 0], [0.5, 0, 0]], float)
+    pentagon = np.array([0, 1, 2, 3, 4])
+    T = fan([pentagon])[0]
+    area = lambda T: 0.5 * np.linalg.norm(np.cross(V[T[:, 1]] - V[T[:, 0]], V[T[:, 2]] - V[T[:, 0]]), axis=1)  # noqa: E731
+    assert area(T).min() == 0.0  # the plain fan
+    T, owner = fan([np.array([0, 1, 2]), pentagon], V)
+    assert np.array_equal(T[0], [0, 1, 2]) and np.array_equal(owner, [0, 1, 1, 1])
+    assert area(T[1:]).min() > 0.1 and area(T[1:]).sum() == pytest.approx(1.0)
+    assert sorted(map(sorted, T[1:].tolist())) != sorted(map(sorted, fan([pentagon])[0].tolist()))
+
+
 def test_orient_sheets_makes_each_sheet_agree_and_leaves_junctions_alone():
     rng = np.random.default_rng(3)
     # three sheets meeting at the line x = y = 0 (a Y junction), each a 4 x 4 grid

@@ -260,6 +260,7 @@ def test_fracref_export_refuses_what_is_not_a_finished_run(tmp_path, capsys):
     ("manifest.json", b""),
     ("animation/transfer.npz", b"PK\x03\x04 cut short"),
     ("coarse/components.json", b"[1, 2"),
+    ("manifest.json", b"[]"),
 ])
 def test_fracref_export_of_a_damaged_run_names_the_file(cube8_run, tmp_path, capsys, rel, damage):
     import shutil
@@ -271,7 +272,8 @@ def test_fracref_export_of_a_damaged_run_names_the_file(cube8_run, tmp_path, cap
     (run / rel).write_bytes(damage)
     assert main(["export", str(run), "--out", str(tmp_path / "x.usdc")]) == 2
     err = capsys.readouterr().err
-    assert f"cannot export, {rel} cannot be read (" in err and "Traceback" not in err, err
+    assert (f"cannot export, {rel} cannot be read (" in err or f"{rel}: holds a JSON list; expected a run's manifest"
+            in err) and "Traceback" not in err, err
     assert len(err.strip().splitlines()) == 1 and not (tmp_path / "x.usdc").exists()
 
 

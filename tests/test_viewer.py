@@ -121,6 +121,26 @@ def test_a_damaged_run_file_is_named_in_one_line_and_the_render_leaves_nothing(r
     assert not (tmp_path / "renders").exists()
 
 
+@pytest.mark.parametrize("rel, content, words", [
+    ("fields/psi.npy", None, "fields/psi.npy holds values of shape (3, 3), expected the grid's"),
+    ("manifest.json", "[]", "manifest.json: holds a JSON list; expected a run's manifest"),
+])
+def test_a_run_file_of_another_kind_is_named_in_one_line_and_the_render_leaves_nothing(run_dir, tmp_path, rel,
+                                                                                        content, words):
+    """A run's file whole but not what the run wrote (another run's field, a manifest that is a list)."""
+    run = tmp_path / "run"
+    shutil.copytree(run_dir, run)
+    if content is None:
+        np.save(run / rel, np.zeros((3, 3)))
+    else:
+        (run / rel).write_text(content)
+    out = tmp_path / "renders" / "deep"
+    r = _cli(["render", str(run), "--what", "slices", "--width", "160", "--height", "120", "--quiet", "--out", str(out)])
+    assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
+    assert words in r.stderr.strip().splitlines()[-1], r.stderr
+    assert not (tmp_path / "renders").exists()
+
+
 def test_render_without_what_renders_what_a_run_stopped_early_has(small_config, tmp_path):
     coarse, refined = tmp_path / "coarse", tmp_path / "refined"
     runner.run(load_config(small_config), coarse, until="coarse", progress=False)

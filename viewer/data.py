@@ -70,7 +70,7 @@ class RunData:
             raise InputError(f"{self.dir}: not a complete run directory (no manifest.json; "
                              f"a run writes it last, so the run failed or is still going)")
         try:
-            self.manifest = json.loads(manifest.read_text(encoding="utf-8"))
+            self.manifest = layout.manifest_object(json.loads(manifest.read_text(encoding="utf-8")), manifest)
         except json.JSONDecodeError as exc:
             raise InputError(f"{manifest}: not valid JSON ({exc})") from None
         self._memo: dict = {}
@@ -153,6 +153,10 @@ class RunData:
                 values = np.asarray(self._pyramid[level])
             else:
                 values = self._read(layout.field(name), f"the {name} field", np.load)
+            if values.shape != tuple(self.grid.shape):  # a file of another run, or written in part
+                raise InputError(f"{self.dir}: {layout.field(name) if not level else layout.PYRAMID} holds values of "
+                                 f"shape {values.shape}, expected the grid's {tuple(self.grid.shape)}; run the config "
+                                 "again to write it whole")
             self._memo[name, level] = values
         return self._memo[name, level]
 

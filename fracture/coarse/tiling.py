@@ -204,7 +204,7 @@ def apart_from_the_rest(pieces: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarr
 def _piece_triangles(V: np.ndarray, polygons: list[list[np.ndarray]]) -> list[tuple[np.ndarray, np.ndarray]]:
     out = []
     for polys in polygons:
-        T, _ = fan([np.asarray(f) for f in polys])
+        T, _ = fan([np.asarray(f) for f in polys], V)
         used, inv = np.unique(T, return_inverse=True)
         out.append((np.ascontiguousarray(V[used], np.float64), np.ascontiguousarray(inv.reshape(-1, 3), np.int64)))
     return out

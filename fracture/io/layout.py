@@ -84,7 +84,16 @@ def reading(run: str | Path, rel: str, doing: str):
 
 
 def read_manifest(run: str | Path) -> dict:
-    return json.loads((Path(run) / MANIFEST).read_text(encoding="utf-8"))
+    return manifest_object(json.loads((Path(run) / MANIFEST).read_text(encoding="utf-8")), Path(run) / MANIFEST)
+
+
+def manifest_object(data, path: str | Path) -> dict:
+    """``data`` read from the manifest at ``path``, if it is a JSON object (a run writes one); else an
+    InputError."""
+    if not isinstance(data, dict):
+        raise InputError(f"{path}: holds a JSON {type(data).__name__}; expected a run's manifest, a JSON object (run "
+                         "the config again to write it whole)")
+    return data
 
 
 def read_grid(run: str | Path):

@@ -112,7 +112,7 @@ def read_mesh(path: str | Path, what: str | None = None, closed: bool = False) -
         V, F = read_obj(path, what)
     elif suffix == ".ply":
         V, polys = read_ply_polygons(path, what)
-        F = fan(polys)[0]
+        F = fan(polys, V)[0]
     else:
         try:
             V, F = igl.read_triangle_mesh(str(path))
@@ -208,4 +208,4 @@ def read_obj_objects(path: Path, what: str | None = None) -> tuple[list[str], np
 def read_obj(path: Path, what: str) -> tuple[np.ndarray, np.ndarray]:
     """Vertices and fan-triangulated faces of all objects of an OBJ file."""
     _, V, polys = read_obj_objects(path, what)
-    return V, fan([f for obj in polys for f in obj])[0]
+    return V, fan([f for obj in polys for f in obj], V)[0]

@@ -196,11 +196,19 @@ def signed_volume(V: np.ndarray, F: np.ndarray) -> float:
     return float(np.einsum("ij,ij->i", A, np.cross(B, C)).sum() / 6.0)
 
 
-def fan(polygons: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+# A fan triangle whose area is below this fraction of its longest edge squared has no area (a corner on a
+# straight edge between its neighbours).
+_FLAT_FAN = 1e-9
+
+
+def fan(polygons: list[np.ndarray], V: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Fan triangles of polygons ``(t, 3)`` and the polygon each came from ``(t,)``.
 
     Triangles come polygon by polygon, in order. Polygons of one size are
-    fanned together (no loop over polygons).
+    fanned together (no loop over polygons). With the points ``V``, a polygon
+    whose fan from its first corner has a triangle of no area (a corner on a
+    straight edge, as an exporter leaves where a neighbour's edge ends on it)
+    is fanned from the corner whose fan's flattest triangle is the least flat.
     """
     if not polygons:
         return np.zeros((0, 3), np.int64), np.zeros(0, np.int64)
@@ -212,7 +220,22 @@ def fan(polygons: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     j = np.arange(len(owner)) - np.repeat(np.cumsum(n_tri) - n_tri, n_tri)  # triangle index within its polygon
     first = start[owner]
     tris = np.stack([flat[first], flat[first + j + 1], flat[first + j + 2]], 1)
+    if V is not None and (sizes > 3).any():
+        V = np.asarray(V, np.float64)
+        if tris.min() >= 0 and tris.max() < len(V):  # indices out of range are the readers' to refuse
+            for k in np.unique(owner[(_flatness(V, tris) < _FLAT_FAN) & (sizes[owner] > 3)]):
+                turns = [np.roll(np.asarray(polygons[k], np.int64), -r) for r in range(sizes[k])]
+                fans = [np.stack([q[np.zeros(len(q) - 2, np.int64)], q[1:-1], q[2:]], 1) for q in turns]
+                tris[owner == k] = max(fans, key=lambda t: _flatness(V, t).min())
     return tris, owner
+
+
+def _flatness(V: np.ndarray, T: np.ndarray) -> np.ndarray:
+    """Per triangle ``T`` of ``V``: twice its area over its longest edge squared (0: no area)."""
+    P = V[T]
+    e = np.stack([P[:, 1] - P[:, 0], P[:, 2] - P[:, 1], P[:, 0] - P[:, 2]], 1)
+    longest = np.max(np.einsum("tkc,tkc->tk", e, e), axis=1)
+    return np.linalg.norm(np.cross(e[:, 0], -e[:, 2]), axis=1) / np.maximum(longest, np.finfo(float).tiny)
 
 
 def weld(P: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:

@@ -67,8 +67,18 @@ def default_root() -> Path:
 
 
 def default_max_bytes() -> int:
-    """``$FRACREF_CACHE_MAX_GB`` (default 5) in bytes."""
-    return int(float(os.environ.get("FRACREF_CACHE_MAX_GB", DEFAULT_MAX_GB)) * 1e9)
+    """``$FRACREF_CACHE_MAX_GB`` (default 5) in bytes; an InputError when it is not a number of gigabytes."""
+    from fracture.errors import InputError
+
+    text = os.environ.get("FRACREF_CACHE_MAX_GB", str(DEFAULT_MAX_GB))
+    try:
+        gb = float(text)
+    except ValueError:
+        gb = float("nan")
+    if not 0.0 <= gb < float("inf"):
+        raise InputError(f"FRACREF_CACHE_MAX_GB={text!r}: expected the stage cache's size in gigabytes, a number "
+                         f">= 0 (default {DEFAULT_MAX_GB:g})")
+    return int(gb * 1e9)
 
 
 def source_files() -> tuple[Path, list[Path]]:

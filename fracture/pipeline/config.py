@@ -37,7 +37,14 @@ class _UniqueKeyLoader(yaml.SafeLoader):
     def construct_mapping(self, node, deep=False):
         seen = {}
         for key_node, _ in node.value:
+            if key_node.tag == "tag:yaml.org,2002:merge":  # "<<: *base": its keys may be given again here
+                continue
             key = self.construct_object(key_node, deep=deep)
+            try:
+                hash(key)
+            except TypeError:  # "? [a, b]": YAML allows it, a config has names
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"a key is a {type(key).__name__}; expected a name", key_node.start_mark) from None
             if key in seen:
                 raise yaml.constructor.ConstructorError(
                     None, None, f"key {key!r} given twice (first on line {seen[key] + 1}); expected each key once",
@@ -53,6 +60,10 @@ class _UniqueKeyLoader(yaml.SafeLoader):
             raise yaml.constructor.ConstructorError(
                 None, None, f"its aliases expand to more than {_MOST_NODES:,} values; expected a config",
                 node.start_mark)
+        inner = _within_itself(node)
+        if inner is not None:  # "a: &x [*x]": a value that holds itself has no end
+            raise yaml.constructor.ConstructorError(
+                None, None, "a value holds itself through an alias; expected a config of plain values", inner.start_mark)
         return self.construct_document(node)
 
 
@@ -88,6 +99,30 @@ def _expanded_size(node, sizes: dict | None = None) -> int:
 
 
 
+def _within_itself(node) -> yaml.Node | None:
+    """A node of the YAML graph ``node`` that holds itself through aliases, or None (iterative: no recursion
+    on a deep file)."""
+    state: dict[int, int] = {}  # 1: on the path from the root, 2: done
+    stack = [(node, False)]
+    while stack:
+        n, leaving = stack.pop()
+        if leaving:
+            state[id(n)] = 2
+            continue
+        if state.get(id(n)) == 2:
+            continue
+        state[id(n)] = 1
+        stack.append((n, True))
+        children = (n.value if isinstance(n, yaml.SequenceNode) else
+                    [c for pair in n.value for c in pair] if isinstance(n, yaml.MappingNode) else [])
+        for child in children:
+            if state.get(id(child)) == 1:
+                return child
+            if state.get(id(child)) != 2:
+                stack.append((child, False))
+    return None
+
+
 def read_yaml(path: Path) -> dict:
     """Read one YAML mapping safely, with errors that name the file and line."""
     if path.is_dir():
@@ -103,6 +138,8 @@ def read_yaml(path: Path) -> dict:
         raise ConfigError(where, "", f"invalid YAML: {problem}") from None
     except UnicodeDecodeError:
         raise ConfigError(str(path), "", "not a UTF-8 text file") from None
+    except RecursionError:  # thousands of nested brackets: PyYAML's parser recurses
+        raise ConfigError(str(path), "", "nests values too deeply to be read; expected a config") from None
     if data is None:  # read as all defaults, a run would fail far from here, not naming the file
         raise ConfigError(str(path), "", "holds no settings (the file is empty or only comments); expected a mapping "
                           "of keys (configs/example.yaml, say)")
@@ -151,6 +188,9 @@ def _collect(path: Path, merged: _Merged, stack: tuple[Path, ...]) -> None:
     if not isinstance(includes, list) or not all(isinstance(i, str) for i in includes):
         raise ConfigError(str(path), "defaults", f"got {includes!r}, expected a list of config file paths")
     for item in includes:
+        if not Path(item).name:  # "", "/", ".": no file
+            raise ConfigError(str(path), "defaults", f"got {item!r}, expected the path of a config file or a preset's "
+                              f"name: {', '.join(presets.names())}")
         target = path.parent / item
         if target.suffix not in (".yaml", ".yml"):
             target = target.with_name(target.name + ".yaml")

@@ -67,7 +67,7 @@ def export_run(run: str | Path, fmt: str = "usd", out: str | Path | None = None,
         faces.append(F)
         exterior.append(np.asarray(face_data["exterior"]).astype(bool))
     with _reading(run, layout.MANIFEST):
-        manifest = json.loads(_need(run, layout.MANIFEST).read_text())
+        manifest = layout.manifest_object(json.loads(_need(run, layout.MANIFEST).read_text()), run / layout.MANIFEST)
         up = manifest.get("stats", {}).get("coarse", {}).get("up_axis", "z")
     with _reading(run, layout.CONFIG):
         timing = run_usd_timing(yaml.safe_load(_need(run, layout.CONFIG).read_text()), manifest)

@@ -23,7 +23,7 @@ def root() -> Path:
 def find(name: str) -> Path | None:
     """The preset ``name`` (``.yaml`` optional; ``strength/bricks``), or None."""
     base = root()
-    target = (base / name).with_suffix(".yaml") if not name.endswith((".yaml", ".yml")) else base / name
+    target = base / (name if name.endswith((".yaml", ".yml")) else name + ".yaml")  # "bricks.old" is no "bricks"
     try:
         target.resolve().relative_to(base.resolve())  # a name, not a way out of the folder
     except ValueError:

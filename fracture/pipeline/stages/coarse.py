@@ -94,6 +94,7 @@ def read_exterior(path) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """The object's closed exterior, oriented outward (cavities inward), and notes on what was turned."""
     from fracture.errors import InputError
     from fracture.mesh.clean import remove_flat_triangles
+    from fracture.mesh.intersect import self_intersections
     from fracture.mesh.topology import orient_outward
 
     BV, BF = read_mesh(path, "input.exterior", closed=True)
@@ -102,6 +103,11 @@ def read_exterior(path) -> tuple[np.ndarray, np.ndarray, list[str]]:
         raise InputError(f"input.exterior ({path}): faces {conflict[0] + 1} and {conflict[1] + 1} (counted from 1) "
                          "lie on a one-sided surface; expected the closed surface of a solid")
     BV, BF, flat = remove_flat_triangles(BV, BF)
+    count, pairs = self_intersections(BV, BF, report=1)
+    if count:  # two overlapping shells: one of them is taken for a cavity, and the solid has no volume to cut
+        raise InputError(f"input.exterior ({path}): the surface crosses or touches itself ({count} pairs of faces, first faces "
+                         f"{pairs[0, 0] + 1} and {pairs[0, 1] + 1}, counted from 1); expected the closed surface of one "
+                         "solid (join overlapping parts into one, with a boolean union)")
     notes = [f"input.exterior: {flat} triangles without area removed (corners merged or flipped away)"] if flat else []
     if turned:
         notes.append(f"input.exterior: {turned} faces turned to face outward")
