@@ -163,8 +163,8 @@ def checked_cache_dir(args) -> Path | None:
 
 
 class _Stopped(KeyboardInterrupt):
-    """Ctrl-C or SIGTERM while a command runs: unwinds as Ctrl-C does (a run being staged is removed); ``code``
-    is the exit status (130, 143)."""
+    """Ctrl-C, SIGTERM or SIGHUP while a command runs: unwinds as Ctrl-C does (a run being staged is removed);
+    ``code`` is the exit status (130, 143, 129)."""
 
     def __init__(self, signum: int):
         super().__init__(signum)
@@ -176,7 +176,7 @@ _stopped_by: list[int] = []
 
 
 def _stop(signum, frame):
-    """Ctrl-C and SIGTERM: raise :class:`_Stopped` where the program is.
+    """Ctrl-C, SIGTERM and SIGHUP: raise :class:`_Stopped` where the program is.
 
     Inside a callback from the compiler's C code (numba writing a kernel to
     its cache through llvmlite) an exception would be printed and dropped, and
@@ -204,14 +204,15 @@ def _in_compiler_callback(frame) -> bool:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """The command line; Ctrl-C and SIGTERM stop it with one line (the previous handlers are restored)."""
+    """The command line; Ctrl-C, SIGTERM and SIGHUP stop it with one line (the previous handlers are restored)."""
     import signal
 
     problem = environment_problem()  # before anything loads numba, which refuses it with a traceback
     if problem is not None:
         print(f"fracref: error: {problem}", file=sys.stderr)
         return 2
-    signals = [signal.SIGINT, signal.SIGTERM] if _on_main_thread() else []
+    # SIGHUP: the terminal it ran in was closed
+    signals = [signal.SIGINT, signal.SIGTERM, signal.SIGHUP] if _on_main_thread() else []
     previous = [signal.signal(s, _stop) for s in signals]
     _stopped_by.clear()
     try:
@@ -238,7 +239,7 @@ def _say_stopped(code: int, argv: list[str] | None, run_in_place: Path | None = 
     """One line on what a stop left: a sweep keeps its finished points, a run stopped while the run it replaced
     was deleted is whole, any other command writes nothing."""
     words = list(sys.argv[1:] if argv is None else argv)
-    how = "interrupted" if code == 130 else "terminated"
+    how = {130: "interrupted", 129: "stopped (its terminal closed)"}.get(code, "terminated")
     if run_in_place is not None and words[:1] != ["sweep"]:
         print(f"fracref: {how} after the run was written whole to {run_in_place}; what is left of the run it "
               "replaced goes with the next run there", file=sys.stderr)

@@ -193,6 +193,7 @@ def test_set_overrides(tmp_path, small_config):
     assert cfg.grid.resolution == [8, 9, 10]
     assert cfg.strength.layers[0].grain_frequency == 2.5
     assert cfg.name == "other"
+    assert load_config(small_config, ["psi.stress_weight = 3"]).psi.stress_weight == 3.0  # spaced as in YAML
     for bad, words in [("psi.stress_weight", "expected key.path=value"),
                        ("psi.stress_weight=-2", "--set psi.stress_weight=-2: psi.stress_weight: got -2"),
                        ("psi.typo=1", "psi.typo: unknown key"),

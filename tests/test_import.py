@@ -556,6 +556,9 @@ def test_missing_directory_and_no_frames(tmp_path):
     (tmp_path / "frac.0001.ply").write_text("ply\n")  # a PLY sequence read with the default glob: said how
     with pytest.raises(InputError, match=r"no frame files match '\*\.obj'; it holds \.ply files: set input\.glob: '\*\.ply'"):
         read_sequence(tmp_path)
+    (tmp_path / "frac.0001.ply").rename(tmp_path / "FRAC.0001.OBJ")  # the suffix as the files spell it
+    with pytest.raises(InputError, match=r"no frame files match '\*\.obj'; it holds \.OBJ files: set input\.glob: '\*\.OBJ'"):
+        read_sequence(tmp_path)
 
 
 def test_houdini_names_its_preroll_frames_below_zero_and_may_start_a_file_with_a_bom(tmp_path):
@@ -610,6 +613,7 @@ def test_frames_are_ordered_by_their_number_not_their_text(tmp_path):
 @pytest.mark.parametrize("drop, rename, words", [
     ([7], {}, ["frame 7 missing between frame6.obj and frame8.obj"]),
     ([7, 8], {}, ["frame 7, 8 missing"]),
+    (list(range(7, 30)), {}, ["frames 7 to 29 missing (23 frames) between frame6.obj and frame30.obj"]),
     ([], {12: "frame_12.obj"}, ["frame12.obj and frame_12.obj are both frame 12"]),
     ([], {5: "rest.obj"}, ["rest.obj", "no frame number"]),
 ])

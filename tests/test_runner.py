@@ -162,6 +162,21 @@ def test_force_replaces_only_an_earlier_run(tmp_path, small_config):
     assert (run / "manifest.json").read_bytes() != first
 
 
+def test_force_over_a_link_to_a_run_replaces_the_link_and_leaves_the_run_it_named(tmp_path):
+    """``--out`` a link to an earlier run, with --force: the new run takes the link's place, nothing is left
+    beside it, and the run the link named is as it was."""
+    earlier = tmp_path / "earlier"
+    earlier.mkdir()
+    (earlier / "manifest.json").write_text("{}")
+    link = tmp_path / "link"
+    link.symlink_to(earlier)
+    with staged_directory(link, force=True) as staging:
+        (staging / "manifest.json").write_text('{"new": 1}')
+    assert not link.is_symlink() and json.loads((link / "manifest.json").read_text()) == {"new": 1}
+    assert (earlier / "manifest.json").read_text() == "{}"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["earlier", "link"]
+
+
 def test_an_output_path_through_a_file_is_one_line(tmp_path, small_config):
     (tmp_path / "afile").write_text("x")
     res = fracref("run", small_config, "--out", tmp_path / "afile" / "sub", "--until", "coarse")
@@ -291,20 +306,22 @@ def test_a_full_disk_leaves_nothing_and_says_so(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
-def test_a_killed_cli_run_removes_its_staging(tmp_path, small_config):
+@pytest.mark.parametrize("signame, said", [("SIGTERM", "terminated"), ("SIGHUP", "stopped (its terminal closed)")])
+def test_a_killed_cli_run_removes_its_staging(tmp_path, small_config, signame, said):
     import signal
     import time
 
+    signum = getattr(signal, signame)
     proc = subprocess.Popen([sys.executable, "-m", "fracref", "run", str(small_config), "--out", str(tmp_path / "run"),
                              "--quiet"], cwd=REPO, stderr=subprocess.PIPE, text=True)
     while not list(tmp_path.glob(".run.partial-*")) and proc.poll() is None:
         time.sleep(0.05)
-    proc.send_signal(signal.SIGTERM)
+    proc.send_signal(signum)
     proc.wait(timeout=120)
     err = proc.stderr.read()
     assert proc.returncode != 0 or (tmp_path / "run").is_dir()  # killed, or it had already finished
     if proc.returncode != 0:
-        assert proc.returncode == 128 + signal.SIGTERM and err.endswith("fracref: terminated; nothing was written\n")
+        assert proc.returncode == 128 + signum and err.endswith(f"fracref: {said}; nothing was written\n"), err
     assert not list(tmp_path.glob(".run.*"))
     assert "Traceback" not in err
 

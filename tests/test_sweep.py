@@ -169,3 +169,27 @@ def test_a_failed_point_says_what_went_wrong_in_the_users_words(tmp_path):
     assert status["status"] == "failed" and status["error"].startswith(str(tmp_path / "c.yaml")), status
     assert "Error:" not in status["error"]
 
+
+
+def test_a_terminated_sweep_leaves_no_half_written_point(tmp_path, small_config):
+    """SIGTERM while two workers write their points: each worker unwinds as from Ctrl-C, so no point's staging
+    stays in the sweep's folder."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from conftest import REPO
+
+    out = tmp_path / "sw"
+    proc = subprocess.Popen([sys.executable, "-m", "fracref", "sweep", str(small_config), "--grid", "seed=1,2,3,4",
+                             "--jobs", "2", "--out", str(out)], cwd=REPO, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    start = time.monotonic()
+    while not list(out.glob(".*.partial-*")) and proc.poll() is None and time.monotonic() - start < 120:
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    if proc.returncode != 0:  # stopped (or it had already finished)
+        assert proc.returncode == 128 + signal.SIGTERM and "the sweep's finished points are kept" in err, err
+    assert "Traceback" not in err and not list(out.glob(".*")), list(out.glob(".*"))

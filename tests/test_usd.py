@@ -644,7 +644,10 @@ def _damaged_usd(path, damage):
         if damage == "no points" and k == 1:
             continue
         for t, P in enumerate(frames, start=1):
-            mesh.GetPointsAttr().Set(Vt.Vec3fArray.FromNumpy(P[k].astype(np.float32)), t)
+            points = P[k] if not (damage == "a point more" and k == 1 and t == 3) else np.r_[P[k], P[k][:1]]
+            mesh.GetPointsAttr().Set(Vt.Vec3fArray.FromNumpy(points.astype(np.float32)), t)
+    if damage == "negative rate":
+        stage.SetTimeCodesPerSecond(-24)
     stage.GetRootLayer().Save()
 
 
@@ -653,6 +656,8 @@ def _damaged_usd(path, damage):
     ("no faces", "piece 't1' (/geo/t1) has no faces or inconsistent face counts"),
     ("negative index", "piece 't1' (/geo/t1): a face uses point -1; expected point indices from 0"),
     ("huge range", "its time code range 1 to 1e+06 holds 1,000,000 frames; expected at most 10,000"),
+    ("a point more", "piece 't1' has 5 points at frame 3, 4 at the first frame; expected the same points"),
+    ("negative rate", "the stage's timeCodesPerSecond is -24; expected a positive number of time codes per second"),
 ])
 def test_a_damaged_usd_is_refused_naming_the_piece_and_what_was_expected(tmp_path, damage, words):
     from fracture.errors import InputError
@@ -732,3 +737,20 @@ def test_a_usd_that_cannot_be_written_is_said_of_the_users_file(tmp_path, monkey
         write_pieces_usd(tmp_path / "p.usdc", ["a", "b"], faces, [np.ones(4, bool)] * 2, frames)
     assert str(error.value) == f"{tmp_path / 'p.usdc'}: cannot write the USD file: No space left on device"
     assert list(tmp_path.iterdir()) == []
+
+
+def test_what_a_killed_usd_writer_left_beside_the_file_goes_with_the_next_write(tmp_path):
+    """A writer killed mid-file leaves ``.p.partial-PID.usdc``; the next write of ``p.usdc`` deletes it, and
+    leaves a writer's that is still going."""
+    import os
+    import subprocess
+    import sys
+
+    dead = int(subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True,
+                              text=True).stdout)
+    stale, live = tmp_path / f".p.partial-{dead}.usdc", tmp_path / f".p.partial-{os.getppid()}.usdc"
+    stale.write_bytes(b"half")
+    live.write_bytes(b"going")
+    faces, frames = _two_tetras_falling(3)
+    write_pieces_usd(tmp_path / "p.usdc", ["a", "b"], faces, [np.ones(4, bool)] * 2, frames)
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([live.name, "p.usdc"])

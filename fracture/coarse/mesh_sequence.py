@@ -243,7 +243,8 @@ def frame_paths(directory: Path, pattern: str) -> list[Path]:
     """
     paths = [p for p in directory.glob(pattern) if p.is_file()]
     if not paths:
-        others = sorted({p.suffix.lower() for p in directory.iterdir() if p.is_file()} & set(_MESH_SUFFIXES))
+        # the suffixes as the files spell them ('.OBJ' is not matched by '*.obj')
+        others = sorted({p.suffix for p in directory.iterdir() if p.is_file() and p.suffix.lower() in _MESH_SUFFIXES})
         hint = "".join(f"; it holds {s} files: set input.glob: '*{s}'" for s in others[:1])
         raise InputError(f"{directory}: no frame files match {pattern!r}{hint}")
     numbered = []
@@ -266,8 +267,11 @@ def frame_paths(directory: Path, pattern: str) -> list[Path]:
             if (b - a) % step:
                 raise InputError(f"{directory}: frames do not follow at a constant step: {na} (frame {a}) then "
                                  f"{nb} (frame {b}), elsewhere every {step}")
-            missing = ", ".join(str(k) for k in range(a + step, b, step))
-            raise InputError(f"{directory}: frame {missing} missing between {na} and {nb}")
+            gone = range(a + step, b, step)
+            which = (f"frame {', '.join(map(str, gone))} missing" if len(gone) <= 5 else
+                     f"frames {gone[0]} to {gone[-1]} missing ({len(gone):,} frames"
+                     f"{'' if step == 1 else f', every {step}'})")
+            raise InputError(f"{directory}: {which} between {na} and {nb}")
     return [p for _, _, p in numbered]
 
 

@@ -140,6 +140,7 @@ def read_usd_frames(path: str | Path) -> UsdAnimation:
         topology.append((counts, idx))
     cache = UsdGeom.XformCache()
     frames = []
+    first_counts: dict[str, int] = {}  # each piece's points at the first frame
     for t in times:
         when = "the default time" if t.IsDefault() else f"frame {t.GetValue():g}"  # a stage without time samples
         cache.SetTime(t)
@@ -154,6 +155,10 @@ def read_usd_frames(path: str | Path) -> UsdAnimation:
             P = np.asarray(P, np.float64).reshape(-1, 3)
             if idx.max() >= len(P):
                 raise InputError(f"{path}: piece {name!r} at {when}: a face uses point {idx.max()} of {len(P)}")
+            if first_counts.setdefault(name, len(P)) != len(P):
+                raise InputError(f"{path}: piece {name!r} has {len(P)} points at {when}, {first_counts[name]} at the "
+                                 "first frame; expected the same points at every frame (a piece's points that change "
+                                 "in number are no rigid motion)")
             if instance is None:
                 M = np.asarray(cache.GetLocalToWorldTransform(p), np.float64)  # row vectors: x' = [x 1] M
             else:  # the mesh in its prototype's space, moved by the instance, in the instancer's world
@@ -182,8 +187,11 @@ def read_usd_frames(path: str | Path) -> UsdAnimation:
             raise InputError(f"{path}: frame {t.GetValue():g} has {len(frame.V)} points, the first has "
                              f"{len(rest.V)}: a piece's points change in number")
     up = "y" if UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.y else "z"
-    return UsdAnimation(frames, up, float(stage.GetTimeCodesPerSecond()), float(UsdGeom.GetStageMetersPerUnit(stage)),
-                        hidden)
+    fps = float(stage.GetTimeCodesPerSecond())
+    if not 0.0 < fps < float("inf"):  # the outputs would play at it
+        raise InputError(f"{path}: the stage's timeCodesPerSecond is {fps:g}; expected a positive number of time "
+                         "codes per second (24, say)")
+    return UsdAnimation(frames, up, fps, float(UsdGeom.GetStageMetersPerUnit(stage)), hidden)
 
 
 class _Instanced(NamedTuple):

@@ -106,6 +106,16 @@ def _stale(out: Path, kind: str) -> list[Path]:
     return stale
 
 
+def _remove(p: Path) -> None:
+    """Delete the folder ``p``, or the link ``p`` (an ``--out`` that was a link to a run: the run it names
+    stays), leaving what cannot be deleted."""
+    if p.is_symlink():
+        with contextlib.suppress(OSError):
+            p.unlink()
+    else:
+        shutil.rmtree(p, ignore_errors=True)
+
+
 def remove_stale_staging(out: Path) -> list[Path]:
     """Remove what killed runs into ``out`` left beside it; returns the removed directories.
 
@@ -121,7 +131,7 @@ def remove_stale_staging(out: Path) -> list[Path]:
         if not out.exists():
             os.replace(p, out)
             continue
-        shutil.rmtree(p, ignore_errors=True)
+        _remove(p)
         removed.append(p)
     for p in _stale(out, "partial"):
         shutil.rmtree(p, ignore_errors=True)
@@ -172,7 +182,7 @@ def staged_directory(out: str | Path, force: bool = False, marker: str = RUN_MAR
                           "is untouched") from None
     if old is not None:
         try:
-            shutil.rmtree(old, ignore_errors=True)
+            _remove(old)
         except BaseException as exc:  # Ctrl-C while the replaced run goes: this one is whole and in place (what
             exc.run_in_place = out  # is left of the other goes with the next run there: remove_stale_staging)
             raise

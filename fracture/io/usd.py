@@ -30,6 +30,7 @@ over it, so a failed write never leaves half a file behind.
 
 from __future__ import annotations
 
+import glob
 import os
 import re
 from collections.abc import Iterable, Sequence
@@ -37,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fracture.io.atomic import OutputError
+from fracture.io.atomic import OutputError, process_alive
 
 # A piece whose points at a frame are within this of a rotation and translation of its rest points (relative
 # to the scene's size) moves rigidly at that frame: its transform is written, not its points. Rigid-body
@@ -135,6 +136,7 @@ def write_pieces_usd(path: str | Path, names: Sequence[str], faces: Sequence[np.
         raise ValueError(f"{len(names)} names, {len(faces)} face arrays and {len(exterior)} exterior flags"
                          + ("" if rest is None else f", {len(rest)} rest point arrays"))
     tmp = path.with_name(f".{path.stem}.partial-{os.getpid()}{path.suffix}")
+    _remove_stale_partials(path)
 
     def vec3f(P: np.ndarray):
         return Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(P, np.float32))
@@ -236,3 +238,13 @@ def write_pieces_usd(path: str | Path, names: Sequence[str], faces: Sequence[np.
     finally:
         tmp.unlink(missing_ok=True)
     return path
+
+
+def _remove_stale_partials(path: Path) -> None:
+    """Delete the files ``.STEM.partial-PID.SUFFIX`` beside ``path`` that a killed writer (process ``PID``, gone)
+    left; those of a writer still going stay."""
+    head = f".{path.stem}.partial-"
+    for stale in path.parent.glob(f"{glob.escape(head)}*{glob.escape(path.suffix)}"):
+        pid = stale.name[len(head):len(stale.name) - len(path.suffix)]
+        if pid.isdigit() and not process_alive(int(pid)):
+            stale.unlink(missing_ok=True)

@@ -212,6 +212,7 @@ def parse_override(text: str) -> tuple[list[str | int], Any]:
     if "=" not in text:
         raise ConfigError(SET_SOURCE, "", f"got {text!r}, expected key.path=value")
     key, raw = text.split("=", 1)
+    key = key.strip()  # "psi.stress_weight = 2", as one writes it in YAML
     tokens: list[str | int] = []
     pos = 0
     for m in _KEY_TOKEN.finditer(key):

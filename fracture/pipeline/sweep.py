@@ -228,20 +228,34 @@ def _local(tasks: list[tuple[Point, tuple]], jobs: int) -> Iterator[tuple[Point,
         for f in as_completed(futures):
             yield futures[f], f.result()
     except BaseException:  # Ctrl-C, a signal, the caller gone: the points still running are stopped, not awaited
-        for proc in list((getattr(pool, "_processes", None) or {}).values()):
+        workers = list((getattr(pool, "_processes", None) or {}).values())
+        for proc in workers:
             proc.terminate()
         pool.shutdown(wait=False, cancel_futures=True)
+        for proc in workers:
+            proc.join(_WORKER_GRACE)
         raise
     pool.shutdown()
 
 
 def _worker_setup(threads: int) -> None:
     """A sweep worker: set up as the command line is; Ctrl-C is the sweep's to answer (it stops its workers),
-    not each worker's (each printed a traceback of wherever it was)."""
+    not each worker's (each printed a traceback of wherever it was). The sweep stops a worker with SIGTERM: it
+    unwinds as from Ctrl-C, so the run it was writing removes its staging (killed at once, it stayed in the
+    sweep's folder)."""
     from fracture.process import prepare_process
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, _stopped_worker)
     prepare_process(threads=threads)
+
+
+def _stopped_worker(signum, frame):
+    raise KeyboardInterrupt
+
+
+# Seconds the sweep waits for its stopped workers to remove what they were writing.
+_WORKER_GRACE = 10.0
 
 
 def _ray_start(jobs: int, address: str | None) -> bool:
