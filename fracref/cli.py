@@ -304,8 +304,11 @@ def _main(argv: list[str] | None) -> int:
         out = args.out if args.out is not None else Path("runs") / cfg.name
         done = runner.run(cfg, out, until=args.until, force=args.force, progress=not args.quiet,
                           cache=cache_from_args(args))
+        manifest = layout.read_manifest(done)
         if not args.quiet:
-            print(runner.timing_table(layout.read_manifest(done)))
+            print(runner.timing_table(manifest))
+        if manifest.get("notes"):  # what was repaired, left out or refused on the way: a user's to know, quiet or not
+            print("notes:\n" + "\n".join(f"  - {note}" for note in manifest["notes"]))
         print(f"run complete: {done}  (manifest: {done / layout.MANIFEST})")
         return 0
     except (ConfigError, InputError, ResultError, StageError, RunDirectoryExists, OutputError) as exc:

@@ -44,6 +44,21 @@ def test_read_mesh_errors(tmp_path):
         assert name in str(err.value) and "input.exterior" in str(err.value)
 
 
+def test_a_closed_surface_whose_faces_are_not_joined_says_so(tmp_path):
+    """A box whose faces each keep their own corners (written unwelded): its edges are all open, and the message
+    says why."""
+    from fracture.mesh.primitives import box
+
+    V, F = box([0, 0, 0], [1, 1, 1])
+    loose = V[F].reshape(-1, 3)  # every face its own three vertices
+    lines = [f"v {x} {y} {z}" for x, y, z in loose] + [f"f {3 * k + 1} {3 * k + 2} {3 * k + 3}" for k in range(len(F))]
+    (tmp_path / "loose.obj").write_text("\n".join(lines) + "\n")
+    with pytest.raises(InputError, match=rf"found {3 * len(F)} boundary edges and 0 edges shared by more than 2 "
+                                         rf"triangles; {len(loose) - len(V)} vertices lie exactly where others do: the "
+                                         r"faces are not joined there"):
+        read_mesh(tmp_path / "loose.obj", "input.exterior", closed=True)
+
+
 def test_check_triangle_mesh_errors():
     V = np.zeros((3, 3))
     with pytest.raises(InputError, match=r"face 2 refers to vertex 4 \(both counted from 1\), but there are 3 "

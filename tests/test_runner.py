@@ -148,6 +148,17 @@ def test_existing_non_directory_is_refused(tmp_path, small_config):
         runner.run(load_config(small_config), tmp_path / "file", force=True, progress=False)
 
 
+def test_a_run_says_its_notes_quiet_or_not(tmp_path, small_config):
+    """A material with no weak places is no error, but the user must hear of it where the run ends."""
+    for quiet in ((), ("--quiet",)):
+        out = tmp_path / f"run{len(quiet)}"
+        res = fracref("run", small_config, "--out", out, "--until", "fields", *quiet,
+                      "--set", "strength.layers[0].weight=0")
+        assert res.returncode == 0, res.stderr
+        assert "notes:\n  - fields: the strength layers give zeta = 0 everywhere" in res.stdout, res.stdout
+        assert res.stdout.rstrip().endswith(f"run complete: {out}  (manifest: {out / 'manifest.json'})")
+
+
 def test_force_replaces_only_an_earlier_run(tmp_path, small_config):
     mine = tmp_path / "mine"
     mine.mkdir()

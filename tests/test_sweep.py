@@ -193,3 +193,14 @@ def test_a_terminated_sweep_leaves_no_half_written_point(tmp_path, small_config)
     if proc.returncode != 0:  # stopped (or it had already finished)
         assert proc.returncode == 128 + signal.SIGTERM and "the sweep's finished points are kept" in err, err
     assert "Traceback" not in err and not list(out.glob(".*")), list(out.glob(".*"))
+
+
+def test_export_and_render_of_a_sweep_name_one_of_its_points(local_sweep, tmp_path, capsys):
+    _, out, _ = local_sweep
+    first = out / "psi.stress_weight=0.2,seed=7"
+    for args, verb in ((["export", str(out), "--out", str(tmp_path / "x.usdc")], "export"),
+                       (["render", str(out), "--quiet", "--out", str(tmp_path / "r")], "name")):
+        assert main(args) == 2
+        err = capsys.readouterr().err
+        assert err == f"fracref: error: {out}: a sweep, not a run; {verb} one of its points, e.g. {first}\n", err
+    assert list(tmp_path.iterdir()) == []

@@ -66,6 +66,7 @@ class RunData:
         manifest = self.dir / layout.MANIFEST
         if not self.dir.is_dir():
             raise InputError(f"{self.dir}: no such run directory (make one with `fracref run CONFIG --out DIR`)")
+        layout.not_a_sweep(self.dir, "name")
         if not manifest.is_file():
             raise InputError(f"{self.dir}: not a complete run directory (no manifest.json; "
                              f"a run writes it last, so the run failed or is still going)")

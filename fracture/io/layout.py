@@ -87,6 +87,16 @@ def read_manifest(run: str | Path) -> dict:
     return manifest_object(json.loads((Path(run) / MANIFEST).read_text(encoding="utf-8")), Path(run) / MANIFEST)
 
 
+def not_a_sweep(run: str | Path, doing: str) -> None:
+    """An InputError when ``run`` is a sweep's folder (its ``sweep.json``), which holds runs but is none: name
+    one of its points."""
+    run = Path(run)
+    if (run / "sweep.json").is_file():
+        points = sorted(p.name for p in run.iterdir() if (p / MANIFEST).is_file())
+        example = f", e.g. {run / points[0]}" if points else " (none has finished)"
+        raise InputError(f"{run}: a sweep, not a run; {doing} one of its points{example}")
+
+
 def manifest_object(data, path: str | Path) -> dict:
     """``data`` read from the manifest at ``path``, if it is a JSON object (a run writes one); else an
     InputError."""

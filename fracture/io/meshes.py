@@ -78,9 +78,12 @@ def check_triangle_mesh(V, F, what: str, closed: bool = False) -> tuple[np.ndarr
         if np.any(counts != 2):
             open_edges = int((counts == 1).sum())
             nonmanifold = int((counts > 2).sum())
+            twins = len(V) - len(np.unique(V, axis=0))
+            hint = (f"; {twins} vertices lie exactly where others do: the faces are not joined there (merge them, "
+                    "with Merge by Distance in Blender, say)" if twins and open_edges else "")
             raise InputError(
                 f"{what}: expected a closed surface (every edge shared by exactly 2 triangles), "
-                f"found {open_edges} boundary edges and {nonmanifold} edges shared by more than 2 triangles"
+                f"found {open_edges} boundary edges and {nonmanifold} edges shared by more than 2 triangles{hint}"
             )
     return V, F
 

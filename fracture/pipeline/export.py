@@ -49,6 +49,7 @@ def export_run(run: str | Path, fmt: str = "usd", out: str | Path | None = None,
         raise InputError(f"export: unknown format {fmt!r}; expected one of {', '.join(FORMATS)}")
     if not run.is_dir():
         raise InputError(f"{run}: not a run directory")
+    layout.not_a_sweep(run, "export")
     with _reading(run, layout.COMPONENTS):
         names = [str(name) for name in json.loads(_need(run, layout.COMPONENTS).read_text())["names"]]
     with _reading(run, layout.TRANSFER):

@@ -51,9 +51,10 @@ def check_grid_memory(cfg: Config, BV: np.ndarray) -> None:
     if need > c.grid.max_memory_gb:
         shape = "x".join(str(n) for n in grid.shape)
         thin = grid.size > grid_for(BV, c.grid.resolution, c.grid.padding).size  # min_across made the cells
+        gb = f"{need:.1f}" if need >= 0.1 else f"{need:.2g}"  # a tiny limit: not "0.0 GB, more than 0.01"
         raise ConfigError("config", "grid.min_across" if thin else "grid.resolution",
                           f"{c.grid.min_across if thin else c.grid.resolution} gives a {shape} grid ({grid.size:,} "
-                          f"nodes) whose fields need about {need:.1f} GB, more than grid.max_memory_gb "
+                          f"nodes) whose fields need about {gb} GB, more than grid.max_memory_gb "
                           f"({c.grid.max_memory_gb:g} GB); expected " + (
                               "fewer nodes across the object's thinnest extent" if thin else "a lower resolution")
                           + ", or raise the limit if this machine has the memory")
