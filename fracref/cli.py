@@ -404,6 +404,9 @@ def _view(args) -> int:
     for name, value in (("width", args.width), ("height", args.height)):
         if not 480 <= value <= 16384:
             raise InputError(f"view: --{name} must be a window size in pixels in 480..16384, got {value}")
+    if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        raise InputError("view: no display to open a window on (DISPLAY is not set); `fracref render RUN` makes the "
+                         "same pictures without one")
 
     return view_main(args.target, args.out, args.width, args.height, args.camera)
 

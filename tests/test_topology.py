@@ -29,6 +29,13 @@ def test_fan_triangulates_polygons():
     assert fan([])[0].shape == (0, 3)
 
 
+def test_the_volume_of_a_box_far_from_the_origin_keeps_its_digits():
+    V, F = box([0, 0, 0], [1, 1, 1], (3, 3, 3))
+    for offset in (0.0, 1e4, 1e7):
+        assert signed_volume(V + offset, F) == pytest.approx(1.0, rel=1e-9)
+        assert signed_volume(V + offset, F[:, ::-1]) == pytest.approx(-1.0, rel=1e-9)
+
+
 def test_a_polygon_with_a_corner_on_a_straight_edge_is_fanned_without_a_flat_triangle():
     """An exporter's pentagon whose fifth corner lies on the edge from its first to its fourth: fanned from the
     first corner one triangle has no area; fanned from where none is flat, the pentagon's area is kept."""

@@ -57,6 +57,12 @@ def _cli(args, timeout=300):
                           timeout=timeout, env=env)
 
 
+def test_the_window_without_a_display_says_to_render(run_dir):
+    r = _cli(["view", str(run_dir)])
+    assert r.returncode == 2 and r.stderr == ("fracref: error: view: no display to open a window on (DISPLAY is not "
+                                              "set); `fracref render RUN` makes the same pictures without one\n")
+
+
 def test_headless_renders_are_figures_and_videos(run_dir, tmp_path):
     r = _cli(["render", str(run_dir), "--what", "iterations", "--what", "animation", "--out", str(tmp_path),
               "--width", "320", "--height", "240", "--fps", "4", "--image-seconds", "0.5", "--hold", "1.5",

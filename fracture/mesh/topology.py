@@ -191,8 +191,12 @@ def diagonal(V: np.ndarray) -> float:
 
 
 def signed_volume(V: np.ndarray, F: np.ndarray) -> float:
-    """Volume enclosed by a closed, outward triangle mesh (negative if inward)."""
-    A, B, C = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    """Volume enclosed by a closed, outward triangle mesh (negative if inward): the tetrahedra from one of its
+    corners, not from the origin (an object 10^7 units away lost every digit of its volume in the products)."""
+    if not len(F):
+        return 0.0
+    o = V[F[0, 0]]
+    A, B, C = V[F[:, 0]] - o, V[F[:, 1]] - o, V[F[:, 2]] - o
     return float(np.einsum("ij,ij->i", A, np.cross(B, C)).sum() / 6.0)
 
 
