@@ -754,3 +754,25 @@ def test_what_a_killed_usd_writer_left_beside_the_file_goes_with_the_next_write(
     faces, frames = _two_tetras_falling(3)
     write_pieces_usd(tmp_path / "p.usdc", ["a", "b"], faces, [np.ones(4, bool)] * 2, frames)
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted([live.name, "p.usdc"])
+
+
+@pytest.mark.parametrize("missing", ["sublayer", "reference"])
+def test_a_usd_naming_a_layer_that_is_not_there_is_refused(tmp_path, missing):
+    """USD skips a sublayer or a reference it cannot open and goes on: the pieces in it would be silently gone."""
+    from pxr import Usd
+
+    from fracture.coarse.usd_input import read_usd_frames
+    from fracture.errors import InputError
+
+    _damaged_usd(tmp_path / "x.usdc", None)
+    stage = Usd.Stage.Open(str(tmp_path / "x.usdc"))
+    if missing == "sublayer":
+        stage.GetRootLayer().subLayerPaths.append("gone.usda")
+    else:
+        stage.DefinePrim("/more").GetReferences().AddReference("gone.usd")
+    stage.GetRootLayer().Save()
+    with pytest.raises(InputError) as error:
+        read_usd_frames(tmp_path / "x.usdc")
+    assert "gone.usd" in str(error.value) and str(error.value).endswith(
+        "expected every layer and reference it names beside it (copy them with it, or flatten the stage: usdcat "
+        "--flatten)")

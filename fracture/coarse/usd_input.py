@@ -81,6 +81,12 @@ def read_usd_frames(path: str | Path) -> UsdAnimation:
         stage = Usd.Stage.Open(str(path))
     except Tf.ErrorException as exc:
         raise InputError(f"{path}: cannot open as USD: {usd_problem(exc)}") from None
+    problems = stage.GetCompositionErrors()  # USD skips a sublayer or reference it cannot open, and goes on
+    if problems:
+        more = f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""
+        problem = str(problems[0]).strip().removesuffix("; skipping.").rstrip(".")
+        raise InputError(f"{path}: {problem}{more}; expected every layer and reference it names beside it (copy them "
+                         "with it, or flatten the stage: usdcat --flatten)")
     # instanced pieces (instanceable references, as Houdini may write packed fragments) are walked into
     found = [p for p in Usd.PrimRange.Stage(stage, Usd.TraverseInstanceProxies()) if p.IsA(UsdGeom.Mesh)]
     if not found:
