@@ -638,7 +638,10 @@ def _damaged_usd(path, damage):
         idx = faces[k].ravel().tolist()
         if damage == "negative index" and k == 1:
             idx[0] = -1
-        if not (damage == "no faces" and k == 1):
+        if damage == "faces sampled":  # only as time samples, as Houdini may write them
+            mesh.CreateFaceVertexCountsAttr().Set(Vt.IntArray([3] * len(faces[k])), 1)
+            mesh.CreateFaceVertexIndicesAttr().Set(Vt.IntArray(idx), 1)
+        elif not (damage == "no faces" and k == 1):
             mesh.CreateFaceVertexCountsAttr(Vt.IntArray([3] * len(faces[k])))
             mesh.CreateFaceVertexIndicesAttr(Vt.IntArray(idx))
         if damage == "no points" and k == 1:
@@ -776,3 +779,22 @@ def test_a_usd_naming_a_layer_that_is_not_there_is_refused(tmp_path, missing):
     assert "gone.usd" in str(error.value) and str(error.value).endswith(
         "expected every layer and reference it names beside it (copy them with it, or flatten the stage: usdcat "
         "--flatten)")
+
+
+def test_faces_given_only_as_time_samples_are_read():
+    """Face counts and indices authored as time samples only (Houdini may write them so): read at the first
+    frame, the same pieces as with default values."""
+    import tempfile
+    from pathlib import Path
+
+    from fracture.coarse.usd_input import read_usd_frames
+
+    with tempfile.TemporaryDirectory() as d:
+        _damaged_usd(Path(d) / "plain.usdc", None)
+        _damaged_usd(Path(d) / "sampled.usdc", "faces sampled")
+        plain, sampled = (read_usd_frames(Path(d) / name) for name in ("plain.usdc", "sampled.usdc"))
+    assert len(sampled.frames) == len(plain.frames) == 3
+    for a, b in zip(sampled.frames, plain.frames):
+        assert np.array_equal(a.V, b.V) and len(a.polygons) == len(b.polygons) == 2
+        for x, y in zip(a.polygons, b.polygons):
+            assert len(x) == len(y) and all(np.array_equal(p, q) for p, q in zip(x, y))

@@ -131,8 +131,10 @@ def read_usd_frames(path: str | Path) -> UsdAnimation:
     topology = []
     for p, name in zip(meshes, names):
         mesh = UsdGeom.Mesh(p)
-        counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get() or [], np.int64)
-        idx = np.asarray(mesh.GetFaceVertexIndicesAttr().Get() or [], np.int64)
+        # the faces at the default time, or at the first frame where only time samples hold them (as Houdini may
+        # write them)
+        counts = np.asarray(_at_default_or(mesh.GetFaceVertexCountsAttr(), times[0]) or [], np.int64)
+        idx = np.asarray(_at_default_or(mesh.GetFaceVertexIndicesAttr(), times[0]) or [], np.int64)
         if counts.size == 0 or counts.sum() != idx.size or (counts < 3).any():
             raise InputError(f"{path}: piece {name!r} ({p.GetPath()}) has no faces or inconsistent face counts "
                              "(faceVertexCounts and faceVertexIndices); expected polygons of 3 or more corners")
@@ -198,6 +200,12 @@ def read_usd_frames(path: str | Path) -> UsdAnimation:
         raise InputError(f"{path}: the stage's timeCodesPerSecond is {fps:g}; expected a positive number of time "
                          "codes per second (24, say)")
     return UsdAnimation(frames, up, fps, float(UsdGeom.GetStageMetersPerUnit(stage)), hidden)
+
+
+def _at_default_or(attr, time):
+    """``attr``'s value at the default time, else at ``time`` (an attribute with time samples only)."""
+    value = attr.Get()
+    return attr.Get(time) if value is None else value
 
 
 class _Instanced(NamedTuple):
