@@ -179,6 +179,15 @@ def test_yaml_that_is_legal_but_no_config_is_said_in_one_line(tmp_path):
     assert "key 'weight' given twice" in message
 
 
+def test_an_error_in_a_section_a_file_filled_in_part_names_the_file(tmp_path, small_config):
+    message, path = _error(tmp_path, "sweep:\n  grid:\n    seed: []\n")
+    assert message.startswith(f"{path}: sweep.grid: got "), message
+    message, path = _error(tmp_path, "psi: {1: 2}\n")
+    assert message.startswith(f"{path}: psi[1]: unknown key"), message
+    message, _ = _error(tmp_path, "seed: 1\n", ["strength.layers[0]=null"])
+    assert message.startswith("--set strength.layers[0]=null: strength.layers[0]: got null"), message
+
+
 def test_a_preset_name_is_the_whole_name(tmp_path):
     """``strength/bricks.old`` is not the preset ``strength/bricks`` (a suffix taken for an extension)."""
     message, _ = _error(tmp_path, "defaults: [strength/bricks.old]\n")

@@ -168,10 +168,14 @@ class _Merged:
                     self.origins[sub] = source
 
     def origin(self, key: str) -> str:
-        """The source of ``key``: the file that set it or its closest parent."""
+        """The source of ``key``: the file that set it, else the last that set a key inside it (a section a file
+        filled in part), else so for its closest parent."""
         while key:
             if key in self.origins:
                 return self.origins[key]
+            inner = [s for k, s in self.origins.items() if k.startswith((key + ".", key + "["))]
+            if inner:
+                return inner[-1]
             key = re.sub(r"(\.[^.\[]*|\[\d+\])$", "", key) if ("." in key or "[" in key) else ""
         return "defaults"
 

@@ -247,10 +247,10 @@ def _problem(error: dict, tree: Any, model: type[BaseModel], origin: Callable[[s
             key_i = join(key, index)
             if error["type"] == "union_tag_invalid":
                 kind = item.get("kind") if isinstance(item, Mapping) else item
-                return ConfigError(origin(key), f"{key_i}.kind", f"got {_shown(kind)}, expected one of "
+                return ConfigError(origin(key_i), f"{key_i}.kind", f"got {_shown(kind)}, expected one of "
                                    + ", ".join(repr(k) for k in LAYER_TYPES))
             if error["type"] in ("union_tag_not_found", "model_attributes_type", "dict_type"):
-                return ConfigError(origin(key), key_i, f"got {_shown(item)}, expected a section with a 'kind' key")
+                return ConfigError(origin(key_i), key_i, f"got {_shown(item)}, expected a section with a 'kind' key")
             # (layers, index, kind, field...): on into the layer's own type; a list is set by one file as a whole
             model, node, key, i = LAYER_TYPES[loc[i + 2]], item, key_i, i + 3
             continue
