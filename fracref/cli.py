@@ -376,6 +376,9 @@ def _sweep(args) -> int:
 
     if not 1 <= args.jobs <= 1024:
         raise ConfigError("--jobs", "", f"got {args.jobs}, expected a number of points at once in 1..1024")
+    if args.address is not None and args.backend != "ray":
+        raise ConfigError("--address", "", f"got {args.address!r} with the {args.backend} backend; expected it with "
+                          "--backend ray (the cluster to join)")
     cfg = load_config(args.config, args.overrides)
     grid = parse_grid(args.grid) if args.grid else cfg.sweep.grid
     runner.stages_until(args.until)

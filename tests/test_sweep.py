@@ -130,11 +130,13 @@ def test_a_resumed_sweep_runs_again_the_points_whose_config_or_stages_changed(lo
 
 def test_a_value_given_twice_is_refused(local_sweep, tmp_path, capsys):
     config, _, _ = local_sweep
-    for grid in ("psi.stress_weight=0.2,0.2", "seed=1,01"):
+    for grid in ("psi.stress_weight=0.2,0.2", "seed=1,01", "psi.stress_weight=1,1.0", "grid.resolution=[8,8,8],[8,8,8.0]"):
         rc = main(["sweep", str(config), "--grid", grid, "--out", str(tmp_path / "twice"), "--quiet", "--no-sheet"])
         err = capsys.readouterr().err
         assert rc == 2 and "is given twice; expected distinct values" in err and "Traceback" not in err, err
         assert not (tmp_path / "twice").exists()
+        if grid == "psi.stress_weight=1,1.0":
+            assert "the value 1 (and 1.0, the same number) is given twice" in err, err
 
 
 def test_sweep_grids_are_read_from_the_command_line_or_the_config_and_checked_first(local_sweep, tmp_path, capsys):
@@ -204,3 +206,11 @@ def test_export_and_render_of_a_sweep_name_one_of_its_points(local_sweep, tmp_pa
         err = capsys.readouterr().err
         assert err == f"fracref: error: {out}: a sweep, not a run; {verb} one of its points, e.g. {first}\n", err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_cluster_address_without_the_ray_backend_is_refused(local_sweep, tmp_path, capsys):
+    config, _, _ = local_sweep
+    rc = main(["sweep", str(config), "--grid", "seed=1,2", "--address", "auto", "--out", str(tmp_path / "a")])
+    assert rc == 2 and not (tmp_path / "a").exists()
+    assert capsys.readouterr().err == ("fracref: error: --address: got 'auto' with the local backend; expected it "
+                                       "with --backend ray (the cluster to join)\n")

@@ -107,12 +107,13 @@ def points(grid: dict[str, list]) -> list[Point]:
     (``0.2,0.2``, or ``1,01``: both 1) is refused, as its two points would be one run."""
     keys = list(grid)
     for k in keys:
-        seen = set()
+        seen: dict[str, str] = {}
         for v in grid[k]:
-            text = json.dumps(v, sort_keys=True)
-            if text in seen:
-                raise ConfigError(GRID_SOURCE, k, f"the value {text} is given twice; expected distinct values")
-            seen.add(text)
+            text, same = json.dumps(v, sort_keys=True), json.dumps(_as_numbers(v), sort_keys=True)
+            if same in seen:
+                twice = text if seen[same] == text else f"{seen[same]} (and {text}, the same number)"
+                raise ConfigError(GRID_SOURCE, k, f"the value {twice} is given twice; expected distinct values")
+            seen[same] = text
     out = [Point(tuple(zip(keys, combo))) for combo in itertools.product(*(grid[k] for k in keys))]
     named: dict[str, Point] = {}
     for point in out:  # two values whose folder names are one (characters a path cannot hold become _)
@@ -122,6 +123,19 @@ def points(grid: dict[str, list]) -> list[Point]:
                               "digits or . = , - [ ] :")
         named[point.name] = point
     return out
+
+
+def _as_numbers(v):
+    """``v`` with every number a float (1 and 1.0 are one value of a key), in lists and mappings too."""
+    if isinstance(v, bool):
+        return v
+    if isinstance(v, (int, float)):
+        return float(v)
+    if isinstance(v, list):
+        return [_as_numbers(x) for x in v]
+    if isinstance(v, dict):
+        return {k: _as_numbers(x) for k, x in v.items()}
+    return v
 
 
 def check_points(config: Path, base: list[str], pts: list[Point]) -> dict[str, str]:
