@@ -108,6 +108,11 @@ def test_render_rejects_bad_requests_clearly(run_dir, tmp_path):
     assert r.returncode == 2 and "--frame counts frames from 1; got 0" in r.stderr, r.stderr
     r = _cli(["render", str(run_dir), "--what", "slices", "--frame", "999", "--out", str(tmp_path)])
     assert r.returncode == 2 and "frame must be in 1..6, got 999" in r.stderr, r.stderr
+    for flag, value, words in (("--fps", "0", "--fps must be in 1..240 video frames a second, got 0"),
+                               ("--image-seconds", "0", "--image-seconds must be in (0, 60], got 0.0"),
+                               ("--hold", "-1", "--hold must be in 0..60 seconds, got -1.0")):
+        r = _cli(["render", str(run_dir), "--what", "slices", flag, value, "--out", str(tmp_path)])
+        assert r.returncode == 2 and r.stderr == f"fracref: error: {words}\n", r.stderr
     assert not list(tmp_path.glob("*.png"))
 
 

@@ -57,12 +57,13 @@ class Timing:
     hold: float = 1.0
 
     def check(self) -> "Timing":
+        """Itself, if its values are in range; else an InputError naming the render's flag that set the value."""
         if not 1 <= self.fps <= 240:
-            raise InputError(f"fps must be in 1..240, got {self.fps}")
+            raise InputError(f"--fps must be in 1..240 video frames a second, got {self.fps}")
         if self.image_seconds is not None and not 0 < self.image_seconds <= 60:
-            raise InputError(f"seconds per image must be in (0, 60], got {self.image_seconds}")
+            raise InputError(f"--image-seconds must be in (0, 60], got {self.image_seconds}")
         if not 0 <= self.hold <= 60:
-            raise InputError(f"hold must be in 0..60 seconds, got {self.hold}")
+            raise InputError(f"--hold must be in 0..60 seconds, got {self.hold}")
         return self
 
     def counts(self, n: int, default_seconds: float) -> list[int]:
