@@ -138,8 +138,6 @@ def checked_cache_dir(args) -> Path | None:
     a file stands where it would be or it cannot be written (a cache that cannot be written is otherwise only
     said in the manifest: asked for by name, it is said here), and so is a ``$FRACREF_CACHE_MAX_GB`` that is no
     size."""
-    import os
-
     from fracture.errors import InputError
     from fracture.pipeline.cache import default_max_bytes
 
@@ -147,18 +145,18 @@ def checked_cache_dir(args) -> Path | None:
     if args.no_cache:
         return d
     default_max_bytes()
-    named, by = (d, "--cache-dir") if d is not None else (os.environ.get("FRACREF_CACHE_DIR"), "FRACREF_CACHE_DIR=")
-    if not named:
+    named = d if d is not None else Path(os.environ.get("FRACREF_CACHE_DIR") or "")
+    if not named.name:
         return d
-    named = Path(named)
+    said = f"--cache-dir {named}" if d is not None else f"FRACREF_CACHE_DIR={named}"
     blocked = next((p for p in (named, *named.parents) if p.exists() and not p.is_dir()), None)
     if blocked is not None:
-        raise InputError(f"{by}{'' if by.endswith('=') else ' '}{named}: {blocked} is a file, not a folder; expected "
-                         "a folder for the stage cache (or --no-cache)")
+        raise InputError(f"{said}: {blocked} is a file, not a folder; expected a folder for the stage cache (or "
+                         "--no-cache)")
     existing = next((p for p in (named, *named.parents) if p.exists()), None)
     if existing is not None and not os.access(existing, os.W_OK | os.X_OK):
-        raise InputError(f"{by}{'' if by.endswith('=') else ' '}{named}: {existing} cannot be written; expected a "
-                         "folder the stage cache can be written to (or --no-cache)")
+        raise InputError(f"{said}: {existing} cannot be written; expected a folder the stage cache can be written "
+                         "to (or --no-cache)")
     return d
 
 

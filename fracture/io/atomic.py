@@ -96,14 +96,20 @@ def process_alive(pid: int) -> bool:
     return True
 
 
-def _stale(out: Path, kind: str) -> list[Path]:
-    """The directories ``.NAME.KIND-PID-XXXX`` beside ``out`` whose process ``PID`` is gone."""
+def left_by_dead_writers(folder: Path, head: str, tail: str = "") -> list[Path]:
+    """The entries ``HEAD PID REST TAIL`` of ``folder`` (``PID`` digits, up to a ``-`` or ``TAIL``) whose
+    process ``PID`` is gone: what a killed writer left."""
     stale = []
-    for p in sorted(out.parent.glob(f".{glob.escape(out.name)}.{kind}-*")):
-        pid = p.name[len(out.name) + len(kind) + 3:].split("-")[0]
-        if p.is_dir() and pid.isdigit() and not process_alive(int(pid)):
+    for p in sorted(folder.glob(f"{glob.escape(head)}*{glob.escape(tail)}")):
+        pid = p.name[len(head):len(p.name) - len(tail)].split("-")[0]
+        if pid.isdigit() and not process_alive(int(pid)):
             stale.append(p)
     return stale
+
+
+def _stale(out: Path, kind: str) -> list[Path]:
+    """The directories ``.NAME.KIND-PID-XXXX`` beside ``out`` whose process ``PID`` is gone."""
+    return [p for p in left_by_dead_writers(out.parent, f".{out.name}.{kind}-") if p.is_dir()]
 
 
 def _remove(p: Path) -> None:

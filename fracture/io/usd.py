@@ -30,7 +30,6 @@ over it, so a failed write never leaves half a file behind.
 
 from __future__ import annotations
 
-import glob
 import os
 import re
 from collections.abc import Iterable, Sequence
@@ -38,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fracture.io.atomic import OutputError, process_alive
+from fracture.io.atomic import OutputError, left_by_dead_writers
 
 # A piece whose points at a frame are within this of a rotation and translation of its rest points (relative
 # to the scene's size) moves rigidly at that frame: its transform is written, not its points. Rigid-body
@@ -241,10 +240,7 @@ def write_pieces_usd(path: str | Path, names: Sequence[str], faces: Sequence[np.
 
 
 def _remove_stale_partials(path: Path) -> None:
-    """Delete the files ``.STEM.partial-PID.SUFFIX`` beside ``path`` that a killed writer (process ``PID``, gone)
-    left; those of a writer still going stay."""
-    head = f".{path.stem}.partial-"
-    for stale in path.parent.glob(f"{glob.escape(head)}*{glob.escape(path.suffix)}"):
-        pid = stale.name[len(head):len(stale.name) - len(path.suffix)]
-        if pid.isdigit() and not process_alive(int(pid)):
-            stale.unlink(missing_ok=True)
+    """Delete the files ``.STEM.partial-PID.SUFFIX`` beside ``path`` that a killed writer left; those of a
+    writer still going stay."""
+    for stale in left_by_dead_writers(path.parent, f".{path.stem}.partial-", path.suffix):
+        stale.unlink(missing_ok=True)

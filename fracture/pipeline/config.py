@@ -60,10 +60,6 @@ class _UniqueKeyLoader(yaml.SafeLoader):
             raise yaml.constructor.ConstructorError(
                 None, None, f"its aliases expand to more than {_MOST_NODES:,} values; expected a config",
                 node.start_mark)
-        inner = _within_itself(node)
-        if inner is not None:  # "a: &x [*x]": a value that holds itself has no end
-            raise yaml.constructor.ConstructorError(
-                None, None, "a value holds itself through an alias; expected a config of plain values", inner.start_mark)
         return self.construct_document(node)
 
 
@@ -83,11 +79,15 @@ def load_yaml(text: str) -> Any:
 
 
 def _expanded_size(node, sizes: dict | None = None) -> int:
-    """How many values a YAML node stands for with its aliases expanded (each node's size counted once)."""
+    """How many values a YAML node stands for with its aliases expanded (each node's size counted once); a
+    ConstructorError for a node that holds itself (``a: &x [*x]``: a value with no end)."""
     sizes = {} if sizes is None else sizes
     if id(node) in sizes:
+        if sizes[id(node)] is None:  # still being counted: reached again from within itself
+            raise yaml.constructor.ConstructorError(
+                None, None, "a value holds itself through an alias; expected a config of plain values", node.start_mark)
         return sizes[id(node)]
-    sizes[id(node)] = 1  # a node within itself (a recursive alias) counts once
+    sizes[id(node)] = None
     if isinstance(node, yaml.SequenceNode):
         n = 1 + sum(_expanded_size(child, sizes) for child in node.value)
     elif isinstance(node, yaml.MappingNode):
@@ -97,30 +97,6 @@ def _expanded_size(node, sizes: dict | None = None) -> int:
     sizes[id(node)] = n
     return n
 
-
-
-def _within_itself(node) -> yaml.Node | None:
-    """A node of the YAML graph ``node`` that holds itself through aliases, or None (iterative: no recursion
-    on a deep file)."""
-    state: dict[int, int] = {}  # 1: on the path from the root, 2: done
-    stack = [(node, False)]
-    while stack:
-        n, leaving = stack.pop()
-        if leaving:
-            state[id(n)] = 2
-            continue
-        if state.get(id(n)) == 2:
-            continue
-        state[id(n)] = 1
-        stack.append((n, True))
-        children = (n.value if isinstance(n, yaml.SequenceNode) else
-                    [c for pair in n.value for c in pair] if isinstance(n, yaml.MappingNode) else [])
-        for child in children:
-            if state.get(id(child)) == 1:
-                return child
-            if state.get(id(child)) != 2:
-                stack.append((child, False))
-    return None
 
 
 def read_yaml(path: Path) -> dict:

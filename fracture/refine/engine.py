@@ -543,7 +543,7 @@ class Refiner:
             if done >= p.iterations:
                 break
         if start is not None and len(self.stages()) > 1 and (self.first, self.count) == self.stages()[-1]:
-            done = self._last_stage_again(start, done, callback)
+            self._last_stage_again(start, done, callback)
         off_b = self.onb.settle() if self.onb.error(self.onb.boundary) > self.onb.on_b else 0.0
         if off_b > self.onb.on_b:
             log.boundary_error[-1] = off_b
@@ -600,11 +600,11 @@ class Refiner:
                 break
         return done, settled
 
-    def _last_stage_again(self, start: FractureSurface, done: int, callback=None) -> int:
+    def _last_stage_again(self, start: FractureSurface, done: int, callback=None) -> None:
         """After the last stage of a flow from the coarse surface ``start`` (on B): if it ended above
         ``start`` on level 0, on dense samples, the stage again from ``start``, with iterations of its own,
         and whichever of the two ends lower (module notes); each return to a surface is the log's next entry,
-        with ``callback`` called. Returns the iterations done in all."""
+        with ``callback`` called (``done``: the iterations run before, which it numbers from)."""
         offset = self.shift(0, 1)
 
         def value(m):
@@ -612,15 +612,14 @@ class Refiner:
 
         ended, coarse = value(self.mesh), value(start)
         if ended <= coarse:
-            return done
+            return
         first = copy.deepcopy(self.mesh)
         self._return_to(start, callback)
-        done, _ = self._stage(self.params.stage_iterations, done, callback)
+        self._stage(self.params.stage_iterations, done, callback)
         again = value(self.mesh)
         if again >= ended:
             self._return_to(first, callback)
         self.again = (ended, coarse, again)
-        return done
 
     def _return_to(self, surface: FractureSurface, callback=None, stage: int | None = None) -> None:
         """``surface`` (a copy) as the mesh, as the log's next entry (of the current stage, or ``stage``),
