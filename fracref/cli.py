@@ -174,31 +174,14 @@ _stopped_by: list[int] = []
 
 
 def _stop(signum, frame):
-    """Ctrl-C, SIGTERM and SIGHUP: raise :class:`_Stopped` where the program is.
+    """Ctrl-C, SIGTERM and SIGHUP: raise :class:`_Stopped` where the program is, or a moment later when it is
+    inside the compiler's C code (:func:`fracture.process.later_if_compiling`)."""
+    from fracture.process import later_if_compiling
 
-    Inside a callback from the compiler's C code (numba writing a kernel to
-    its cache through llvmlite) an exception would be printed and dropped, and
-    the run would go on: the signal is sent again a moment later, once the
-    callback has returned."""
-    if _in_compiler_callback(frame):
-        import threading
-
-        threading.Timer(_REDELIVER_SECONDS, os.kill, (os.getpid(), signum)).start()
+    if later_if_compiling(signum, frame):
         return
     _stopped_by.append(signum)
     raise _Stopped(signum)
-
-
-# Seconds after which a signal that arrived inside a compiler callback is sent again.
-_REDELIVER_SECONDS = 0.05
-
-
-def _in_compiler_callback(frame) -> bool:
-    while frame is not None:
-        if "llvmlite" in frame.f_code.co_filename:
-            return True
-        frame = frame.f_back
-    return False
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -47,6 +47,25 @@ def cores() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
+# Seconds after which a signal that arrived inside a compiler callback is sent again.
+_REDELIVER_SECONDS = 0.05
+
+
+def later_if_compiling(signum: int, frame) -> bool:
+    """For a signal handler that raises to stop the program: whether the signal came inside a callback from the
+    compiler's C code (numba writing a kernel to its cache through llvmlite), where an exception would be
+    printed with its traceback and dropped, and the program would go on; then the signal is sent again a
+    moment later, once the callback has returned."""
+    while frame is not None:
+        if "llvmlite" in frame.f_code.co_filename:
+            import threading
+
+            threading.Timer(_REDELIVER_SECONDS, os.kill, (os.getpid(), signum)).start()
+            return True
+        frame = frame.f_back
+    return False
+
+
 # The threading layers numba knows (NUMBA_THREADING_LAYER).
 _LAYERS = ("default", "safe", "threadsafe", "forksafe", "omp", "tbb", "workqueue")
 

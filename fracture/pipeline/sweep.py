@@ -265,7 +265,10 @@ def _worker_setup(threads: int) -> None:
 
 
 def _stopped_worker(signum, frame):
-    raise KeyboardInterrupt
+    from fracture.process import later_if_compiling
+
+    if not later_if_compiling(signum, frame):  # a kernel being compiled: once it is written
+        raise KeyboardInterrupt
 
 
 # Seconds the sweep waits for its stopped workers to remove what they were writing.
