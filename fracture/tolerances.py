@@ -33,6 +33,12 @@ tol.report = 1e-5
 # crosses B stops when its bracket is shorter than this (then projects onto B).
 tol.on_surface = 1e-5
 
+# The side of B from a closest point's pseudonormal (Exterior.inside_near): a barycentric weight of the
+# closest point below this puts it on its triangle's edge (two: at a corner); a point closer to B than this
+# (relative to B's diagonal: on B, to rounding) is answered by its winding number, as before, whatever it is.
+tol.on_feature = 1e-9
+tol.side_of_b = 1e-9
+
 # Refinement: a boundary vertex farther than this from B (relative to the
 # finest grid cell) is off B; the loop does not end while one is (a vertex
 # split from a boundary edge starts on the chord and reaches B the iteration

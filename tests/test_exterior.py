@@ -99,3 +99,103 @@ def test_no_triangles_wind_about_no_point_and_an_empty_piece_is_checked_without_
         assert np.array_equal(fast_winding(np.zeros((0, 3)), none, P), np.zeros(3000))
     checks = mesh_checks(V, none)
     assert checks["volume"] == 0.0 and checks["triangles"] == 0 and checks["self_intersections"] == 0
+
+
+def _l_prism(divisions=3):
+    """An L-shaped prism (a concave edge along z, two concave corners): its L cut into three squares, each a
+    box, and their shared faces removed (the boxes' faces on x = 1 or y = 1 between two of the squares)."""
+    squares = [(0, 0), (1, 0), (0, 1)]
+    V, F = [], []
+    for x, y in squares:
+        Vb, Fb = box([x, y, 0], [x + 1, y + 1, 1], (divisions, divisions, divisions))
+        c = Vb[Fb].mean(axis=1)
+        inner = np.zeros(len(Fb), bool)
+        for ox, oy in squares:  # a face on the side shared with another square is inside the L
+            if (ox, oy) != (x, y):
+                on = np.isclose(c[:, 0], max(x, ox)) if ox != x else np.isclose(c[:, 1], max(y, oy))
+                inside = (c[:, 1] > min(y, oy)) & (c[:, 1] < min(y, oy) + 1) if ox != x else \
+                    (c[:, 0] > min(x, ox)) & (c[:, 0] < min(x, ox) + 1)
+                inner |= on & inside
+        F.append(Fb[~inner] + sum(len(v) for v in V))
+        V.append(Vb)
+    from fracture.mesh.topology import weld
+
+    V, F = np.concatenate(V), np.concatenate(F)
+    V, remap = weld(V, 1e-9)
+    return V, remap[F]
+
+
+def _inside_l(P):
+    return (P[:, 2] > 0) & (P[:, 2] < 1) & (P[:, 0] > 0) & (P[:, 1] > 0) & ((P[:, 0] < 1) & (P[:, 1] < 2) |
+                                                                       (P[:, 0] < 2) & (P[:, 1] < 1))
+
+
+def _inside_pinch(P):
+    return np.all((P > 0) & (P < 1), axis=1) | np.all((P > 1) & (P < 2), axis=1)
+
+
+def _pinch():
+    """Two cubes that share one corner, (1, 1, 1): a closed oriented surface whose corner there is a pinch."""
+    V0, F0 = box([0, 0, 0], [1, 1, 1], (2, 2, 2))
+    V1, F1 = box([1, 1, 1], [2, 2, 2], (2, 2, 2))
+    V, F = np.concatenate([V0, V1]), np.concatenate([F0, F1 + len(V0)])
+    from fracture.mesh.topology import weld
+
+    V, remap = weld(V, 1e-9)
+    return V, remap[F]
+
+
+def _spike():
+    """A tall thin tetrahedron: its edges and corners are sharp (normals more than a right angle apart), where
+    one triangle's normal tells the side of a point beyond its edge wrongly."""
+    V = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.6, 0.0], [0.2, 0.2, 3.0]])
+    return V, np.array([[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]])
+
+
+def _inside_spike(P):
+    V = _spike()[0]
+    w = np.linalg.solve((V[1:] - V[0]).T, (P - V[0]).T).T  # barycentric weights of corners 1, 2, 3
+    return (w > 0).all(axis=1) & (w.sum(axis=1) < 1)
+
+
+@pytest.mark.parametrize("shape", ["box", "l", "hollow", "pinch", "spike"])
+def test_the_side_of_b_from_closest_points_is_the_winding_numbers(shape):
+    """Pseudonormals (of the closest point's triangle, edge or corner) tell inside from outside as the winding
+    numbers do, on convex and concave edges and corners, a cavity, and a pinch (where a corner's normal does
+    not tell, and the winding number is asked); close to B and far from it."""
+    from fracture.mesh.topology import closed_oriented
+
+    V, F = {"box": lambda: box([0, 0, 0], [1, 2, 3], (2, 3, 4)), "l": _l_prism,
+            "hollow": lambda: _hollow_box((3, 3, 3)), "pinch": _pinch, "spike": _spike}[shape]()
+    assert closed_oriented(F)
+    B = Exterior(V, F)
+    rng = np.random.default_rng(3)
+    lo, hi = V.min(axis=0) - 0.5, V.max(axis=0) + 0.5
+    far = lo + rng.random((4000, 3)) * (hi - lo)
+    # near B: around its corners (the closest point at a corner or on an edge) and its faces
+    corners = V[rng.integers(0, len(V), 3000)] + rng.normal(0, 0.05, (3000, 3))
+    t = rng.integers(0, len(F), 3000)
+    faces = V[F[t]].mean(axis=1) + rng.normal(0, 0.02, (3000, 3))
+    t, u = rng.integers(0, len(F), 3000), rng.random((3000, 1))  # around the edges
+    edges = V[F[t, 0]] * u + V[F[t, 1]] * (1 - u) + rng.normal(0, 0.05, (3000, 3))
+    P = np.concatenate([far, corners, faces, edges])
+    d2, tri, C = B.closest(P)
+    away = d2 > 1e-12
+    got = B.inside_near(P, tri, C)
+    assert np.array_equal(got[away], B.inside(P)[away])
+    if shape in ("l", "pinch", "spike"):
+        truth = {"l": _inside_l, "pinch": _inside_pinch, "spike": _inside_spike}[shape](P)
+        assert np.array_equal(got[away], truth[away])
+
+
+def test_the_side_of_b_needs_no_winding_numbers_on_a_closed_b_and_takes_them_on_an_open_one():
+    V, F = _l_prism()
+    B = Exterior(V, F)
+    inside, _ = B.grid_nodes(np.array([-0.35, -0.35, -0.35]), np.full(3, 0.1), (29, 29, 18), 0.01)
+    assert "_wn" not in vars(B)  # the dearest query near B, never built
+    assert inside.sum() > 0 and not inside.all()
+    # a B with a hole is answered by winding numbers (its pseudonormals would not tell)
+    P = np.random.default_rng(4).random((500, 3)) * 2.0
+    opened = Exterior(V, F[1:])
+    d2, tri, C = opened.closest(P)
+    assert np.array_equal(opened.inside_near(P, tri, C), opened.inside(P))

@@ -131,3 +131,25 @@ def test_corner_groups_are_the_unique_sorted_rows_with_or_without_packing():
         group, size = corner_groups(F)
         assert np.array_equal(group, inverse.ravel()) and np.array_equal(size, count)
         assert (size[group[:60]] >= 2).all()
+
+
+def test_across_edges_and_one_fan():
+    """The triangle across each edge of a closed oriented surface, and which vertices are a single fan (libigl's
+    test) on two tetrahedra that share a corner (a pinch)."""
+    from fracture.mesh.topology import across_edges, manifold_vertices, one_fan
+
+    tet = np.array([[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]])
+    across = across_edges(tet)
+    for f in range(4):
+        for k in range(3):
+            g = across[f, k]
+            a, b = tet[f, k], tet[f, (k + 1) % 3]
+            assert g != f and b in tet[g] and a in tet[g]
+            i = list(tet[g]).index(b)
+            assert tet[g, (i + 1) % 3] == a  # along the edge the other way
+    assert across_edges(tet[:3]) is None and across_edges(np.r_[tet, tet[:1]]) is None
+    two = np.r_[tet, tet + 3]  # vertex 3 is both tetrahedra's
+    assert one_fan(two, across_edges(two), 7).tolist() == manifold_vertices(two).tolist()
+    assert one_fan(two, across_edges(two), 7).tolist() == [True, True, True, False, True, True, True]
+    V, F = box([0, 0, 0], [1, 2, 3], (3, 4, 5))
+    assert one_fan(F, across_edges(F), len(V)).all()

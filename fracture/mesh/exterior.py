@@ -13,7 +13,8 @@ import igl
 import numpy as np
 from scipy import ndimage
 
-from fracture.mesh.topology import face_frames
+from fracture.mesh.topology import across_edges, face_frames, one_fan
+from fracture.tolerances import tol
 
 
 def fast_winding(V: np.ndarray, F: np.ndarray, P: np.ndarray) -> np.ndarray:
@@ -34,6 +35,11 @@ def fast_winding(V: np.ndarray, F: np.ndarray, P: np.ndarray) -> np.ndarray:
 _BOX_OVER_AREA = 8.0
 # ... and spans more than this many cells along an axis.
 _PIECE_CELLS = 2.0
+
+
+# A point's side of B is sure where its offset from its closest point makes more than this cosine with the
+# plane of the closest point's pseudonormal (otherwise the winding number is asked).
+_SURE_SIDE = 0.1
 
 
 def _small_pieces(T: np.ndarray, spacing: np.ndarray) -> np.ndarray:
@@ -106,6 +112,62 @@ class Exterior:
         """Whether points are inside (winding number above one half)."""
         return self.winding(P) > 0.5
 
+    @cached_property
+    def _across(self) -> np.ndarray | None:
+        """:func:`across_edges` of B: None unless B is closed and oriented (the surfaces on which a closest
+        point's pseudonormal tells inside from outside)."""
+        return across_edges(self.F)
+
+    @cached_property
+    def _on_b(self) -> float:
+        """Closer to B than this is on it, to rounding (:data:`tol.side_of_b` of its diagonal)."""
+        return tol.side_of_b * float(np.linalg.norm(np.ptp(self.V, axis=0))) if len(self.V) else 0.0
+
+    @cached_property
+    def _corner_normals(self) -> np.ndarray:
+        """Per vertex of a closed oriented B its angle-weighted normal; zero at a pinch (its triangles make
+        more than one fan), where no normal tells."""
+        normal = igl.per_vertex_normals(self.V, self.F, igl.PER_VERTEX_NORMALS_WEIGHTING_TYPE_ANGLE)
+        normal[~one_fan(self.F, self._across, len(self.V))] = 0.0
+        return np.nan_to_num(normal)
+
+    def inside_near(self, P: np.ndarray, tri: np.ndarray, C: np.ndarray) -> np.ndarray:
+        """:meth:`inside` for points ``P`` whose closest points ``C`` on B, on triangles ``tri``, are known
+        (:meth:`closest`): the side of the closest point's pseudonormal (its triangle's normal, the sum of
+        the two triangles' normals on an edge, the angle-weighted normal at a corner: Baerentzen and Aanaes,
+        "Signed distance computation using the angle weighted pseudonormal", 2005), the winding number where
+        that is not sure: a point on B (to rounding) or nearly level with the normal, a corner at a pinch of
+        B, a B that is not closed.
+
+        Winding numbers near B are the dearest to take (the hierarchy's far-field sums do not apply): on
+        350,000 points within a cell or so of the scenes' B, 0.6-1.2 s against 0.08 s for this (with the
+        closest points known)."""
+        P = np.ascontiguousarray(P, np.float64).reshape(-1, 3)
+        across = self._across
+        if across is None or not len(P):
+            return self.inside(P)
+        tri = np.asarray(tri, np.int64)
+        T = self.V[self.F[tri]]
+        bary = igl.barycentric_coordinates(np.ascontiguousarray(C, np.float64),
+                                           *(np.ascontiguousarray(T[:, k]) for k in range(3)))
+        on = bary < tol.on_feature  # NaN (a triangle of no area) is on nothing: its normal is zero, and unsure
+        count = on.sum(axis=1)
+        normal = self.normals[tri].copy()
+        edge = np.flatnonzero(count == 1)  # on the edge opposite the zero weight's corner j: edge j + 1
+        normal[edge] += self.normals[across[tri[edge], (np.argmax(on[edge], axis=1) + 1) % 3]]
+        vertex = np.flatnonzero(count == 2)  # at the corner of the nonzero weight
+        if len(vertex):
+            normal[vertex] = self._corner_normals[self.F[tri[vertex], np.argmin(on[vertex], axis=1)]]
+        away = P - C
+        side = np.einsum("ij,ij->i", away, normal)
+        length = np.linalg.norm(away, axis=1)
+        sure = (np.abs(side) > _SURE_SIDE * length * np.linalg.norm(normal, axis=1)) & (length > self._on_b)
+        out = side < 0.0
+        unsure = np.flatnonzero(~sure)
+        if len(unsure):
+            out[unsure] = self.inside(P[unsure])
+        return out
+
     def closest(self, P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Squared distances, triangle ids and closest points on B of points ``(k, 3)``."""
         return self._tree.squared_distance(self.V, self.F, np.ascontiguousarray(P, np.float64).reshape(-1, 3))
@@ -120,11 +182,11 @@ class Exterior:
         nodes ``asked`` (a mask of ``shape``, default all) are answered, the others are False.
 
         Only the nodes of the cells that B's triangles' bounding boxes meet are
-        asked (winding number and distance); every other node lies in a region
+        asked (closest point, and from it the side: :meth:`inside_near`); every other node lies in a region
         of such nodes joined by grid edges that B does not cross (a triangle
-        across an edge would have marked both its ends), so one winding number
-        per region answers for all of it. On the collapsing wall's search band
-        0.04 s against 0.40 s for asking every node. A triangle larger than a
+        across an edge would have marked both its ends), so one node per region
+        answers for all of it. On the collapsing wall's search band 0.04 s
+        against 0.40 s for asking every node. A triangle larger than a
         few cells is split first (:func:`_small_pieces`): the box of a large
         slanted one holds mostly nodes far from it (a prism's six faces marked
         every node of its grid)."""
@@ -155,14 +217,15 @@ class Exterior:
         inside = np.zeros(shape, bool)
         on_b = np.zeros(shape, bool) if near else None
         if len(idx):
-            inside.flat[idx] = self.inside(P)
+            d2, tri, C = self.closest(P)
+            inside.flat[idx] = self.inside_near(P, tri, C)
             if near:
-                on_b.flat[idx] = self.closest(P)[0] < within * within
+                on_b.flat[idx] = d2 < within * within
         regions, n = ndimage.label(~touched)
         if n:
             _, first = np.unique(regions.ravel(), return_index=True)  # a node of each region (0: the touched)
             seeds = origin + np.stack(np.unravel_index(first[1:], shape), 1) * spacing
-            inside |= np.concatenate([[False], self.inside(seeds)])[regions] & asked
+            inside |= np.concatenate([[False], self.inside_near(seeds, *self.closest(seeds)[1:])])[regions] & asked
         return inside, on_b
 
     def along(self, start: np.ndarray, through: np.ndarray) -> np.ndarray:

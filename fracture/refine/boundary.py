@@ -139,8 +139,8 @@ class BoundaryOnB:
         near = ids[~(clearance(self.mesh.F, X1, s.near_at, s.near_d2, ids) > thin)]
         if not len(near):
             return near
-        d2 = self.closest(near, X1)[0]
-        out = near[(d2 < thin * thin) | ~self.B.inside(X1[near])]
+        d2, tri, C = self.closest(near, X1)
+        out = near[(d2 < thin * thin) | ~self.B.inside_near(X1[near], tri, C)]
         s.near_at[out] = np.nan
         return out
 
