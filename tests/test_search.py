@@ -148,7 +148,7 @@ def test_the_viewer_names_the_searched_step():
 
 
 def test_moved_vertices_that_meet_another_go_back():
-    from fracture.refine.search import _apart
+    from fracture.refine.label_surface import _apart
 
     V = np.array([[0.0, 0, 0], [1.0, 0, 0], [0.0, 1, 0], [5.0, 5, 5]])
     X = V.copy()
@@ -238,7 +238,7 @@ def test_sheets_move_into_a_thin_valley_of_psi_only_where_their_integral_falls()
     from conftest import grid_sheet
 
     from fracture.mesh.topology import unique_edges
-    from fracture.refine.search import _to_valley, _where_lower
+    from fracture.refine.label_surface import _to_valley, _where_lower
 
     h, width = 0.05, 0.5  # a weak layer half a cell wide on the plane z = 0.5
     def psi(X):
@@ -359,7 +359,7 @@ def test_moves_that_make_triangles_cross_are_taken_back_and_the_others_kept():
     stays. A crossing the surface had before stays and counts as one it had; a new one beside it goes."""
     from fracture.mesh.intersect import meeting_pairs, self_intersections
     from fracture.mesh.primitives import sheet
-    from fracture.refine.search import _uncrossed
+    from fracture.refine.label_surface import _uncrossed
 
     lower = sheet(lambda u, v: np.stack([u, v, 0 * u], -1), (0, 1), (0, 1), 11, 11)
     upper = sheet(lambda u, v: np.stack([u, v, 0 * u + 0.1], -1), (0, 0.5), (0, 1), 6, 11)
@@ -467,7 +467,7 @@ def test_rim_moves_that_make_rims_cross_on_b_are_taken_back_and_the_others_kept(
     make its edges cross on B, and go back; a move elsewhere that crosses nothing stays. A pair that crossed
     before stays, and a move of one of its edges too."""
     from fracture.refine.crossings_on_b import close_pairs
-    from fracture.refine.search import _rims_uncrossed
+    from fracture.refine.label_surface import _rims_uncrossed
 
     def normal_at(P):
         return np.tile([0.0, 0.0, 1.0], (len(P), 1))
