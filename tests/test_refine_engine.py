@@ -381,7 +381,7 @@ def test_the_polish_of_a_searched_surface_settles_at_its_first_iteration_that_no
     valley floors, where the step cannot descend."""
     from fracture.refine.search import SearchResult
 
-    def search(mesh, pyramid, B):
+    def search(mesh, pyramid, B, volumes):
         copy = FractureSurface.from_coarse(mesh.V.copy(), mesh.F.copy(), mesh.sides.copy())
         return SearchResult(copy, travel=np.zeros(len(copy.V)), functional=(1.0, 1.0))
 

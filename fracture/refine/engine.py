@@ -122,6 +122,7 @@ from fracture.mesh.fracture_surface import FractureSurface
 from fracture.refine.params import RefineParams
 from fracture.refine.remesh import PsiSplits
 from fracture.refine.search import SearchResult, search_band, search_in_rounds
+from fracture.refine.volumes import PieceVolumes, measure_volumes
 from fracture.refine.state import VertexState
 from fracture.refine.step import (BOUNDARY_MOVE, ImplicitStep, StepSize, cotangent_weights, limit_by_shortest_edge,
                                   limit_moves)
@@ -211,8 +212,9 @@ class Refiner:
     ``collisions`` is the collision step (default
     :func:`~fracture.refine.collide.stop_collisions`, same signature): a seam for
     another collision response, or for a test that blocks a vertex.
-    ``search(mesh, pyramid, B) -> SearchResult`` is the global search before the
-    flow (default: :func:`default_search` of the parameters; None: none).
+    ``search(mesh, pyramid, B, volumes) -> SearchResult`` is the global search before the
+    flow (default: :func:`default_search` of the parameters; None: none); ``volumes`` are the pieces'
+    volumes and shares to keep (:class:`~fracture.refine.volumes.PieceVolumes`, or None: no limit).
     ``grain`` (a :class:`fields.grain.Grain`) makes the functional the integral
     of psi g(n): the flow, the splits and the step's acceptance use it (the
     implicit area term takes each triangle's g(n) as a factor of its weight).
@@ -232,6 +234,7 @@ class Refiner:
         self.stop_collisions = collisions
         self.search = default_search(params, grain=grain) if search == "default" else search
         self.searched = False  # the search's surface replaced the coarse one
+        self.searched_volume = None  # the pieces' volumes when it did
         # the last stage's end, the coarse surface's and the end of the stage run again from it, on dense samples
         self.again: tuple[float, float, float] | None = None
         self.h = float(np.min(pyramid.grid.spacing))
@@ -240,6 +243,9 @@ class Refiner:
         self.step = StepSize(params.step, self.h)
         self.solve = ImplicitStep()  # keeps its factorisation for a retried step
         self.state = VertexState.empty(len(mesh.V))
+        # each piece's volume, kept above its share of the coarse one (None: no limit)
+        self.volumes = (PieceVolumes.measure(mesh.V, mesh.F, mesh.sides, self.B, pyramid.grid, params.keep_volume)
+                        if params.keep_volume > 0.0 and len(mesh.F) else None)
         self.begin_stage(*self.stages()[0])  # sets first, count, near, offset and the step size
         # the boundary constraint on B: owns B's answers about the vertices, the boundary and what is off B
         self.onb = BoundaryOnB(mesh, self.state, self.B, self.h, params, collisions)
@@ -410,6 +416,8 @@ class Refiner:
             d[held] = 0.0
             limit_moves(m.V, m.F, d, p.fold, p.max_move * self.h)
             limit_by_shortest_edge(m.V, m.F, d, boundary, BOUNDARY_MOVE)
+            if self.volumes is not None:
+                self.volumes.hold(m.V, m.F, m.sides, d)
             trial = m.V + d
             self.onb.project(boundary, trial)
             inner = np.flatnonzero((d != 0.0).any(axis=1))
@@ -453,6 +461,8 @@ class Refiner:
         self.at_minimum = not descended and (tried_least or self.searched)
         s.hold[stopped] = p.hold
         moved = np.linalg.norm(X1 - m.V, axis=1)
+        if self.volumes is not None:
+            self.volumes.moved(m.V, X1, m.F, m.sides)
         m.V = X1
         self.onb.boundary = boundary  # flips keep the boundary: valid until the next splits
         flip_edges(m.V, m.F, m.sides, max_passes=3, safe=True, grid=grid, table=table, closed=closed)
@@ -471,13 +481,14 @@ class Refiner:
         replaces the mesh (in place) and is the log's next entry, with ``callback(-1, self)``."""
         clock = time.perf_counter()
         log = self.log
-        result = self.search(self.mesh, self.pyramid, self.B)
+        result = self.search(self.mesh, self.pyramid, self.B, self.volumes)
         log.search = result
         if result.surface is None:
             log.tick("search", clock)
             return result
         self.searched = True
-        self._take(result.surface)
+        self._take(result.surface, self._volumes_of(result))
+        self.searched_volume = self._volume()
         self.begin_stage(*self.stages()[0])
         # both on the polish's field (level 0): the coarse surface's functional there, and the new one's;
         # how far the surface went: the new vertices' distances to the coarse surface
@@ -532,7 +543,8 @@ class Refiner:
         if log.boundary_error[-1] > self.onb.on_b:  # the surface onto B before the flow starts
             self.onb.settle()
         self.onb.fit_chords(self.edges())
-        start = None if self.searched else copy.deepcopy(self.mesh)  # the last stage may run again from it
+        # the last stage may run again from it
+        start = None if self.searched else (copy.deepcopy(self.mesh), self._volume())
         done, unsettled = 0, []
         for first, count in self.stages():
             if (first, count) != (self.first, self.count):
@@ -543,7 +555,7 @@ class Refiner:
             if done >= p.iterations:
                 break
         if start is not None and len(self.stages()) > 1 and (self.first, self.count) == self.stages()[-1]:
-            self._last_stage_again(start, done, callback)
+            self._last_stage_again(*start, done, callback)
         off_b = self.onb.settle() if self.onb.error(self.onb.boundary) > self.onb.on_b else 0.0
         if off_b > self.onb.on_b:
             log.boundary_error[-1] = off_b
@@ -600,11 +612,12 @@ class Refiner:
                 break
         return done, settled
 
-    def _last_stage_again(self, start: FractureSurface, done: int, callback=None) -> None:
-        """After the last stage of a flow from the coarse surface ``start`` (on B): if it ended above
-        ``start`` on level 0, on dense samples, the stage again from ``start``, with iterations of its own,
-        and whichever of the two ends lower (module notes); each return to a surface is the log's next entry,
-        with ``callback`` called (``done``: the iterations run before, which it numbers from)."""
+    def _last_stage_again(self, start: FractureSurface, start_volume, done: int, callback=None) -> None:
+        """After the last stage of a flow from the coarse surface ``start`` (on B; its pieces' volumes
+        ``start_volume``): if it ended above ``start`` on level 0, on dense samples, the stage again from
+        ``start``, with iterations of its own, and whichever of the two ends lower (module notes); each return
+        to a surface is the log's next entry, with ``callback`` called (``done``: the iterations run before,
+        which it numbers from)."""
         offset = self.shift(0, 1)
 
         def value(m):
@@ -613,29 +626,45 @@ class Refiner:
         ended, coarse = value(self.mesh), value(start)
         if ended <= coarse:
             return
-        first = copy.deepcopy(self.mesh)
-        self._return_to(start, callback)
+        first = copy.deepcopy(self.mesh), self._volume()
+        self._return_to(start, callback, volume=start_volume)
         self._stage(self.params.stage_iterations, done, callback)
         again = value(self.mesh)
         if again >= ended:
-            self._return_to(first, callback)
+            self._return_to(first[0], callback, volume=first[1])
         self.again = (ended, coarse, again)
 
-    def _return_to(self, surface: FractureSurface, callback=None, stage: int | None = None) -> None:
-        """``surface`` (a copy) as the mesh, as the log's next entry (of the current stage, or ``stage``),
-        ``callback`` called."""
+    def _return_to(self, surface: FractureSurface, callback=None, stage: int | None = None, volume=None) -> None:
+        """``surface`` (a copy; its pieces' volumes ``volume``) as the mesh, as the log's next entry (of the
+        current stage, or ``stage``), ``callback`` called."""
         before = self.functional()
-        self._take(surface)
+        self._take(surface, volume)
         self.full = False
         self._record_step(before, self.functional(), 0.0)
         self._record(0.0, self.onb.error(self.onb.boundary), stage=stage)
         if callback is not None:
             callback(len(self.log.functional) - 1, self)
 
-    def _take(self, surface: FractureSurface) -> None:
+    def _volumes_of(self, result: SearchResult) -> np.ndarray | None:
+        """The pieces' volumes after the search: as its labels changed them, or measured on the grid (a search
+        that does not say)."""
+        if self.volumes is None:
+            return None
+        if len(result.volume_change) == len(self.volumes.volume):
+            return self.volumes.volume + result.volume_change
+        s = result.surface
+        return measure_volumes(s.V, s.F, s.sides, self.B, self.pyramid.grid)
+
+    def _volume(self) -> np.ndarray | None:
+        return None if self.volumes is None else self.volumes.volume.copy()
+
+    def _take(self, surface: FractureSurface, volume: np.ndarray | None = None) -> None:
         """Replace the mesh by a copy of ``surface`` (in place; the iterations edit the mesh's arrays in place,
-        and the log keeps the search's surface as it was) and start its per-vertex state and boundary afresh."""
+        and the log keeps the search's surface as it was), its pieces' volumes ``volume``, and start its
+        per-vertex state and boundary afresh."""
         self.mesh.replace(copy.deepcopy(surface))
+        if self.volumes is not None:
+            self.volumes.volume = np.asarray(volume, np.float64).copy()
         self.state = self.onb.state = VertexState.empty(len(self.mesh.V))
         self._ordered = 0
         self.onb.off_b = np.zeros(0, np.int64)
@@ -649,7 +678,7 @@ class Refiner:
         log.sampled = (log.sampled[0], log.search.sampled[1])
         log.stop += (f"; the polish raised the functional on dense samples ({polished:.6g} against the search's "
                      f"{log.search.sampled[1]:.6g}): the search's surface is kept")
-        self._return_to(log.search.surface, callback, stage=SEARCH_STAGE)
+        self._return_to(log.search.surface, callback, stage=SEARCH_STAGE, volume=self.searched_volume)
 
 
 def default_search(params: RefineParams, distance: np.ndarray | None = None, names: list[str] | None = None,
@@ -663,14 +692,15 @@ def default_search(params: RefineParams, distance: np.ndarray | None = None, nam
     if params.search == "none":
         return None
 
-    def search(mesh, pyramid, B):
+    def search(mesh, pyramid, B, volumes=None):
         prepared = None if bands is None else bands.get()
         if prepared is None:
             prepared = search_band(mesh, pyramid.grid, B, params.band, params.core, distance, names)
             if bands is not None:
                 bands.put(prepared)
         return search_in_rounds(mesh, pyramid, B, params.band, params.tension, rounds=params.search_rounds,
-                                distance=distance, prepared=prepared, core=params.core, names=names, grain=grain)
+                                distance=distance, prepared=prepared, core=params.core, names=names, grain=grain,
+                                volumes=volumes)
 
     return search
 

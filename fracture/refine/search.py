@@ -63,7 +63,7 @@ and polishes it.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import igl
 import numba
@@ -144,6 +144,8 @@ class SearchResult:
     functional: tuple[float, float] = (0.0, 0.0)
     sampled: tuple[float, float] = (0.0, 0.0)  # the same on dense samples: what decides
     pressed: float = 0.0  # the share of the cut's weight on edges to nodes the band keeps (its limits)
+    # per piece, the volume the cut's labels give it less the coarse labels' (each node a cell's volume)
+    volume_change: np.ndarray = field(default_factory=lambda: np.zeros(0))
     seconds: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
 
@@ -234,7 +236,7 @@ def _thin_pieces(V, F, sides, coarse, n_pieces, spacing) -> np.ndarray:
 def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, tension: float,
                      distance: np.ndarray | None = None, grain=None, core: float = 0.4,
                      names: list[str] | None = None, prepared: SearchBand | None = None,
-                     origin: FractureSurface | None = None) -> SearchResult:
+                     origin: FractureSurface | None = None, volumes=None) -> SearchResult:
     """Search the band of ``band`` grid cells around ``mesh`` (the coarse surface) for the labelling of
     least weighted area (module notes).
 
@@ -246,7 +248,9 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
     (per node the edge weights of :class:`~fracture.refine.cut_weights.GrainWeights`); ``prepared``
     (optional) the band :func:`search_band` made of the same surface, grid, B, ``band`` and ``core``;
     ``origin`` (optional, default ``mesh``) the coarse surface the new vertices hang from in the tree
-    and their travel is measured from (:func:`search_in_rounds` searches again from a searched surface).
+    and their travel is measured from (:func:`search_in_rounds` searches again from a searched surface);
+    ``volumes`` (optional, a :class:`~fracture.refine.volumes.PieceVolumes`) the pieces' volumes and the
+    shares they keep: a cut that leaves a piece below its share is not kept.
     """
     clock = time.perf_counter()
     seconds: dict[str, float] = {}
@@ -281,32 +285,48 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
     def reach_of(ids):
         return _reach(sub, near[ids], V0, F0, S0, band * h + h)
 
-    labels, graph, log = _cut(sub, near, keep, coarse, shifted, node_weights, reach_of)
-    cut = labels[graph.p] != labels[graph.q]
-    pressed = float(graph.w[cut & (keep[graph.p] | keep[graph.q])].sum() / max(graph.w[cut].sum(), tol.tiny))
-    tick("cut")
-
-    # 3. islands join the piece around them
     notes: list[str] = []
-    islands = 0
-    for _ in range(_ISLAND_ROUNDS):
-        labels, count = _mend(sub, near, labels, keep)
-        islands += count
-        if not count:
-            break
-    else:
-        if _islands(sub, near, labels, keep).any():
+    held: list[int] = []  # pieces that keep their coarse nodes: the cut left them below their share of volume
+    for attempt in range(2):
+        labels, graph, log = _cut(sub, near, keep | np.isin(coarse, held), coarse, shifted, node_weights, reach_of)
+        cut = labels[graph.p] != labels[graph.q]
+        pressed = float(graph.w[cut & (keep[graph.p] | keep[graph.q])].sum() / max(graph.w[cut].sum(), tol.tiny))
+        tick("cut")
+
+        # 3. islands join the piece around them; every piece keeps enough of its volume
+        islands = 0
+        for _ in range(_ISLAND_ROUNDS):
+            labels, count = _mend(sub, near, labels, keep | np.isin(coarse, held))
+            islands += count
+            if not count:
+                break
+        else:
+            if _islands(sub, near, labels, keep | np.isin(coarse, held)).any():
+                return SearchResult(None, free_nodes=int(free.sum()), seconds=seconds, notes=[
+                    "search: the cut leaves a piece in parts; the coarse surface is kept"])
+        present = np.bincount(labels, minlength=n_pieces) > 0
+        lost = [c for c in range(n_pieces) if (coarse == c).any() and not present[c]]
+        if lost:
             return SearchResult(None, free_nodes=int(free.sum()), seconds=seconds, notes=[
-                "search: the cut leaves a piece in parts; the coarse surface is kept"])
+                f"search: piece{'s' if len(lost) > 1 else ''} {_named(lost, names)} would vanish; the coarse "
+                "surface is kept"])
+        change = (np.bincount(labels, minlength=n_pieces) - np.bincount(coarse, minlength=n_pieces))[:n_pieces]
+        change = change * float(np.prod(grid.spacing))
+        short = _short(volumes, change, n_pieces)
+        if not len(short):
+            break
+        said = _shares(volumes, change, short, names)
+        if attempt:  # the pieces held, the cut still leaves another below its share
+            return SearchResult(None, free_nodes=int(free.sum()), seconds=seconds, notes=[
+                f"search: the cut would leave {said} of {_their(short)} coarse volume (refine.keep_volume: at least "
+                f"{100 * volumes.keep:.0f} %), with {_named(held, names)} held; the coarse surface is kept"])
+        held = short.tolist()
+        notes.append(f"search: the cut left {said} of {_their(short)} coarse volume (refine.keep_volume: at least "
+                     f"{100 * volumes.keep:.0f} %): {'they' if len(short) > 1 else 'it'} kept {_their(short)} "
+                     "coarse grid nodes, and the band was cut again")
     if islands:
         notes.append(f"search: {islands} grid nodes the cut had cut off from their piece joined the piece around "
                      "them")
-    present = np.bincount(labels, minlength=n_pieces) > 0
-    lost = [c for c in range(n_pieces) if (coarse == c).any() and not present[c]]
-    if lost:
-        return SearchResult(None, free_nodes=int(free.sum()), seconds=seconds, notes=[
-            f"search: piece{'s' if len(lost) > 1 else ''} {_named(lost, names)} would vanish; the coarse "
-            "surface is kept"])
     tick("pieces")
 
     # 4. the surface
@@ -328,7 +348,7 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
     result = SearchResult(surface, travel=travel / h, free_nodes=int(free.sum()),
                           labels_changed=int((labels != coarse).sum()),
                           cut_energy=(log.energy[0], graph.energy(labels)), functional=(before, after),
-                          sampled=sampled, pressed=pressed, seconds=seconds, notes=notes)
+                          sampled=sampled, pressed=pressed, volume_change=change, seconds=seconds, notes=notes)
     if sampled[1] >= sampled[0]:
         result.surface = None
         result.notes.append(f"search: the cut's surface does not lower the functional ({sampled[1]:.6g} against the "
@@ -337,8 +357,8 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
 
 
 def search_in_rounds(mesh: FractureSurface, pyramid, B: Exterior, band: float, tension: float, rounds: int = 1,
-                     distance: np.ndarray | None = None, prepared: SearchBand | None = None, **options
-                     ) -> SearchResult:
+                     distance: np.ndarray | None = None, prepared: SearchBand | None = None, volumes=None,
+                     **options) -> SearchResult:
     """:func:`graph_cut_search` of ``mesh`` (the coarse surface), then again from its own surface, up to
     ``rounds`` searches in all, and one more (up to :data:`_MOST_ROUNDS`) whenever the last one's cut lay
     against the nodes its band keeps on at least :data:`_PRESSED` of its weight (the least surface lies
@@ -348,15 +368,18 @@ def search_in_rounds(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
     ``rounds`` bands from the coarse one, and the cores shrink with the pieces (a minimum cut favours small
     pieces: module notes, 1). A weak sheet 8 voxels off a tilted cut, beyond the first round's cores, is
     reached by the second (`docs/design-measurements.md`). ``options`` go to every round; ``distance`` and
-    ``prepared`` (of the coarse surface) to the first. The result's energies run from the coarse surface to
+    ``prepared`` (of the coarse surface) to the first; ``volumes`` (the pieces' volumes and shares) to every
+    round, with the volumes the kept rounds left. The result's energies run from the coarse surface to
     the last kept round's, its seconds are summed and its notes say how many rounds were kept."""
-    result = graph_cut_search(mesh, pyramid, B, band, tension, distance=distance, prepared=prepared, **options)
+    result = graph_cut_search(mesh, pyramid, B, band, tension, distance=distance, prepared=prepared,
+                              volumes=volumes, **options)
     kept, why = 1, []
     while result.surface is not None and (kept < rounds or (result.pressed >= _PRESSED and kept < _MOST_ROUNDS)):
         if kept >= rounds:
             why.append(f"round {kept}'s cut lay against its band's limits on {100 * result.pressed:.0f} % of its "
                        "weight")
-        again = graph_cut_search(result.surface, pyramid, B, band, tension, origin=mesh, **options)
+        after = None if volumes is None else replace(volumes, volume=volumes.volume + result.volume_change)
+        again = graph_cut_search(result.surface, pyramid, B, band, tension, origin=mesh, volumes=after, **options)
         seconds = {k: result.seconds.get(k, 0.0) + again.seconds.get(k, 0.0)
                    for k in result.seconds.keys() | again.seconds.keys()}
         if again.surface is None:
@@ -373,7 +396,8 @@ def search_in_rounds(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
                               cut_energy=(result.cut_energy[0], again.cut_energy[1]),
                               functional=(result.functional[0], again.functional[1]),
                               sampled=(result.sampled[0], again.sampled[1]), pressed=again.pressed,
-                              seconds=seconds, notes=result.notes + again.notes)
+                              volume_change=result.volume_change + again.volume_change, seconds=seconds,
+                              notes=result.notes + again.notes)
         kept += 1
     if kept > 1:
         result.notes.append(f"search: {kept} rounds, each from the last one's surface ("
@@ -383,6 +407,24 @@ def search_in_rounds(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
 
 def _named(pieces, names) -> str:
     return ", ".join(repr(names[c]) if names is not None and c < len(names) else str(c) for c in pieces)
+
+
+def _short(volumes, change: np.ndarray, n_pieces: int) -> np.ndarray:
+    """The pieces that the volume ``change`` leaves below their share (none without ``volumes``)."""
+    if volumes is None:
+        return np.zeros(0, np.int64)
+    return np.flatnonzero((change < 0.0) & (change < -volumes.room[:n_pieces]))
+
+
+def _shares(volumes, change: np.ndarray, pieces: np.ndarray, names) -> str:
+    """``piece 'a' 42 %, 'b' 47 %``: what ``change`` leaves of the pieces' coarse volumes."""
+    share = (volumes.volume[pieces] + change[pieces]) / np.maximum(volumes.coarse[pieces], tol.tiny)
+    return f"piece{'s' if len(pieces) > 1 else ''} " + ", ".join(
+        f"{_named([c], names)} {100 * max(v, 0.0):.0f} %" for c, v in zip(pieces, share))
+
+
+def _their(pieces) -> str:
+    return "their" if len(pieces) > 1 else "its"
 
 
 # -- the band ---------------------------------------------------------------------------------------------
@@ -434,6 +476,14 @@ class _SideOf:
 
     def __call__(self, P: np.ndarray) -> np.ndarray:
         return self.piece[self.tree.query(P, workers=-1)[1]]
+
+
+def node_pieces(P: np.ndarray, V: np.ndarray, F: np.ndarray, sides: np.ndarray, h: float) -> np.ndarray:
+    """The piece of each point ``P`` inside B: the side of the surface ``(V, F, sides)`` it lies on (the
+    band's rule, :func:`_sides`); ``h`` is the grid's cell."""
+    if not len(P) or not len(F):
+        return np.zeros(len(P), np.int64)
+    return _sides(P, V, F, sides, _SideOf(V, F, sides, h))
 
 
 def _sides(near_points: np.ndarray, V0, F0, S0, side_of: _SideOf) -> np.ndarray:

@@ -102,12 +102,16 @@ def refine_stage(ctx: RunContext) -> None:
         "crossing_pairs_relaxed": int(crossed),
         "phase_seconds": {k: round(v, 4) for k, v in log.seconds.items()},
         "search": _search_stats(log.search),
+        # each piece's volume at the end as a share of its coarse volume (followed through the steps)
+        "piece_volume_shares": ([] if refiner.volumes is None else
+                                [round(float(v), 4) for v in refiner.volumes.shares()]),
     }
     if log.search is not None:
         ctx.notes.extend(log.search.notes)
     if crossed:
         ctx.notes.append(f"refine: {crossed} pairs of refined triangles crossed each other; relaxed apart")
     ctx.notes.extend(_outcome_notes(params, log, len(cf.F), refiner.searched))
+    ctx.notes.extend(_volume_notes(refiner.volumes, cf.names))
 
 
 def _outcome_notes(params, log, coarse_triangles: int, searched: bool) -> list[str]:
@@ -128,6 +132,18 @@ def _outcome_notes(params, log, coarse_triangles: int, searched: bool) -> list[s
                          "; the flow lowered it as it measures it (psi at the vertices), not on dense samples"
                          if own else ""))
     return notes
+
+
+def _volume_notes(volumes, names: list[str]) -> list[str]:
+    """The pieces whose volume the flow held at their share of the coarse volume (refine.keep_volume)."""
+    if volumes is None or not volumes.held:
+        return []
+    held = sorted(volumes.held)
+    many = len(held) > 1
+    ends = ", ".join(f"{names[c]!r} {100 * volumes.shares()[c]:.0f} %" for c in held)
+    return [f"refine: the flow held piece{'s' if many else ''} {', '.join(repr(names[c]) for c in held)} at "
+            f"{100 * volumes.keep:.0f} % of {'their' if many else 'its'} coarse volume (refine.keep_volume), "
+            f"where the material would have shrunk {'them' if many else 'it'} further; at the end {ends}"]
 
 
 class _CachedBand:
