@@ -9,15 +9,16 @@ took a piece from 24.4 % of the object to 1.1 %, almost all of it in the first, 
 field, moves of a cell per iteration); with other materials the search took pieces to nothing
 (`docs/design-measurements.md`).
 
-- The pieces' volumes are measured once, on the field grid: every second node along each axis inside B takes
-  the piece on its side of the nearest sheet (:func:`fracture.refine.search.node_pieces`, as the search's
-  band does), each the volume of eight cells.
+- The pieces' volumes are measured once, by the divergence theorem: a third of the flux of the position out
+  of each piece through its sheets and its part of B (B's triangles split to two cells, each given the piece
+  on its inner side: :func:`fracture.refine.search.node_pieces`, the search's band's rule).
 - A step sweeps volume from piece to piece: each triangle its area times its corners' mean move along its
   normal, which the piece behind it gains and the piece in front loses. The volumes follow the steps taken.
 - A step that would leave a piece below ``keep_volume`` of its coarse volume moves no vertex of that piece's
   sheets further into it (its sheets may still move out of it).
-- A search round that would leave a piece below it is not kept (:func:`fracture.refine.search.graph_cut_search`:
-  its labels give the change on the grid).
+- A search's cut that would leave a piece below it (its labels give the change, node by node) keeps that
+  piece's coarse nodes and is cut again; if another piece then falls short, the coarse surface is kept
+  (:func:`fracture.refine.search.graph_cut_search`).
 """
 
 from __future__ import annotations
@@ -28,9 +29,12 @@ import numpy as np
 
 from fracture.mesh.exterior import Exterior
 from fracture.mesh.topology import face_frames
+from fracture.tolerances import tol
 
-# The volumes are measured on every this-many-th node of the field grid along each axis.
-_STRIDE = 2
+# B's triangles are split to edges of at most this many cells to be given to the pieces ...
+_CELLS = 2.0
+# ... each the piece of the point this many cells inside B from its middle.
+_INNER = 0.25
 
 
 @dataclass
@@ -93,14 +97,40 @@ class PieceVolumes:
 
 
 def measure_volumes(V: np.ndarray, F: np.ndarray, sides: np.ndarray, B: Exterior, grid) -> np.ndarray:
-    """The volumes of the pieces the surface ``(V, F, sides)`` cuts B into, on ``grid`` (module notes)."""
+    """The volumes of the pieces the surface ``(V, F, sides)`` cuts B into (module notes): by the divergence
+    theorem, a third of the flux of ``x`` out of each piece, through its sheets and its part of B (B's
+    triangles split to at most two cells, each given the piece on the inner side of its middle)."""
     from fracture.refine.search import node_pieces
 
-    spacing = np.asarray(grid.spacing, np.float64) * _STRIDE
-    shape = tuple(int(n) for n in (np.asarray(grid.shape) - 1) // _STRIDE + 1)
-    origin = np.asarray(grid.origin, np.float64)
-    inside, _ = B.grid_nodes(origin, spacing, shape, 0.0, near=False)
-    P = origin + np.stack(np.unravel_index(np.flatnonzero(inside.ravel()), shape), 1) * spacing
     n = int(sides.max()) + 1 if len(sides) else 0
-    pieces = node_pieces(P, V, F, sides, float(np.min(grid.spacing)))
-    return (np.bincount(pieces, minlength=n)[:n] * float(np.prod(spacing))).astype(np.float64)
+    h = float(np.min(grid.spacing))
+    centre = 0.5 * (B.V.min(axis=0) + B.V.max(axis=0))  # about B's middle: no digits lost far from the origin
+    T = _split(B.V[B.F] - centre, _CELLS * h)
+    flux = np.einsum("ij,ij->i", T.mean(axis=1), np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])) / 6.0
+    normal = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
+    length = np.maximum(np.linalg.norm(normal, axis=1), tol.tiny)
+    inner = T.mean(axis=1) - (_INNER * h / length)[:, None] * normal + centre
+    volume = np.bincount(node_pieces(inner, V, F, sides, h), flux, n)[:n]
+    if len(F):
+        S = V[F] - centre  # a sheet's normal points from the piece behind it (sides[:, 0]) to the one in front
+        flux = np.einsum("ij,ij->i", S.mean(axis=1), np.cross(S[:, 1] - S[:, 0], S[:, 2] - S[:, 0])) / 6.0
+        volume += np.bincount(sides[:, 0], flux, n)[:n] - np.bincount(sides[:, 1], flux, n)[:n]
+    return volume
+
+
+def _split(T: np.ndarray, longest: float) -> np.ndarray:
+    """Triangles ``T`` (``(m, 3, 3)``) split into four at their edges' middles until no edge is longer than
+    ``longest``."""
+    out = []
+    for _ in range(32):
+        edge = np.linalg.norm(T - np.roll(T, 1, axis=1), axis=2).max(axis=1)
+        big = edge > longest
+        out.append(T[~big])
+        T = T[big]
+        if not len(T):
+            break
+        a, b, c = T[:, 0], T[:, 1], T[:, 2]
+        ab, bc, ca = 0.5 * (a + b), 0.5 * (b + c), 0.5 * (c + a)
+        T = np.concatenate([np.stack(q, 1) for q in ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))])
+    out.append(T)
+    return np.concatenate(out)
