@@ -25,6 +25,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 
 from fracture.mesh.exterior import Exterior
@@ -60,10 +61,8 @@ class PieceVolumes:
 
     def swept(self, V: np.ndarray, F: np.ndarray, sides: np.ndarray, D: np.ndarray) -> np.ndarray:
         """Per piece, the volume it gains when the vertices ``V`` move by ``D`` (module notes)."""
-        area, normal = face_frames(V, F)
-        flux = area * np.einsum("ij,ij->i", D[F].mean(axis=1), normal)  # gained behind, lost in front
-        n = len(self.volume)
-        return np.bincount(sides[:, 0], flux, n)[:n] - np.bincount(sides[:, 1], flux, n)[:n]
+        return _swept(np.ascontiguousarray(V, np.float64), np.ascontiguousarray(F, np.int64),
+                      np.ascontiguousarray(sides, np.int64), np.ascontiguousarray(D, np.float64), len(self.volume))
 
     def hold(self, V: np.ndarray, F: np.ndarray, sides: np.ndarray, d: np.ndarray) -> np.ndarray:
         """Zero (in ``d``) the moves of the vertices of the sheets of every piece the step ``d`` would leave
@@ -134,3 +133,20 @@ def _split(T: np.ndarray, longest: float) -> np.ndarray:
         T = np.concatenate([np.stack(q, 1) for q in ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))])
     out.append(T)
     return np.concatenate(out)
+
+
+@numba.njit(cache=True)
+def _swept(V, F, sides, D, n):
+    # each triangle's area vector times its corners' mean move, gained behind it and lost in front, in one pass
+    # (NumPy's gathers of the corners' moves took three times as long on the Jell-O's steps)
+    out = np.zeros(n)
+    for t in range(F.shape[0]):
+        a, b, c = F[t, 0], F[t, 1], F[t, 2]
+        flux = 0.0
+        for k in range(3):
+            k1, k2 = (k + 1) % 3, (k + 2) % 3
+            area = 0.5 * ((V[b, k1] - V[a, k1]) * (V[c, k2] - V[a, k2]) - (V[b, k2] - V[a, k2]) * (V[c, k1] - V[a, k1]))
+            flux += area * (D[a, k] + D[b, k] + D[c, k]) / 3.0
+        out[sides[t, 0]] += flux
+        out[sides[t, 1]] -= flux
+    return out
