@@ -13,6 +13,8 @@ The refiner composes the parts, each in its own module:
   (:mod:`fracture.refine.step`);
 * the collision constraints (:mod:`fracture.refine.collide`) and safe edge
   flips (:mod:`fracture.refine.flips`);
+* the pieces' volumes (:mod:`fracture.refine.volumes`): no step moves a
+  piece's sheets further into it below ``keep_volume`` of its coarse volume;
 * the per-vertex state (:mod:`fracture.refine.state`), grown and renumbered as
   a whole.
 
@@ -87,7 +89,8 @@ One iteration:
    velocity is taken again where anything moved;
 3. the step: backward Euler on the area term
    (:func:`~fracture.refine.step.implicit_step`), the boundary constraint again,
-   collision holds, the move limits, projection of the boundary onto B,
+   collision holds, the move limits, the pieces' volumes held at their share,
+   projection of the boundary onto B,
    inner vertices that would leave B stopped (:meth:`~fracture.refine.boundary.BoundaryOnB.leaving`),
    continuous collision detection (stopped vertices stay where they were);
    the step is taken only if it does not raise the minimised functional
@@ -646,8 +649,8 @@ class Refiner:
             callback(len(self.log.functional) - 1, self)
 
     def _volumes_of(self, result: SearchResult) -> np.ndarray | None:
-        """The pieces' volumes after the search: as its labels changed them, or measured on the grid (a search
-        that does not say)."""
+        """The pieces' volumes after the search: as its labels changed them, or measured (a search that does
+        not say)."""
         if self.volumes is None:
             return None
         if len(result.volume_change) == len(self.volumes.volume):
