@@ -622,3 +622,9 @@ def test_a_refinement_that_ends_higher_than_it_began_says_so():
         "sampled alike); the flow lowered it as it measures it (psi at the vertices), not on dense samples"]
     assert "as it measures it" not in _outcome_notes(params, SimpleNamespace(sampled=(0.6, 0.7), functional=[0.6, 0.7]),
                                                      100, searched=False)[0]
+    # the coarse surface fitted onto B scored higher still: the flow lowered the functional from where it began
+    fitted = SimpleNamespace(sampled=(0.7206, 0.7461), sampled_on_b=0.754, functional=[0.49, 0.75])
+    assert _outcome_notes(params, fitted, 100, searched=False) == [
+        "refine: the refined surface scores higher on the functional than the coarse one (0.7461 against 0.7206, "
+        "sampled alike), whose rims cut across B's curves: fitted onto B the coarse surface scores 0.754, and the "
+        "flow lowered it from there"]

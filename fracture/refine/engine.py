@@ -170,6 +170,9 @@ class IterationLog:
     # the functional of level 0 (shifted as the last stage's) over the coarse and the final surface, on dense
     # samples (flow.sampled_energy): comparable between surfaces meshed differently
     sampled: tuple[float, float] = (0.0, 0.0)
+    # the same of the coarse surface fitted onto B, where the flow from it starts (0: not measured): its rims
+    # follow B's curves, which can add area (the wall with the branch's material 0.7206 -> 0.7540)
+    sampled_on_b: float = 0.0
 
     def tick(self, phase: str, since: float) -> float:
         now = time.perf_counter()
@@ -627,6 +630,7 @@ class Refiner:
             return sampled_energy(m.V, m.F, self.pyramid.value, self.h, offset, self.grain)
 
         ended, coarse = value(self.mesh), value(start)
+        self.log.sampled_on_b = coarse
         if ended <= coarse:
             return
         first = copy.deepcopy(self.mesh), self._volume()
