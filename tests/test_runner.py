@@ -614,14 +614,14 @@ def test_a_refinement_that_ends_higher_than_it_began_says_so():
     from fracture.refine.params import RefineParams
 
     params = RefineParams()
-    lower = SimpleNamespace(sampled=(0.66, 0.61), functional=[0.7, 0.6])
+    lower = SimpleNamespace(sampled=(0.66, 0.61), sampled_on_b=0.0, functional=[0.7, 0.6])
     assert _outcome_notes(params, lower, 100, searched=True) == []
-    higher = SimpleNamespace(sampled=(0.658, 0.693), functional=[0.7, 0.6])
+    higher = SimpleNamespace(sampled=(0.658, 0.693), sampled_on_b=0.0, functional=[0.7, 0.6])
     assert _outcome_notes(params, higher, 100, searched=True) == [
         "refine: the refined surface scores higher on the functional than the coarse one (0.693 against 0.658, "
         "sampled alike); the flow lowered it as it measures it (psi at the vertices), not on dense samples"]
-    assert "as it measures it" not in _outcome_notes(params, SimpleNamespace(sampled=(0.6, 0.7), functional=[0.6, 0.7]),
-                                                     100, searched=False)[0]
+    rose = SimpleNamespace(sampled=(0.6, 0.7), sampled_on_b=0.0, functional=[0.6, 0.7])
+    assert "as it measures it" not in _outcome_notes(params, rose, 100, searched=False)[0]
     # the coarse surface fitted onto B scored higher still: the flow lowered the functional from where it began
     fitted = SimpleNamespace(sampled=(0.7206, 0.7461), sampled_on_b=0.754, functional=[0.49, 0.75])
     assert _outcome_notes(params, fitted, 100, searched=False) == [

@@ -13,7 +13,7 @@ import igl
 import numpy as np
 from scipy import ndimage
 
-from fracture.mesh.topology import across_edges, face_frames, one_fan
+from fracture.mesh.topology import across_edges, face_frames, one_fan, split_while
 from fracture.tolerances import tol
 
 
@@ -46,22 +46,15 @@ def _small_pieces(T: np.ndarray, spacing: np.ndarray) -> np.ndarray:
     """Triangles ``T`` (``(m, 3, 3)``: corners) split into four at their edges' midpoints, again and again,
     while their boxes on the grid of ``spacing`` hold many nodes far from them (:data:`_BOX_OVER_AREA`,
     :data:`_PIECE_CELLS`); their union is the union of ``T``."""
-    out = []
     cell = float(np.prod(spacing)) ** (1.0 / 3.0)
-    for _ in range(32):  # each round halves a piece's span: 32 rounds reach any span a float can hold
+
+    def far_from_its_nodes(T):
         span = (T.max(axis=1) - T.min(axis=1)) / spacing
         nodes = np.prod(np.floor(span) + 2.0, axis=1)
         area = 0.5 * np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1) / (cell * cell)
-        big = (span.max(axis=1) > _PIECE_CELLS) & (nodes > _BOX_OVER_AREA * (area + span.sum(axis=1) + 1.0))
-        out.append(T[~big])
-        T = T[big]
-        if not len(T):
-            break
-        a, b, c = T[:, 0], T[:, 1], T[:, 2]
-        ab, bc, ca = 0.5 * (a + b), 0.5 * (b + c), 0.5 * (c + a)
-        T = np.concatenate([np.stack(q, 1) for q in ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))])
-    out.append(T)
-    return np.concatenate(out)
+        return (span.max(axis=1) > _PIECE_CELLS) & (nodes > _BOX_OVER_AREA * (area + span.sum(axis=1) + 1.0))
+
+    return split_while(T, far_from_its_nodes)
 
 
 def _centre(V: np.ndarray) -> np.ndarray:

@@ -209,6 +209,24 @@ def face_frames(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return face_geometry(np.ascontiguousarray(V, np.float64), np.ascontiguousarray(F, np.int64).reshape(-1, 3))
 
 
+def split_while(T: np.ndarray, too_big) -> np.ndarray:
+    """Triangles ``T`` (``(m, 3, 3)``: corners) split into four at their edges' middles, again and again, while
+    ``too_big(T)`` (a mask of ``T``'s rows) says so; their union is the union of ``T``. Each round halves a
+    piece's span: 32 rounds reach any span a float can hold."""
+    out = []
+    for _ in range(32):
+        big = too_big(T)
+        out.append(T[~big])
+        T = T[big]
+        if not len(T):
+            break
+        a, b, c = T[:, 0], T[:, 1], T[:, 2]
+        ab, bc, ca = 0.5 * (a + b), 0.5 * (b + c), 0.5 * (c + a)
+        T = np.concatenate([np.stack(q, 1) for q in ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))])
+    out.append(T)
+    return np.concatenate(out)
+
+
 def plane_basis(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Two unit vectors ``u, v`` with ``(u, v, n)`` a right-handed orthonormal frame."""
     n = np.asarray(n, np.float64) / np.linalg.norm(n)

@@ -288,7 +288,8 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
     notes: list[str] = []
     held: list[int] = []  # pieces that keep their coarse nodes: the cut left them below their share of volume
     for attempt in range(2):
-        labels, graph, log = _cut(sub, near, keep | np.isin(coarse, held), coarse, shifted, node_weights, reach_of)
+        kept = keep | np.isin(coarse, held)
+        labels, graph, log = _cut(sub, near, kept, coarse, shifted, node_weights, reach_of)
         cut = labels[graph.p] != labels[graph.q]
         pressed = float(graph.w[cut & (keep[graph.p] | keep[graph.q])].sum() / max(graph.w[cut].sum(), tol.tiny))
         tick("cut")
@@ -296,12 +297,12 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
         # 3. islands join the piece around them; every piece keeps enough of its volume
         islands = 0
         for _ in range(_ISLAND_ROUNDS):
-            labels, count = _mend(sub, near, labels, keep | np.isin(coarse, held))
+            labels, count = _mend(sub, near, labels, kept)
             islands += count
             if not count:
                 break
         else:
-            if _islands(sub, near, labels, keep | np.isin(coarse, held)).any():
+            if _islands(sub, near, labels, kept).any():
                 return SearchResult(None, free_nodes=int(free.sum()), seconds=seconds, notes=[
                     "search: the cut leaves a piece in parts; the coarse surface is kept"])
         present = np.bincount(labels, minlength=n_pieces) > 0

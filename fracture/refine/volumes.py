@@ -29,7 +29,8 @@ import numba
 import numpy as np
 
 from fracture.mesh.exterior import Exterior
-from fracture.mesh.topology import face_frames
+from fracture.mesh.topology import face_frames, split_while
+from fracture.refine.search import node_pieces
 from fracture.tolerances import tol
 
 # B's triangles are split to edges of at most this many cells to be given to the pieces ...
@@ -99,40 +100,27 @@ def measure_volumes(V: np.ndarray, F: np.ndarray, sides: np.ndarray, B: Exterior
     """The volumes of the pieces the surface ``(V, F, sides)`` cuts B into (module notes): by the divergence
     theorem, a third of the flux of ``x`` out of each piece, through its sheets and its part of B (B's
     triangles split to at most two cells, each given the piece on the inner side of its middle)."""
-    from fracture.refine.search import node_pieces
-
     n = int(sides.max()) + 1 if len(sides) else 0
     h = float(np.min(grid.spacing))
     centre = 0.5 * (B.V.min(axis=0) + B.V.max(axis=0))  # about B's middle: no digits lost far from the origin
-    T = _split(B.V[B.F] - centre, _CELLS * h)
-    flux = np.einsum("ij,ij->i", T.mean(axis=1), np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])) / 6.0
-    normal = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
+    T = split_while(B.V[B.F] - centre,
+                    lambda T: np.linalg.norm(T - np.roll(T, 1, axis=1), axis=2).max(axis=1) > _CELLS * h)
+    middle, normal, flux = _flux(T)
     length = np.maximum(np.linalg.norm(normal, axis=1), tol.tiny)
-    inner = T.mean(axis=1) - (_INNER * h / length)[:, None] * normal + centre
+    inner = middle - (_INNER * h / length)[:, None] * normal + centre
     volume = np.bincount(node_pieces(inner, V, F, sides, h), flux, n)[:n]
-    if len(F):
-        S = V[F] - centre  # a sheet's normal points from the piece behind it (sides[:, 0]) to the one in front
-        flux = np.einsum("ij,ij->i", S.mean(axis=1), np.cross(S[:, 1] - S[:, 0], S[:, 2] - S[:, 0])) / 6.0
+    if len(F):  # a sheet's normal points from the piece behind it (sides[:, 0]) to the one in front
+        flux = _flux(V[F] - centre)[2]
         volume += np.bincount(sides[:, 0], flux, n)[:n] - np.bincount(sides[:, 1], flux, n)[:n]
     return volume
 
 
-def _split(T: np.ndarray, longest: float) -> np.ndarray:
-    """Triangles ``T`` (``(m, 3, 3)``) split into four at their edges' middles until no edge is longer than
-    ``longest``."""
-    out = []
-    for _ in range(32):
-        edge = np.linalg.norm(T - np.roll(T, 1, axis=1), axis=2).max(axis=1)
-        big = edge > longest
-        out.append(T[~big])
-        T = T[big]
-        if not len(T):
-            break
-        a, b, c = T[:, 0], T[:, 1], T[:, 2]
-        ab, bc, ca = 0.5 * (a + b), 0.5 * (b + c), 0.5 * (c + a)
-        T = np.concatenate([np.stack(q, 1) for q in ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))])
-    out.append(T)
-    return np.concatenate(out)
+def _flux(T: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per triangle (corners ``T``): its middle, twice its area vector, and a third of the flux of the
+    position through it."""
+    middle = T.mean(axis=1)
+    normal = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
+    return middle, normal, np.einsum("ij,ij->i", middle, normal) / 6.0
 
 
 @numba.njit(cache=True)

@@ -125,7 +125,7 @@ def _outcome_notes(params, log, coarse_triangles: int, searched: bool) -> list[s
         notes.append(f"refine: refine.max_triangles ({params.max_triangles}) is not above the coarse surface's "
                      f"{coarse_triangles} triangles: nothing was split")
     coarse, refined = log.sampled
-    on_b = getattr(log, "sampled_on_b", 0.0)
+    on_b = log.sampled_on_b
     if refined > coarse and 0.0 < refined <= on_b:
         notes.append(f"refine: the refined surface scores higher on the functional than the coarse one ({refined:.6g} "
                      f"against {coarse:.6g}, sampled alike), whose rims cut across B's curves: fitted onto B the "
