@@ -26,7 +26,8 @@ benchmarks (importing any module of the package changes nothing).
   workers share the cores and use the work queue, whose threads sleep).
 - the kernels' threads: as many as the cores the process may run on (numba
   counts the machine's, also in a process pinned to fewer), or as asked: a
-  sweep's workers share the cores.
+  sweep's workers share the cores. A caller whose kernels are small runs them
+  on its own thread (:func:`fracture.threads.kernel_threads`).
 
 A process that does not call this gets numba's choices.
 """

@@ -439,3 +439,67 @@ def test_a_last_stage_run_again_that_ends_higher_gives_the_first_end_back(monkey
     assert again > ended > start and log.stop.endswith("not lower; the first kept")
     assert len(r.mesh.F) == calls[-2] == log.triangles[-1]  # the first end's triangles
     assert abs(log.sampled[1] - ended) < 1e-3 * ended
+
+
+def test_a_return_to_an_earlier_surface_takes_back_its_volumes_and_holds():
+    """A surface given back (the last stage's first end, the search's) comes with the pieces' volumes and the
+    holds of its own run: the notes name the pieces held on the way to the surface kept, not those of a run
+    that was dropped."""
+    import copy
+
+    r = _held_tilted_sheet()
+    assert r.volumes is not None
+    surface, volume = copy.deepcopy(r.mesh), r.volumes.volume.copy()
+    r.volumes.held = {0}
+    kept = r._volume()
+    r.volumes.held.add(1)
+    r.volumes.volume = 0.5 * volume
+    assert kept.held == {0} and np.array_equal(kept.volume, volume)  # a copy, not the live record
+    r._take(surface, kept)
+    assert r.volumes.held == {0} and np.array_equal(r.volumes.volume, volume)
+    r.volumes.held.add(1)
+    assert kept.held == {0}  # the snapshot stays as it was
+
+
+def test_kernel_threads_run_small_work_on_the_calling_thread_and_restore_the_count():
+    import numba
+    import pytest
+
+    from fracture.threads import kernel_threads
+
+    before = numba.get_num_threads()
+    with kernel_threads(10, parallel_from=100):
+        assert numba.get_num_threads() == 1
+    with kernel_threads(100, parallel_from=100):
+        assert numba.get_num_threads() == before
+    with pytest.raises(RuntimeError), kernel_threads(10, parallel_from=100):
+        raise RuntimeError("inside")
+    assert numba.get_num_threads() == before
+
+
+def test_a_refinement_makes_the_same_surface_with_its_kernels_on_one_thread_or_on_every_one(monkeypatch):
+    """The iterations' kernels run on one thread below a size (fracture.threads): the surface may not depend
+    on it, to the bit."""
+    import numba
+    import pytest
+
+    import fracture.refine.engine as engine
+    from fracture.threads import kernel_threads
+
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("one thread only: nothing to compare")
+    pyramid = two_weak_sheets()
+    BV, BF = box([0, 0, 0], [1, 1, 1], (8, 8, 8))
+    ends, threads = [], []
+    for parallel_from in (0, 10**12):  # every iteration on every thread, then every one on one
+        def spy(elements, _from=parallel_from):
+            threads.append((_from, elements))
+            return kernel_threads(elements, _from)
+
+        monkeypatch.setattr(engine, "kernel_threads", spy)
+        mesh = flat_cut()
+        log = Refiner(mesh, pyramid, BV, BF, RefineParams(iterations=12), np.random.default_rng(0)).run()
+        ends.append((mesh.V.copy(), mesh.F.copy(), log.functional[-1]))
+    assert {f for f, _ in threads} == {0, 10**12}  # both ways ran
+    (V0, F0, E0), (V1, F1, E1) = ends
+    assert np.array_equal(F0, F1) and np.array_equal(V0, V1) and E0 == E1

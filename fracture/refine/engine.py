@@ -108,6 +108,7 @@ of psi, the area, triangles, mean and largest move, and ``tau``.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import time
 from dataclasses import dataclass, field
 
@@ -129,6 +130,7 @@ from fracture.refine.volumes import PieceVolumes, measure_volumes
 from fracture.refine.state import VertexState
 from fracture.refine.step import (BOUNDARY_MOVE, ImplicitStep, StepSize, cotangent_weights, limit_by_shortest_edge,
                                   limit_moves)
+from fracture.threads import kernel_threads
 from fracture.tolerances import tol
 from fracture.mesh.topology import boundary_conormals
 
@@ -240,7 +242,7 @@ class Refiner:
         self.stop_collisions = collisions
         self.search = default_search(params, grain=grain) if search == "default" else search
         self.searched = False  # the search's surface replaced the coarse one
-        self.searched_volume = None  # the pieces' volumes when it did
+        self.searched_volume = None  # the pieces' volumes when it did (PieceVolumes)
         # the last stage's end, the coarse surface's and the end of the stage run again from it, on dense samples
         self.again: tuple[float, float, float] | None = None
         self.h = float(np.min(pyramid.grid.spacing))
@@ -377,7 +379,13 @@ class Refiner:
 
     # -- one iteration --------------------------------------------------------------------
     def iterate(self) -> tuple[float, int]:
-        """One iteration (module notes); returns the mean move in grid cells and the number of splits."""
+        """One iteration (module notes); returns the mean move in grid cells and the number of splits. Its
+        kernels run on one thread on a surface of fewer triangles than the threads pay for
+        (:func:`~fracture.threads.kernel_threads`)."""
+        with kernel_threads(len(self.mesh.F)):
+            return self._iterate()
+
+    def _iterate(self) -> tuple[float, int]:
         m, p, log, s = self.mesh, self.params, self.log, self.state
         clock = time.perf_counter()
         self.put_in_spatial_order()
@@ -652,26 +660,33 @@ class Refiner:
         if callback is not None:
             callback(len(self.log.functional) - 1, self)
 
-    def _volumes_of(self, result: SearchResult) -> np.ndarray | None:
+    def _volumes_of(self, result: SearchResult) -> PieceVolumes | None:
         """The pieces' volumes after the search: as its labels changed them, or measured (a search that does
         not say)."""
         if self.volumes is None:
             return None
         if len(result.volume_change) == len(self.volumes.volume):
-            return self.volumes.volume + result.volume_change
-        s = result.surface
-        return measure_volumes(s.V, s.F, s.sides, self.B, self.pyramid.grid)
+            volume = self.volumes.volume + result.volume_change
+        else:
+            s = result.surface
+            volume = measure_volumes(s.V, s.F, s.sides, self.B, self.pyramid.grid)
+        return dataclasses.replace(self.volumes, volume=volume, held=set(self.volumes.held))
 
-    def _volume(self) -> np.ndarray | None:
-        return None if self.volumes is None else self.volumes.volume.copy()
+    def _volume(self) -> PieceVolumes | None:
+        """The pieces' volumes now and the pieces the flow held on its way here (a copy): what a return to
+        this surface takes back, so that the notes name the holds of the surface kept."""
+        if self.volumes is None:
+            return None
+        return dataclasses.replace(self.volumes, volume=self.volumes.volume.copy(), held=set(self.volumes.held))
 
-    def _take(self, surface: FractureSurface, volume: np.ndarray | None = None) -> None:
+    def _take(self, surface: FractureSurface, volume: PieceVolumes | None = None) -> None:
         """Replace the mesh by a copy of ``surface`` (in place; the iterations edit the mesh's arrays in place,
-        and the log keeps the search's surface as it was), its pieces' volumes ``volume``, and start its
-        per-vertex state and boundary afresh."""
+        and the log keeps the search's surface as it was), its pieces' volumes and holds those of ``volume``
+        (:meth:`_volume`), and start its per-vertex state and boundary afresh."""
         self.mesh.replace(copy.deepcopy(surface))
         if self.volumes is not None:
-            self.volumes.volume = np.asarray(volume, np.float64).copy()
+            self.volumes.volume = np.asarray(volume.volume, np.float64).copy()
+            self.volumes.held = set(volume.held)
         self.state = self.onb.state = VertexState.empty(len(self.mesh.V))
         self._ordered = 0
         self.onb.off_b = np.zeros(0, np.int64)
