@@ -197,6 +197,44 @@ def test_a_terminated_sweep_leaves_no_half_written_point(tmp_path, small_config)
     assert "Traceback" not in err and not list(out.glob(".*")), list(out.glob(".*"))
 
 
+def _deaf_worker(ready) -> None:
+    """A worker that does not answer SIGTERM (as one may not while it waits on the pool)."""
+    import signal
+    import time
+
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    ready.set()
+    time.sleep(600)
+
+
+def _worker_that_stops(ready) -> None:
+    import time
+
+    ready.set()
+    time.sleep(600)
+
+
+def test_stopped_workers_that_outlive_the_grace_are_killed():
+    """A stopped sweep ends: a worker that answers SIGTERM ends by it, one that does not is killed after the
+    grace, and the stop does not wait longer than that."""
+    import multiprocessing as mp
+    import time
+
+    from fracture.pipeline.sweep import stop_workers
+
+    ctx = mp.get_context("spawn")
+    procs = []
+    for target in (_worker_that_stops, _deaf_worker):
+        ready = ctx.Event()
+        procs.append(ctx.Process(target=target, args=(ready,)))
+        procs[-1].start()
+        assert ready.wait(60)
+    signalled = []
+    stop_workers(procs, grace=1.0, signalled=lambda: signalled.append(True))
+    assert signalled == [True] and not any(p.is_alive() for p in procs)  # returned, with both ended
+    assert procs[0].exitcode == -15 and procs[1].exitcode == -9  # SIGTERM ended one, SIGKILL the other
+
+
 def test_export_and_render_of_a_sweep_name_one_of_its_points(local_sweep, tmp_path, capsys):
     _, out, _ = local_sweep
     first = out / "psi.stress_weight=0.2,seed=7"

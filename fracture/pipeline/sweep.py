@@ -243,13 +243,29 @@ def _local(tasks: list[tuple[Point, tuple]], jobs: int) -> Iterator[tuple[Point,
             yield futures[f], f.result()
     except BaseException:  # Ctrl-C, a signal, the caller gone: the points still running are stopped, not awaited
         workers = list((getattr(pool, "_processes", None) or {}).values())
-        for proc in workers:
-            proc.terminate()
-        pool.shutdown(wait=False, cancel_futures=True)
-        for proc in workers:
-            proc.join(_WORKER_GRACE)
+        stop_workers(workers, signalled=lambda: pool.shutdown(wait=False, cancel_futures=True))
         raise
     pool.shutdown()
+
+
+def stop_workers(workers: list, grace: float | None = None, signalled=None) -> None:
+    """Stop worker processes: SIGTERM, which each unwinds as from Ctrl-C (:func:`_worker_setup`; then
+    ``signalled()``, if given), and, for one still alive after ``grace`` seconds (default ``_WORKER_GRACE``),
+    SIGKILL: the pool's threads, which the interpreter joins on its way out, wait for every worker, and a
+    sweep stopped under load was seen to hang there for minutes after it had said it stopped. A killed worker
+    may leave its point's staging behind; the next write there clears it (:mod:`fracture.io.atomic`)."""
+    grace = _WORKER_GRACE if grace is None else grace
+    for proc in workers:
+        proc.terminate()
+    if signalled is not None:
+        signalled()
+    deadline = time.monotonic() + grace
+    for proc in workers:
+        proc.join(max(0.0, deadline - time.monotonic()))
+    for proc in workers:
+        if proc.is_alive():
+            proc.kill()
+            proc.join()
 
 
 def _worker_setup(threads: int) -> None:
