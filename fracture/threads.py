@@ -6,9 +6,9 @@ Waking one costs 0.2-0.3 ms per kernel on the project's 2-core machine, and an i
 runs dozens of kernels of well under a millisecond on a surface of a few thousand triangles (the areas and
 normals of 2,000 triangles: 29 us on one thread, 273 us on two; of 30,000: 0.69 ms against 0.98 ms). The
 refinement's iterations therefore run their kernels on one thread below :data:`PARALLEL_FROM` triangles
-(measured in docs/design-measurements.md: the Jell-O, the clay and the bunny 10-25 % faster, the same
-surfaces to the bit; the collision tests of a 200,000-triangle surface are faster on both threads, and
-so is the global search on the field grid, which keeps them).
+(measured in docs/design-measurements.md: the Jell-O and the clay 8-17 % faster, the bunny and the branch
+within the machine's spread, the same surfaces to the bit; the collision tests of a 200,000-triangle surface
+are faster on both threads, and so is the global search on the field grid, which keeps them).
 """
 
 from __future__ import annotations

@@ -108,7 +108,6 @@ of psi, the area, triangles, mean and largest move, and ``tau``.
 from __future__ import annotations
 
 import copy
-import dataclasses
 import time
 from dataclasses import dataclass, field
 
@@ -666,18 +665,14 @@ class Refiner:
         if self.volumes is None:
             return None
         if len(result.volume_change) == len(self.volumes.volume):
-            volume = self.volumes.volume + result.volume_change
-        else:
-            s = result.surface
-            volume = measure_volumes(s.V, s.F, s.sides, self.B, self.pyramid.grid)
-        return dataclasses.replace(self.volumes, volume=volume, held=set(self.volumes.held))
+            return self.volumes.copy(self.volumes.volume + result.volume_change)
+        s = result.surface
+        return self.volumes.copy(measure_volumes(s.V, s.F, s.sides, self.B, self.pyramid.grid))
 
     def _volume(self) -> PieceVolumes | None:
         """The pieces' volumes now and the pieces the flow held on its way here (a copy): what a return to
         this surface takes back, so that the notes name the holds of the surface kept."""
-        if self.volumes is None:
-            return None
-        return dataclasses.replace(self.volumes, volume=self.volumes.volume.copy(), held=set(self.volumes.held))
+        return None if self.volumes is None else self.volumes.copy()
 
     def _take(self, surface: FractureSurface, volume: PieceVolumes | None = None) -> None:
         """Replace the mesh by a copy of ``surface`` (in place; the iterations edit the mesh's arrays in place,
@@ -685,8 +680,7 @@ class Refiner:
         (:meth:`_volume`), and start its per-vertex state and boundary afresh."""
         self.mesh.replace(copy.deepcopy(surface))
         if self.volumes is not None:
-            self.volumes.volume = np.asarray(volume.volume, np.float64).copy()
-            self.volumes.held = set(volume.held)
+            self.volumes = volume.copy()
         self.state = self.onb.state = VertexState.empty(len(self.mesh.V))
         self._ordered = 0
         self.onb.off_b = np.zeros(0, np.int64)

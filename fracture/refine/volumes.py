@@ -23,7 +23,7 @@ field, moves of a cell per iteration); with other materials the search took piec
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numba
 import numpy as np
@@ -54,6 +54,11 @@ class PieceVolumes:
         """The volumes of the pieces the surface ``(V, F, sides)`` cuts B into, kept at ``keep`` of them."""
         volume = measure_volumes(V, F, sides, B, grid)
         return cls(volume, volume.copy(), float(keep))
+
+    def copy(self, volume: np.ndarray | None = None) -> PieceVolumes:
+        """A copy of its own (the volumes and the pieces held so far), with the volumes ``volume`` if given."""
+        return replace(self, volume=np.array(self.volume if volume is None else volume, np.float64),
+                       held=set(self.held))
 
     @property
     def room(self) -> np.ndarray:
