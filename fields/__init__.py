@@ -2,18 +2,35 @@
 
 Arrays in, arrays out: grids, procedural strength kinds, the stress estimate,
 the modified field psi, its Gaussian pyramid and slices for display.
+
+The names below are loaded from their modules on first use: a caller of a light
+module (``fields.errors``, ``fields.params``, ``fields.grid``) does not pay for SciPy's
+and numba's imports, which the command line's quick answers (a bad flag, a bad config)
+would otherwise wait a second for.
 """
 
-from fields.build import FieldSet, build_fields, padded_bounds
-from fields.grid import Grid, grid_shape_for_box
-from fields.interpolate import trilinear
-from fields.pyramid import StrengthPyramid
-from fields.slices import axis_slice, slice_image
-from fields.strength import KINDS, strength_field
-from fields.stress import distance_to_surface, modified_strength, stress_from_distance
+from importlib import import_module
 
-__all__ = [
-    "FieldSet", "Grid", "KINDS", "StrengthPyramid", "axis_slice", "build_fields", "distance_to_surface",
-    "grid_shape_for_box", "modified_strength", "padded_bounds", "slice_image", "strength_field",
-    "stress_from_distance", "trilinear",
-]
+_WHERE = {
+    "FieldSet": "build", "build_fields": "build", "padded_bounds": "build",
+    "Grid": "grid", "grid_shape_for_box": "grid",
+    "trilinear": "interpolate",
+    "StrengthPyramid": "pyramid",
+    "axis_slice": "slices", "slice_image": "slices",
+    "KINDS": "strength", "strength_field": "strength",
+    "distance_to_surface": "stress", "modified_strength": "stress", "stress_from_distance": "stress",
+}
+
+__all__ = sorted(_WHERE)
+
+
+def __getattr__(name: str):
+    if name not in _WHERE:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(import_module(f"{__name__}.{_WHERE[name]}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(__all__))

@@ -234,7 +234,6 @@ def _say_stopped(code: int, argv: list[str] | None, run_in_place: Path | None = 
 
 def _main(argv: list[str] | None) -> int:
     args = _parser().parse_args(argv)
-    from fracture.pipeline import runner
     from fracture.process import prepare_process
     from fracture.io.atomic import OutputError, RunDirectoryExists
     from fracture.pipeline.config import dump_config, load_config
@@ -246,6 +245,8 @@ def _main(argv: list[str] | None) -> int:
         if args.command in _COMPUTING:
             prepare_process()  # only where kernels run: config, stages and explain need none of it
         if args.command == "stages":
+            from fracture.pipeline import runner
+
             print("\n".join(runner.available_stages()))
             return 0
         if args.command == "presets":
@@ -281,6 +282,8 @@ def _main(argv: list[str] | None) -> int:
         if args.command == "config":
             sys.stdout.write(dump_config(cfg))
             return 0
+        from fracture.pipeline import runner
+
         runner.stages_until(args.until)  # reject a bad --until before any work
         out = args.out if args.out is not None else Path("runs") / cfg.name
         done = runner.run(cfg, out, until=args.until, force=args.force, progress=not args.quiet,
@@ -320,7 +323,8 @@ def _start_view(run_dir: Path, camera: Path | None):
 def _render(args) -> int:
     from dataclasses import replace
 
-    from viewer.render import DEFAULT_WHAT, Timing, render
+    from viewer.media import Timing
+    from viewer.request import DEFAULT_WHAT, check_request
 
     state = _start_view(args.run_dir, args.camera)
     flags = {"field": args.field, "axis": args.axis, "level": args.level, "cutaway": args.cutaway,
@@ -336,6 +340,12 @@ def _render(args) -> int:
     elif {"compare", "turntable"} & set(whats) and args.camera is None and view.frame == 0:
         view = replace(view, frame=-1)  # the last: the pieces apart
     timing = Timing(args.fps, args.image_seconds, args.hold)
+    # the request is checked against the run before the renderer's libraries load (Open3D: seconds), so a
+    # wrong flag or run directory is said at once
+    check_request(args.run_dir, whats or None, args.width, args.height, timing, view, args.turntable_seconds,
+                  args.supersample)
+    from viewer.render import render
+
     done = render(args.run_dir, whats or None, args.out, args.width, args.height, timing, view, args.quiet,
                   args.supersample, args.transparent, args.turntable_seconds, state.cameras)
     for what, files in done.items():
@@ -383,7 +393,6 @@ def _sweep(args) -> int:
 
 def _view(args) -> int:
     from fracture.errors import InputError
-    from viewer.app import main as view_main
 
     for name, value in (("width", args.width), ("height", args.height)):
         if not 480 <= value <= 16384:
@@ -391,6 +400,7 @@ def _view(args) -> int:
     if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
         raise InputError("view: no display to open a window on (DISPLAY is not set); `fracref render RUN` makes the "
                          "same pictures without one")
+    from viewer.app import main as view_main  # the window's libraries (Open3D: seconds) once it can open
 
     return view_main(args.target, args.out, args.width, args.height, args.camera)
 

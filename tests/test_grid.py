@@ -30,3 +30,25 @@ def test_a_compact_object_and_explicit_shapes_are_as_asked():
     assert grid_for(cube, 50, 0.05, min_across=8).shape == grid_for(cube, 50, 0.05).shape == (50, 50, 39)
     plank = _box([6.0, 0.8, 0.1])
     assert grid_for(plank, [150, 50, 10], 0.05, min_across=8).shape == (150, 50, 10)
+
+
+def test_the_fields_package_loads_its_modules_when_their_names_are_asked_for():
+    """``fields.errors`` or ``fields.grid`` alone (the command line's config and error paths) load neither
+    SciPy nor numba; every name the package lists resolves to its module's."""
+    import json
+    import subprocess
+    import sys
+
+    code = ("import json, sys\nimport fields.errors, fields.grid\nlight = [m for m in ('scipy', 'numba') if m in "
+            "sys.modules]\nimport fields\nnames = {n: getattr(fields, n).__module__ for n in fields.__all__ "
+            "if hasattr(getattr(fields, n), '__module__')}\nprint(json.dumps([light, names, 'KINDS' in dir(fields)]))")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    light, names, listed = json.loads(r.stdout)
+    assert light == [] and listed
+    assert names["Grid"] == "fields.grid" and names["StrengthPyramid"] == "fields.pyramid"
+    assert names["build_fields"] == "fields.build" and names["trilinear"] == "fields.interpolate"
+    with pytest.raises(AttributeError, match="no attribute 'nothing'"):
+        import fields
+
+        fields.nothing  # noqa: B018

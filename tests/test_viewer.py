@@ -116,6 +116,29 @@ def test_render_rejects_bad_requests_clearly(run_dir, tmp_path):
     assert not list(tmp_path.glob("*.png"))
 
 
+@pytest.mark.parametrize("args, words", [
+    (["render", "{run}", "--width", "333"], "width must be an even number"),
+    (["render", "{run}", "--field", "strength"], "field must be one of psi, zeta, xi"),
+    (["render", "{run}", "--what", "compare", "--frame", "999"], "frame must be in 1..6, got 999"),
+    (["render", "{nothing}"], "no such run directory"),
+    (["view", "{run}"], "no display to open a window on"),
+])
+def test_a_wrong_request_is_refused_before_the_renderer_loads(run_dir, tmp_path, args, words):
+    """A bad flag or run directory is said without Open3D (seconds of imports) or the pipeline's stages
+    loaded: the refusal is all the command does."""
+    args = [a.format(run=run_dir, nothing=tmp_path / "nothing") for a in args]
+    code = ("import contextlib, io, json, sys\nfrom fracref.cli import main\nerr = io.StringIO()\n"
+            f"with contextlib.redirect_stderr(err):\n    rc = main({args!r})\n"
+            "print(json.dumps([rc, err.getvalue(), sorted(m for m in ('open3d', 'fracture.pipeline.runner', "
+            "'fracture.refine.engine', 'viewer.render', 'viewer.looks') if m in sys.modules)]))")
+    env = {k: v for k, v in os.environ.items() if k != "DISPLAY"}
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, env=env)
+    assert r.returncode == 0, r.stderr[-2000:]
+    rc, said, loaded = json.loads(r.stdout.strip().splitlines()[-1])
+    assert rc == 2 and words in said and "Traceback" not in said, said
+    assert loaded == [], loaded
+
+
 @pytest.mark.parametrize("damaged, what", [("fields/psi.npy", "slices"), ("refined/iterations.npz", "iterations"),
                                            ("pieces/piece_000.ply", "animation")])
 def test_a_damaged_run_file_is_named_in_one_line_and_the_render_leaves_nothing(run_dir, tmp_path, damaged, what):

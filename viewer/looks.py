@@ -9,7 +9,6 @@ rendered with ``fracref render`` therefore looks like the window.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
 from functools import lru_cache
 
 import numpy as np
@@ -18,11 +17,11 @@ from open3d.visualization import rendering
 
 from fields.colormap import colormap, srgb_to_linear
 from fields.slices import axis_slice
-from fracture.errors import InputError
 from fracture.mesh.topology import face_frames, unique_edges
 from viewer.annotate import finish
-from viewer.data import FIELDS, RunData, Surface
+from viewer.data import RunData, Surface
 from viewer.tolerances import view_tol
+from viewer.view import SURFACE_CMAPS, CameraPose, View
 
 # White: the renderer's colour grading maps 1.0 to 248, so the background is given a little above it.
 BACKGROUND = (1.07, 1.07, 1.07, 1.0)
@@ -34,44 +33,6 @@ INTERIOR_MIX, INTERIOR_COLOR = 0.6, np.array([0.93, 0.90, 0.84])
 PIECE_COLORS = np.array([[0.90, 0.62, 0.00], [0.34, 0.71, 0.91], [0.00, 0.62, 0.45], [0.94, 0.89, 0.26],
                          [0.00, 0.45, 0.70], [0.84, 0.37, 0.00], [0.80, 0.47, 0.65], [0.60, 0.60, 0.60]])
 FIELD_CMAPS = {"psi": "coolwarm", "zeta": "viridis", "xi": "magma"}
-SURFACE_CMAPS = {"psi": "coolwarm", "speed": "viridis"}
-COLOR_BY = tuple(SURFACE_CMAPS)
-
-
-@dataclass
-class View:
-    """What the panels show: each field is a control of the window and part of a view file (``view:``);
-    most are also options of ``fracref render``."""
-
-    field: str = "psi"
-    axis: str = "z"
-    offset: float = 0.5
-    level: int = 0
-    iteration: int = -1  # -1: the last
-    color_by: str = "psi"
-    frame: int = 0  # 0-based; -1: the last
-    overlay_coarse: bool = False
-    cutaway: bool = False
-
-    def check(self, run: RunData) -> "View":
-        """This view with ``iteration`` and ``frame`` resolved (-1: the last), or an error naming the bad
-        value and what is allowed."""
-        if self.field not in FIELDS:
-            raise InputError(f"field must be one of {', '.join(FIELDS)}, got {self.field!r}")
-        if self.axis not in ("x", "y", "z"):
-            raise InputError(f"axis must be x, y or z, got {self.axis!r}")
-        if not 0.0 <= self.offset <= 1.0:
-            raise InputError(f"slice offset must be in [0, 1], got {self.offset}")
-        if self.color_by not in COLOR_BY:
-            raise InputError(f"colour must be one of {', '.join(COLOR_BY)}, got {self.color_by!r}")
-        if not 0 <= self.level < run.pyramid_levels:
-            raise InputError(f"pyramid level must be in 0..{run.pyramid_levels - 1}, got {self.level}")
-        v = View(**asdict(self))
-        if run.has_iterations and v.iteration < 0:
-            v.iteration = len(run.iterations) + v.iteration
-        if v.frame < 0 and run.has_animation:
-            v.frame = run.n_frames + v.frame
-        return v
 
 
 # -- geometry ---------------------------------------------------------------------------------
@@ -375,14 +336,6 @@ def piece_color(c: int) -> tuple[float, float, float]:
 
 
 # -- cameras ------------------------------------------------------------------------------------
-
-
-@dataclass
-class CameraPose:
-    center: np.ndarray
-    eye: np.ndarray
-    up: np.ndarray
-    fov: float = 35.0
 
 
 def frame_points(P: np.ndarray, aspect: float = 16 / 9, look: np.ndarray | None = None,

@@ -7,6 +7,7 @@ with no display.
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -61,3 +62,31 @@ def frame_counts(n: int, seconds: float, fps: int) -> list[int]:
     r = seconds * fps
     ends = [max(1, round((i + 1) * r)) for i in range(n)]
     return [b - a for a, b in zip([0] + ends[:-1], ends)]
+
+
+@dataclass(frozen=True)
+class Timing:
+    """How long a video shows each image: ``fps`` video frames a second, each image ``image_seconds``
+    (None: the view's own pace), the last image held ``hold`` seconds more."""
+
+    fps: int = 24
+    image_seconds: float | None = None
+    hold: float = 1.0
+
+    def check(self) -> "Timing":
+        """Itself, if its values are in range; else an InputError naming the render's flag that set the value."""
+        if not 1 <= self.fps <= 240:
+            raise InputError(f"--fps must be in 1..240 video frames a second, got {self.fps}")
+        if self.image_seconds is not None and not 0 < self.image_seconds <= 60:
+            raise InputError(f"--image-seconds must be in (0, 60], got {self.image_seconds}")
+        if not 0 <= self.hold <= 60:
+            raise InputError(f"--hold must be in 0..60 seconds, got {self.hold}")
+        return self
+
+    def counts(self, n: int, default_seconds: float) -> list[int]:
+        """Video frames of each of ``n`` images, the last one's hold included."""
+        s = self.image_seconds if self.image_seconds is not None else default_seconds
+        counts = frame_counts(n, s, self.fps)
+        if counts:
+            counts[-1] += round(self.hold * self.fps)
+        return counts

@@ -26,11 +26,12 @@ from open3d.visualization import gui, rendering
 from fields.colormap import colorbar
 from viewer.data import FIELDS, RunData, Surface
 from viewer.looks import (
-    COLOR_BY, FIELD_CMAPS, SURFACE_CMAPS, CameraPose, animation_box, animation_pose, frame_box, ground_height,
+    FIELD_CMAPS, SURFACE_CMAPS, CameraPose, animation_box, animation_pose, frame_box, ground_height,
     iteration_box, iteration_caption, iteration_pose, scene_box, set_cutaway, set_frame, set_slice, set_surface,
     show_context, show_material, show_stage, slice_pose,
 )
 from viewer.tolerances import view_tol
+from viewer.view import COLOR_BY
 
 PRESETS = ("iso", "front", "side", "top")
 

@@ -24,7 +24,7 @@ import os
 import shutil
 import sys
 import tempfile
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -34,45 +34,14 @@ from fracture.errors import InputError
 from viewer import annotate
 from viewer.annotate import Bar
 from viewer.data import RunData, Surface
-from viewer.media import Video, check_size, frame_counts
+from viewer.request import check_request, check_supersample
+from viewer.media import Timing, Video
 from viewer.looks import (
     FIELD_CMAPS, SURFACE_CMAPS, CameraPose, View, animation_pose, apply_camera, capture, dominant_normal, frame_points,
     iteration_caption, scene_box,
     iteration_pose, pieces_caption, set_cutaway, set_frame, set_slice, set_surface, show_context, show_material, show_pieces,
     show_stage, slice_pose, slice_title, spread, turntable_poses,
 )
-
-WHAT = ("slices", "iterations", "animation", "compare", "turntable")
-DEFAULT_WHAT = ("slices", "iterations", "animation")
-MAX_SUPERSAMPLE = 4
-
-
-@dataclass(frozen=True)
-class Timing:
-    """How long a video shows each image: ``fps`` video frames a second, each image ``image_seconds``
-    (None: the view's own pace), the last image held ``hold`` seconds more."""
-
-    fps: int = 24
-    image_seconds: float | None = None
-    hold: float = 1.0
-
-    def check(self) -> "Timing":
-        """Itself, if its values are in range; else an InputError naming the render's flag that set the value."""
-        if not 1 <= self.fps <= 240:
-            raise InputError(f"--fps must be in 1..240 video frames a second, got {self.fps}")
-        if self.image_seconds is not None and not 0 < self.image_seconds <= 60:
-            raise InputError(f"--image-seconds must be in (0, 60], got {self.image_seconds}")
-        if not 0 <= self.hold <= 60:
-            raise InputError(f"--hold must be in 0..60 seconds, got {self.hold}")
-        return self
-
-    def counts(self, n: int, default_seconds: float) -> list[int]:
-        """Video frames of each of ``n`` images, the last one's hold included."""
-        s = self.image_seconds if self.image_seconds is not None else default_seconds
-        counts = frame_counts(n, s, self.fps)
-        if counts:
-            counts[-1] += round(self.hold * self.fps)
-        return counts
 
 
 @contextlib.contextmanager
@@ -104,11 +73,7 @@ class Renderer:
                  quiet: bool = False):
         from open3d.visualization import rendering
 
-        if not isinstance(supersample, (int, np.integer)) or not 1 <= supersample <= MAX_SUPERSAMPLE:
-            raise InputError(f"supersample must be an integer in 1..{MAX_SUPERSAMPLE}, got {supersample!r}")
-        if max(width, height) * supersample > 8192:
-            raise InputError(f"{width}x{height} supersampled {supersample} times is over 8192 pixels; "
-                             "expected a smaller size or less supersampling")
+        check_supersample(width, height, supersample)
         self.width, self.height, self.k, self.transparent = width, height, int(supersample), transparent
         # Open3D 0.19 renders with no X display only on EGL's surfaceless platform, which must be in the
         # environment before its first offscreen renderer is made (here: a renderer is what needs it)
@@ -296,38 +261,14 @@ def render(run_dir: str | Path, what: str | tuple[str, ...] | None = None, out: 
            turntable_seconds: float = 6.0, cameras: dict | None = None) -> dict[str, list[Path]]:
     """Render each view ``what`` of a run into ``out`` (default ``RUN_DIR/renders``): PNGs and an MP4
     (slices, iterations, animation), a PNG (compare) or an MP4 (turntable), reading the run and
-    making the renderer once. ``what`` None: those of :data:`DEFAULT_WHAT` the run has (:func:`available`). ``cameras`` (per panel name, as in a view file)
+    making the renderer once. ``what`` None: those of :data:`~viewer.request.DEFAULT_WHAT` the run has (:func:`~viewer.request.check_request` checks the request). ``cameras`` (per panel name, as in a view file)
     replace the fitted cameras: ``material`` for slices, ``iterations``, ``animation`` for the
     animation and the comparison.
 
     Returns the files written, per view.
     """
-    whats = () if what is None else (what,) if isinstance(what, str) else tuple(what)
-    for w in whats:
-        if w not in WHAT:
-            raise InputError(f"--what must be one of {', '.join(WHAT)}, got {w!r}")
-    check_size(width, height)
-    timing = (timing or Timing()).check()
-    if not 0.5 <= turntable_seconds <= 600:
-        raise InputError(f"turntable seconds must be in 0.5..600, got {turntable_seconds}")
-    run = RunData(run_dir)
-    if what is None:
-        whats = available(run)
-        if not whats:
-            raise InputError(f"{run.dir}: nothing to render: the run stopped after its "
-                             f"{_last_stage(run)} stage (the slices need the fields stage)")
-    view = (view or View()).check(run)
-    if "slices" in whats and not run.has_fields:
-        raise InputError(f"{run.dir}: no fields to render slices of (the run stopped after its "
-                         f"{_last_stage(run)} stage)")
-    needs_animation = [w for w in whats if w in ("animation", "compare", "turntable")]
-    if needs_animation and not run.has_animation:
-        raise InputError(f"{run.dir}: no animation to render for {', '.join(needs_animation)} "
-                         f"(the run stopped before the animate stage)")
-    if "iterations" in whats and not run.has_iterations:
-        raise InputError(f"{run.dir}: no iterations to render (run the refine stage with refine.snapshots: true)")
-    if ({"compare", "turntable"} & set(whats) or run.has_animation) and not 0 <= view.frame < run.n_frames:
-        raise InputError(f"frame must be in 1..{run.n_frames}, got {view.frame + 1}")
+    run, whats, view, timing = check_request(run_dir, what, width, height, timing, view, turntable_seconds,
+                                             supersample)
     out = Path(out) if out is not None else run.dir / "renders"
     made = [p for p in (out, *out.parents) if not p.exists()]  # the deepest first
     cameras = cameras or {}
@@ -352,17 +293,6 @@ def render(run_dir: str | Path, what: str | tuple[str, ...] | None = None, out: 
                 break
         raise
     return done
-
-
-def available(run: RunData) -> tuple[str, ...]:
-    """The views of :data:`DEFAULT_WHAT` a run has the outputs of (a run stopped early has fewer)."""
-    has = {"slices": run.has_fields, "iterations": run.has_iterations, "animation": run.has_animation}
-    return tuple(w for w in DEFAULT_WHAT if has[w])
-
-
-def _last_stage(run: RunData) -> str:
-    stages = list(run.manifest.get("stages", {}))
-    return stages[-1] if stages else "first"
 
 
 def _render_one(run: RunData, what: str, view: View, renderer: Renderer, out: Path, timing: Timing,

@@ -19,7 +19,7 @@ from fracture.io.atomic import atomic_write_text
 from fracture.pipeline.config import read_yaml
 from fracture.errors import ConfigError
 from fracture.pipeline.schema import ViewSection, validate
-from viewer.looks import CameraPose, View
+from viewer.view import CameraPose, View
 from viewer.tolerances import view_tol
 
 PANELS = ("material", "iterations", "animation")
