@@ -1,3 +1,4 @@
+import igl
 import numpy as np
 import pytest
 
@@ -149,7 +150,42 @@ def test_across_edges_and_one_fan():
             assert tet[g, (i + 1) % 3] == a  # along the edge the other way
     assert across_edges(tet[:3]) is None and across_edges(np.r_[tet, tet[:1]]) is None
     two = np.r_[tet, tet + 3]  # vertex 3 is both tetrahedra's
-    assert one_fan(two, across_edges(two), 7).tolist() == manifold_vertices(two).tolist()
+    assert one_fan(two, across_edges(two), 7).tolist() == igl.is_vertex_manifold(two).ravel().tolist()
     assert one_fan(two, across_edges(two), 7).tolist() == [True, True, True, False, True, True, True]
+    assert manifold_vertices(two).tolist() == [True, True, True, False, True, True, True]
     V, F = box([0, 0, 0], [1, 2, 3], (3, 4, 5))
     assert one_fan(F, across_edges(F), len(V)).all()
+
+
+def test_manifold_vertices_agree_with_libigl_on_pinched_closed_surfaces_and_open_ones():
+    """Convex hulls glued at a few vertices (pinches, closed and oriented: :func:`one_fan`'s union-find), the
+    same with a triangle taken out (open: libigl's test), and a vertex no triangle names."""
+    from scipy.spatial import ConvexHull
+
+    from fracture.mesh.topology import across_edges, manifold_vertices
+
+    rng = np.random.default_rng(3)
+    pinched = 0
+    for trial in range(40):
+        parts, n = [], 0
+        for _ in range(int(rng.integers(2, 5))):
+            P = rng.normal(size=(30, 3))
+            H = ConvexHull(P).simplices
+            out = np.einsum("ij,ij->i", P[H[:, 0]] - P.mean(axis=0),
+                            np.cross(P[H[:, 1]] - P[H[:, 0]], P[H[:, 2]] - P[H[:, 0]])) < 0
+            H[out] = H[out][:, ::-1]
+            parts.append(H + n)
+            n += 30
+        glue = np.arange(n)
+        at = rng.choice(np.unique(parts[0]))  # a vertex of the first hull, and one of each other hull on it
+        for H in parts[1:]:
+            if rng.random() < 0.8:
+                glue[rng.choice(np.unique(H))] = at
+        F = glue[np.concatenate(parts)]
+        for G in (F, F[1:]):
+            assert (across_edges(G) is not None) == (G is F)
+            ours = manifold_vertices(G)
+            assert np.array_equal(ours, np.asarray(igl.is_vertex_manifold(G), bool).ravel()), trial
+        pinched += int(not manifold_vertices(F)[at])
+    assert pinched >= 20  # most of the glued surfaces have a pinch
+
