@@ -342,11 +342,11 @@ def _render(args) -> int:
     timing = Timing(args.fps, args.image_seconds, args.hold)
     # the request is checked against the run before the renderer's libraries load (Open3D: seconds), so a
     # wrong flag or run directory is said at once
-    check_request(args.run_dir, whats or None, args.width, args.height, timing, view, args.turntable_seconds,
-                  args.supersample)
+    request = check_request(args.run_dir, whats or None, args.width, args.height, timing, view,
+                            args.turntable_seconds, args.supersample)
     from viewer.render import render
 
-    done = render(args.run_dir, whats or None, args.out, args.width, args.height, timing, view, args.quiet,
+    done = render(request.run, whats or None, args.out, args.width, args.height, timing, view, args.quiet,
                   args.supersample, args.transparent, args.turntable_seconds, state.cameras)
     for what, files in done.items():
         pngs = [f for f in files if f.suffix == ".png"]

@@ -158,8 +158,9 @@ def test_across_edges_and_one_fan():
 
 
 def test_manifold_vertices_agree_with_libigl_on_pinched_closed_surfaces_and_open_ones():
-    """Convex hulls glued at a few vertices (pinches, closed and oriented: :func:`one_fan`'s union-find), the
-    same with a triangle taken out (open: libigl's test), and a vertex no triangle names."""
+    """Convex hulls glued at a few vertices (pinches, closed and oriented: :func:`one_fan`'s union-find, with
+    faces of 64 and 32 bits), and the same with a triangle taken out, which is open and goes to libigl (the
+    test checks that it is sent there); hull points inside the hull are vertices no triangle names."""
     from scipy.spatial import ConvexHull
 
     from fracture.mesh.topology import across_edges, manifold_vertices
@@ -182,10 +183,14 @@ def test_manifold_vertices_agree_with_libigl_on_pinched_closed_surfaces_and_open
             if rng.random() < 0.8:
                 glue[rng.choice(np.unique(H))] = at
         F = glue[np.concatenate(parts)]
-        for G in (F, F[1:]):
-            assert (across_edges(G) is not None) == (G is F)
+        for G in (F, F.astype(np.int32), F[1:]):
+            assert (across_edges(G) is not None) == (len(G) == len(F))
             ours = manifold_vertices(G)
-            assert np.array_equal(ours, np.asarray(igl.is_vertex_manifold(G), bool).ravel()), trial
+            assert np.array_equal(ours, np.asarray(igl.is_vertex_manifold(G.astype(np.int64)), bool).ravel()), trial
         pinched += int(not manifold_vertices(F)[at])
     assert pinched >= 20  # most of the glued surfaces have a pinch
+    with pytest.raises(ValueError, match="expected fewer than n = 3"):
+        from fracture.mesh.topology import one_fan
+
+        one_fan(F, across_edges(F), 3)
 

@@ -255,7 +255,7 @@ def contact_sheet(run_dirs: list[Path], captions: list[str], out: str | Path, ti
     return out
 
 
-def render(run_dir: str | Path, what: str | tuple[str, ...] | None = None, out: str | Path | None = None,
+def render(run_dir: str | Path | RunData, what: str | tuple[str, ...] | None = None, out: str | Path | None = None,
            width: int = 1280, height: int = 720, timing: Timing | None = None, view: View | None = None,
            quiet: bool = False, supersample: int = 1, transparent: bool = False,
            turntable_seconds: float = 6.0, cameras: dict | None = None) -> dict[str, list[Path]]:
@@ -265,7 +265,8 @@ def render(run_dir: str | Path, what: str | tuple[str, ...] | None = None, out: 
     replace the fitted cameras: ``material`` for slices, ``iterations``, ``animation`` for the
     animation and the comparison.
 
-    Returns the files written, per view.
+    ``run_dir`` may be the run already read (a :class:`RunData`), so that what a caller checked is not
+    read again. Returns the files written, per view.
     """
     run, whats, view, timing = check_request(run_dir, what, width, height, timing, view, turntable_seconds,
                                              supersample)

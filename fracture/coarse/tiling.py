@@ -342,14 +342,14 @@ def _winding_crossing(pieces, h: float, by_slit: np.ndarray | None = None, origi
         # an edge between two pieces, by no slit, is decided by their two winding numbers alone; the others'
         # (their sum) are asked only toward the outside and by a slit
         pair = (other >= 0) & ~slit
+        asked = [~pair | (owner == p) | (other == p) for p in range(len(pieces))]
         lo, hi = np.zeros(n), np.ones(n)
         for _ in range(_BISECTIONS):
             mid = 0.5 * (lo + hi)
             X = P0 + mid[:, None] * (P1 - P0)
             w_in, w_out, total = np.zeros(n), np.zeros(n), np.zeros(n)
             for p in range(len(pieces)):
-                asked = ~pair | (owner == p) | (other == p)
-                near = np.flatnonzero(asked & np.all((X >= boxes[p][0]) & (X <= boxes[p][1]), axis=1))
+                near = np.flatnonzero(asked[p] & np.all((X >= boxes[p][0]) & (X <= boxes[p][1]), axis=1))
                 if not len(near):
                     continue
                 w = solids[p].winding(X[near])

@@ -30,7 +30,7 @@ import scipy.sparse as sp
 from scipy.sparse import csgraph
 
 from fracture.mesh.intersect import self_intersections
-from fracture.mesh.topology import (closed_oriented, corner_groups, diagonal, face_frames, manifold_vertices,
+from fracture.mesh.topology import (across_edges, corner_groups, diagonal, face_frames, manifold_vertices,
                                     signed_volume, unique_edges)
 from fracture.tolerances import tol
 
@@ -93,7 +93,8 @@ def collapse_short_edges(V: np.ndarray, F: np.ndarray, length: float) -> tuple[n
     used, inverse = np.unique(G, return_inverse=True)
     W, G = W[used], inverse.reshape(-1, 3).astype(np.int64)
     volume = signed_volume(V, F)
-    if (not len(G) or not closed_oriented(G) or not manifold_vertices(G).all()
+    across = across_edges(G) if len(G) else None
+    if (across is None or not manifold_vertices(G, across).all()
             or abs(signed_volume(W, G) - volume) > tol.closure * max(abs(volume), diagonal(V) ** 3)
             or self_intersections(W, G)):
         return V, F, 0

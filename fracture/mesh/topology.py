@@ -57,10 +57,12 @@ def one_fan(F: np.ndarray, across: np.ndarray, n: int) -> np.ndarray:
     F = np.ascontiguousarray(F, np.int64)
     if not len(F):
         return np.zeros(n, bool)
+    if F.min() < 0 or F.max() >= n:
+        raise ValueError(f"one_fan: the faces name vertices 0..{F.max()}, expected fewer than n = {n}")
     return _one_fan(F, np.ascontiguousarray(across, np.int64), n)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _root(parent, i):
     while parent[i] != i:
         parent[i] = parent[parent[i]]  # path halving
