@@ -90,3 +90,27 @@ def test_the_child_ends_when_the_windows_process_is_gone(tmp_path):
         time.sleep(0.1)
     os.kill(child, signal.SIGKILL)
     pytest.fail("the re-run child outlived its parent by 30 s")
+
+
+def test_the_childs_stop_inside_a_compiler_callback_is_taken_after_it(monkeypatch):
+    """The re-run child's SIGTERM handler, as the command line's: inside a callback from llvmlite's C code
+    (a kernel compiled for the first time in the child, where an exception would be dropped and the child
+    killed with its staging left) it sends the signal again a moment later; elsewhere it unwinds."""
+    import sys
+    import time
+
+    from viewer import rerun
+
+    sent = []
+    monkeypatch.setattr(os, "kill", lambda pid, sig: sent.append((pid, sig)))
+    namespace = {"sys": sys}
+    exec(compile("def callback():\n    return sys._getframe()\n",
+                 "/venv/site-packages/llvmlite/binding/executionengine.py", "exec"), namespace)
+    rerun._cut_short(signal.SIGTERM, namespace["callback"]())  # returns: no exception inside the callback
+    for _ in range(100):
+        if sent:
+            break
+        time.sleep(0.02)
+    assert sent == [(os.getpid(), signal.SIGTERM)]
+    with pytest.raises(KeyboardInterrupt):
+        rerun._cut_short(signal.SIGTERM, sys._getframe())

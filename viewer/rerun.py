@@ -76,6 +76,18 @@ class RerunWorker:
                 self._proc.join(timeout)
 
 
+def _cut_short(signum, frame) -> None:
+    """The child's SIGTERM (from :meth:`RerunWorker.stop`): unwind, so that the run's staging directory goes;
+    inside a callback from the compiler's C code, where the exception would be printed and dropped and the
+    run go on until it is killed (its staging left behind), a moment later
+    (:func:`fracture.process.later_if_compiling`)."""
+    from fracture.process import later_if_compiling
+
+    if later_if_compiling(signum, frame):
+        return
+    raise KeyboardInterrupt
+
+
 def _serve(jobs, events) -> None:
     """The child: import the pipeline once, then run the jobs until told to stop (``None``) or until the
     window's process is gone (however it ended: the child must not outlive it)."""
@@ -85,10 +97,7 @@ def _serve(jobs, events) -> None:
 
     from fracture.process import prepare_process
 
-    def cut_short(signum, frame):  # SIGTERM from stop(): unwind, so the run's staging directory goes
-        raise KeyboardInterrupt
-
-    signal.signal(signal.SIGTERM, cut_short)  # this process's own handler (a child of its own)
+    signal.signal(signal.SIGTERM, _cut_short)  # this process's own handler (a child of its own)
 
     importlib.import_module("fracture.pipeline.runner")  # the pipeline's imports now, while nobody waits
 
