@@ -53,7 +53,7 @@ def one_fan(F: np.ndarray, across: np.ndarray, n: int) -> np.ndarray:
     """Per vertex of a closed oriented surface (``across``: :func:`across_edges` of ``F``; ``n`` vertices)
     whether its triangles form one fan (not a pinch of two or more): a vertex's corners in two triangles
     across an edge are joined, and a vertex of one fan has one group of corners; a vertex of no triangle
-    has none (libigl's :func:`manifold_vertices` says the same of it)."""
+    has none (as libigl's ``is_vertex_manifold`` says)."""
     F = np.ascontiguousarray(F, np.int64)
     if not len(F):
         return np.zeros(n, bool)

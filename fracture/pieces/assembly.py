@@ -46,7 +46,7 @@ from fracture.pieces.imprint import Imprint
 from fracture.mesh.intersect import self_intersections
 from fracture.mesh.exterior import fast_winding
 from fracture.mesh.fracture_surface import FractureSurface
-from fracture.mesh.topology import (barycentric_weights, closed_oriented, corner_groups, diagonal,
+from fracture.mesh.topology import (across_edges, barycentric_weights, corner_groups, diagonal,
                                     directed_edge_face, manifold_vertices, signed_volume, weld)
 
 # Jittered attempts after the plain one (seeds 1, 2, ...), each moving the positions by up to this much of B's
@@ -456,8 +456,9 @@ def mesh_checks(V: np.ndarray, F: np.ndarray, intersections: bool = True) -> dic
     ``closed_oriented``: every directed edge appears once and its reverse
     once (closed, edge-manifold and consistently oriented together).
     """
-    vertex_manifold = bool(manifold_vertices(F).all())
-    out = {"closed_oriented": closed_oriented(F), "vertex_manifold": vertex_manifold,
+    across = across_edges(F)  # closed and oriented unless None; the one-fan test reads it too
+    vertex_manifold = bool(manifold_vertices(F, across).all())
+    out = {"closed_oriented": across is not None, "vertex_manifold": vertex_manifold,
            "volume": signed_volume(V, F), "triangles": int(len(F)), "vertices": int(len(V))}
     if intersections:
         out["self_intersections"] = crossing_pairs(V, F)
