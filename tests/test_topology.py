@@ -4,7 +4,7 @@ import pytest
 
 from fracture.mesh.primitives import box
 from fracture.mesh.topology import (corner_groups, directed_edge_face, directed_edges, fan, orient_sheets, signed_volume,
-                                    unique_edges)
+                                    unique_edges, winding_numbers)
 
 
 def test_directed_edge_face_finds_the_owner_or_minus_one():
@@ -194,3 +194,23 @@ def test_manifold_vertices_agree_with_libigl_on_pinched_closed_surfaces_and_open
 
         one_fan(F, across_edges(F), 3)
 
+
+
+def test_winding_numbers_count_the_turns_of_closed_surfaces_and_agree_with_libigl_on_open_ones():
+    """Inside a closed box 1, outside 0, inside a box turned over -1, inside two nested boxes 2; on an open
+    surface (half the box's triangles) the solid angle's share, as libigl's exact winding number gives it."""
+    V, F = box([0, 0, 0], [1, 1, 1], (3, 2, 4))
+    rng = np.random.default_rng(5)
+    inside = rng.uniform(0.05, 0.95, (40, 3))
+    outside = rng.uniform(-1.0, 2.0, (400, 3))
+    outside = outside[np.any((outside < -0.05) | (outside > 1.05), axis=1)]
+    np.testing.assert_allclose(winding_numbers(V, F, inside), 1.0, atol=1e-12)
+    np.testing.assert_allclose(winding_numbers(V, F, outside), 0.0, atol=1e-12)
+    np.testing.assert_allclose(winding_numbers(V, F[:, ::-1], inside), -1.0, atol=1e-12)
+    W, G = box([-1, -1, -1], [2, 2, 2], (2, 2, 2))
+    both = np.concatenate([V, W]), np.concatenate([F, G + len(V)])
+    np.testing.assert_allclose(winding_numbers(*both, inside), 2.0, atol=1e-12)
+    half = F[: len(F) // 2]
+    P = np.concatenate([inside, outside[:40]])
+    np.testing.assert_allclose(winding_numbers(V, half, P), igl.winding_number(V, half, P), atol=1e-12)
+    assert winding_numbers(V, F[:0], P).shape == (len(P),) and not winding_numbers(V, F[:0], P).any()

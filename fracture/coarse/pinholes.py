@@ -23,13 +23,12 @@ share their vertices), which no mesh library's edge collapse does.
 
 from __future__ import annotations
 
-import igl
 import numpy as np
 
 from fracture.coarse.surface import flood_fill_patches
 from fracture.mesh.intersect import self_intersections
 from fracture.mesh.edges import row_edges
-from fracture.mesh.topology import closed_oriented, simple_boundary_loops, unique_edges
+from fracture.mesh.topology import closed_oriented, simple_boundary_loops, unique_edges, winding_numbers
 
 # A closed boundary curve of a sheet smaller than this (grid cells, its box's diagonal) is a pinhole.
 PINHOLE = 0.1
@@ -96,7 +95,7 @@ def _collapse(X, FF, sides, BF, bpiece, loop, extent, size, crossings):
     e, c = unique_edges(FF2[cone])
     if (c[(e == iq).any(axis=1)] != 2).any():
         return None
-    if not igl.winding_number(X2, BF2, q[None, :])[0] > 0.5:
+    if not winding_numbers(X2, BF2, q[None, :])[0] > 0.5:
         return None
     if not _pieces_close(FF2, sides2, BF2, bpiece2, np.unique(np.r_[sides[rows].ravel(), bpiece[merged[BF].any(axis=1)]])):
         return None

@@ -388,6 +388,42 @@ def orient_sheets(F: np.ndarray) -> tuple[np.ndarray, int, tuple[int, int] | Non
     return out, int(turn.sum()), conflict
 
 
+def winding_numbers(V: np.ndarray, F: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """Exact generalised winding numbers of the triangles ``(V, F)`` at points ``P`` ``(k, 3)``: the sum of
+    the triangles' signed solid angles over 4 pi (Van Oosterom and Strackee's formula; Jacobson, Kavan and
+    Sorkine-Hornung 2013).
+
+    For a few points against many triangles (a probe per shell, a pinhole's apex): compiled here because
+    libigl's ``igl.winding_number`` took 0.3 s for one point against B's 75,000 triangles (a Cell Fracture
+    Suzanne), this 2.5 ms against 80,000; many points go to the fast winding numbers' hierarchy
+    (:mod:`fracture.mesh.exterior`)."""
+    P = np.ascontiguousarray(np.asarray(P, np.float64).reshape(-1, 3))
+    if not len(F):
+        return np.zeros(len(P))
+    return _winding_numbers(np.ascontiguousarray(V, np.float64), np.ascontiguousarray(F, np.int64), P)
+
+
+@numba.njit(cache=True)
+def _winding_numbers(V, F, P):
+    out = np.zeros(len(P))
+    for i in range(len(P)):
+        total = 0.0
+        for f in range(len(F)):
+            u, v, w = F[f, 0], F[f, 1], F[f, 2]
+            ax, ay, az = V[u, 0] - P[i, 0], V[u, 1] - P[i, 1], V[u, 2] - P[i, 2]
+            bx, by, bz = V[v, 0] - P[i, 0], V[v, 1] - P[i, 1], V[v, 2] - P[i, 2]
+            cx, cy, cz = V[w, 0] - P[i, 0], V[w, 1] - P[i, 1], V[w, 2] - P[i, 2]
+            la = np.sqrt(ax * ax + ay * ay + az * az)
+            lb = np.sqrt(bx * bx + by * by + bz * bz)
+            lc = np.sqrt(cx * cx + cy * cy + cz * cz)
+            det = ax * (by * cz - bz * cy) - ay * (bx * cz - bz * cx) + az * (bx * cy - by * cx)
+            den = (la * lb * lc + (ax * bx + ay * by + az * bz) * lc + (bx * cx + by * cy + bz * cz) * la
+                   + (cx * ax + cy * ay + cz * az) * lb)
+            total += np.arctan2(det, den)
+        out[i] = total / (2.0 * np.pi)
+    return out
+
+
 def orient_outward(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, int, tuple[int, int] | None]:
     """Orient a closed surface so that it bounds its solid: every shell outward, a cavity's shell inward.
 
@@ -411,7 +447,7 @@ def orient_outward(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, int, tuple
     for j, s in enumerate(shells):
         others = shells != s
         if others.any():
-            w = igl.winding_number(V, F[face_shell == s], V[probe[others]])
+            w = winding_numbers(V, F[face_shell == s], V[probe[others]])
             depth[others] += np.abs(w) > 0.5
     F = F.copy()
     for j, s in enumerate(shells):
