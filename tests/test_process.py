@@ -85,6 +85,27 @@ def test_a_change_in_one_compiled_package_clears_the_caches_of_both(tmp_path):
     assert clear_stale_numba_cache([refine, mesh]) and not compiled.exists()
 
 
+def test_the_kernel_sources_are_parsed_again_only_when_a_module_changes(tmp_path, monkeypatch):
+    """The sources' digest is kept with the digest of every module (numba-tree.sha1): an unchanged tree is
+    not parsed again, and a change in any module (here one the kernel module imports) is still seen."""
+    import fracture.refine as refine_package
+    from fracture.refine import clear_stale_numba_cache
+
+    pkg = tmp_path / "kernels"
+    (pkg / "__pycache__").mkdir(parents=True)
+    (pkg / "k.py").write_text("import numba\nfrom fracture.tolerances import tol\n")
+    clear_stale_numba_cache([pkg])
+    compiled = pkg / "__pycache__" / "k.f-1.py311.1.nbc"
+    compiled.write_bytes(b"machine code")
+    parsed = []
+    real = refine_package.kernel_sources
+    monkeypatch.setattr(refine_package, "kernel_sources", lambda *a: parsed.append(a) or real(*a))
+    assert not clear_stale_numba_cache([pkg]) and not parsed and compiled.exists()
+    (pkg / "k.py").write_text("import numba\nfrom fracture.tolerances import tol\nx = 2\n")
+    assert clear_stale_numba_cache([pkg]) and len(parsed) == 1 and not compiled.exists()
+    assert not clear_stale_numba_cache([pkg]) and len(parsed) == 1
+
+
 @pytest.mark.slow
 def test_a_changed_tolerance_reaches_the_compiled_kernels(tmp_path):
     """The flips' kernel reads the Delaunay tolerance as a module constant, frozen into its cached machine
