@@ -217,6 +217,10 @@ def main() -> None:
     scenario, run_dir, out = sys.argv[1], Path(sys.argv[2]), Path(sys.argv[3])
     threading.Thread(target=_watchdog, daemon=True).start()
     import imageio.v3 as iio
+
+    from viewer.lazy_open3d import defer_open3d_ml
+
+    defer_open3d_ml()  # as `fracref view` starts
     from open3d.visualization import gui
 
     from viewer.app import Viewer

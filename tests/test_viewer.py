@@ -538,3 +538,23 @@ def test_videos_keep_the_pace_of_their_images():
         assert abs(sum(counts) - n * seconds * fps) <= 1  # the video lasts as long as the images
         ends = np.cumsum(counts)
         assert np.all(np.abs(ends - np.arange(1, n + 1) * seconds * fps) <= 1)  # and never drifts
+
+
+def test_open3d_loads_its_machine_learning_package_on_first_use_when_deferred():
+    """`fracref view` and `render` import Open3D without Open3D-ML (scikit-learn): it loads when used."""
+    code = ("import sys\n"
+            "from viewer.lazy_open3d import defer_open3d_ml\n"
+            "assert defer_open3d_ml()\n"
+            "import open3d\n"
+            "import viewer.render\n"
+            "assert 'sklearn' not in sys.modules and 'open3d._ml3d' not in sys.modules\n"
+            "open3d.geometry.TriangleMesh.create_box()\n"
+            "assert open3d.ml.datasets.SemanticKITTI is not None\n"
+            "assert 'sklearn' in sys.modules\n"
+            "assert not defer_open3d_ml()\n"  # Open3D is there: nothing changes
+            "print('ok')\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr[-2000:]
+    plain = subprocess.run([sys.executable, "-c", "import sys, viewer.render; print('sklearn' in sys.modules)"],
+                           capture_output=True, text=True, timeout=300)
+    assert plain.stdout.strip() == "True", plain.stderr[-2000:]  # as a library, the viewer changes nothing
