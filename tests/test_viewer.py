@@ -364,7 +364,8 @@ bar = to_uint8(colormap(np.linspace(0, 1, 1024), FIELD_CMAPS["psi"], 0, 1)).asty
 from scipy.ndimage import binary_erosion
 inside = binary_erosion(np.abs(img - img[0, 0]).sum(axis=2) > 30, iterations=3)  # not the edge's blend
 px = img[inside]
-nearest = np.abs(px[:, None, :] - bar[None, :, :]).max(axis=2).min(axis=1)
+from scipy.spatial import cKDTree
+nearest = cKDTree(bar).query(px, p=np.inf)[0]  # the largest channel's difference to the nearest bar colour
 json.dump({{"pixels": int(inside.sum()), "p95": float(np.percentile(nearest, 95)),
             "median": float(np.median(nearest))}}, sys.stdout)
 """
