@@ -35,7 +35,10 @@ bench: install
 	$(BIN)/python benchmarks/bench_animate.py --triangles 200000
 	$(BIN)/python benchmarks/fidelity.py
 
-install: system-deps $(STAMP) $(BLENDER_STAMP)
+# The two environments are made side by side (each mostly one core: unpacking wheels, then the kernels'
+# compilation in .venv), their output a line at a time.
+install: system-deps
+	@$(MAKE) --no-print-directory --silent -j2 --output-sync=line $(STAMP) $(BLENDER_STAMP)
 
 system-deps:
 	@if command -v dpkg >/dev/null 2>&1; then \
@@ -50,6 +53,7 @@ system-deps:
 	fi
 
 $(STAMP): pyproject.toml
+	@echo "making $(VENV): the project and its packages, then the kernels' one-off compilation (a few minutes)"
 	@$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), "Python >= 3.11 is required, found " + sys.version' 
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
@@ -58,6 +62,7 @@ $(STAMP): pyproject.toml
 	@touch $(STAMP)
 
 $(BLENDER_STAMP):
+	@echo "making $(BLENDER_VENV): Blender as a Python module, for the tests' imports into Blender"
 	$(PYTHON) -m venv $(BLENDER_VENV)
 	$(BLENDER_VENV)/bin/python -m pip install --quiet '$(BPY)' 'numpy<2'
 	@touch $(BLENDER_STAMP)
