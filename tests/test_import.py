@@ -210,7 +210,7 @@ def _remove_object(lines, name):
     ("empty file", [6], lambda l: [], ["frame_0006.obj", "empty"]),
     ("moved piece", [1], lambda l: _shift_piece(l, "source_cell.005", (0.05, 0.05, 0.05)), ["frame_0001.obj", "'source_cell.005'", "must tile"]),
     ("piece twice", range(1, 41), lambda l: _twice(l, "source_cell.002"),
-     ["frame_0001.obj", "'source_cell.002' and 'source_cell.002_dup' overlap by 0.", "100% of the smaller piece",
+     ["frame_0001.obj", "'source_cell.002' and 'source_cell.002_dup' have the same", "vertices",
       "(is a piece exported twice?)"]),
     ("duplicate name", [1, 2], lambda l: _rename(l, "source_cell.004", "source_cell.003"),
      ["frame_0001.obj", "two pieces are named 'source_cell.003'"]),
@@ -727,3 +727,20 @@ def test_the_coarse_cut_does_not_depend_on_the_unit(tmp_path, scale):
     other, _ = load_coarse_sequence(tmp_path / "scaled")
     assert len(other.F) == len(one.F) and (other.F == one.F).all()
     assert np.abs(other.V / scale - one.V).max() <= 1e-12 * np.ptp(one.V)
+
+
+def test_an_overlap_of_a_whole_piece_is_said_to_be_a_piece_exported_twice():
+    """Twins that differ in a vertex pass the check of equal vertices; the labels' overlap names them: every
+    node of the smaller piece inside the other too (and a partial overlap says the piece is moved)."""
+    from fracture.coarse.tiling import _check_tiling
+
+    names = ["a", "a_dup", "b"]
+    label = np.zeros((12, 12, 12), np.int64)
+    label[1:5, 1:5, 1:5] = 1  # 64 nodes of a, inside a_dup too (the argmax gave them to a)
+    label[6:11, 1:11, 1:11] = 3
+    twins = np.tile([0, 1], (64, 1))
+    with pytest.raises(InputError, match=r"'a' and 'a_dup' overlap by .* 100% of the smaller piece.*exported twice"):
+        _check_tiling(label, twins, np.zeros((0, 2), np.int64), names, 0.1, "f.obj: ")
+    moved = np.tile([0, 2], (40, 1))  # 40 of b's 500 nodes inside a
+    with pytest.raises(InputError, match=r"'a' and 'b' overlap by .*\(is a piece moved\?\)"):
+        _check_tiling(label, moved, np.zeros((0, 2), np.int64), names, 0.1, "f.obj: ")

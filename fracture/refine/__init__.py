@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import ast
 import hashlib
+import os
 import re
 from pathlib import Path
 
@@ -95,7 +96,7 @@ def _sources_digest(packages: list[Path]) -> str:
     digest = _digest(kernel_sources(packages))
     try:
         memo.parent.mkdir(exist_ok=True)
-        tmp = memo.with_suffix(".tmp")
+        tmp = memo.with_suffix(f".{os.getpid()}.tmp")  # programs starting together (a sweep's) write their own
         tmp.write_text(f"{tree} {digest}")
         tmp.replace(memo)
     except OSError:  # a read-only install: found again next time
