@@ -315,8 +315,8 @@ def test_a_thin_plank_turned_any_way_keeps_every_piece():
 
 def test_a_ground_a_ball_and_a_plane_exported_with_the_pieces_are_left_out():
     """A Blender scene exported whole: the fractured plank's four pieces, a ground slab below it, a ball (a
-    box) thrown at it and a ground plane it rests on. The slab and the ball touch no piece, the plane is
-    flat: all three are left out with notes, and the import is the one of the pieces alone (the slab's 20
+    box) thrown at it and a ground plane it rests on, written twice. The slab and the ball touch no piece, the
+    planes are flat: all four are left out with notes, and the import is the one of the pieces alone (the slab's 20
     units made the grid's cells three times coarser, and it became a piece)."""
     from fracture.coarse.tiling import label_tiling
 
@@ -327,12 +327,12 @@ def test_a_ground_a_ball_and_a_plane_exported_with_the_pieces_are_left_out():
     ball, _ = _plank_of_boxes([], (0.3, 0.3, 0.3), (0.0, 0.0, 0.0))
     extra = [ground + (-7.0, -10.0, -1.2), ball + (3.0, 2.0, 0.1)]  # 1 and 1.2 from the plank
     plane = np.array([[-10.0, -10.0, 0.0], [10.0, -10.0, 0.0], [10.0, 10.0, 0.0], [-10.0, 10.0, 0.0]])  # under it
-    X = np.concatenate([V, *extra, plane])
+    X = np.concatenate([V, *extra, plane, plane])  # the plane twice: left out, not refused as a piece twice
     P = polygons + [[q + len(V) + 8 * k for q in polygons[0]] for k in range(2)]  # the first box's quads
-    P.append([np.arange(4) + len(X) - 4])
-    t = label_tiling(X, P, ["a", "b", "c", "d", "Ground", "Ball", "Plane"])
+    P += [[np.arange(4) + len(X) - 8], [np.arange(4) + len(X) - 4]]
+    t = label_tiling(X, P, ["a", "b", "c", "d", "Ground", "Ball", "Plane", "Plane.001"])
     assert list(t.kept) == [0, 1, 2, 3]
-    assert t.notes[0] == "left out flat pieces (a ground plane?): not solids: 'Plane'"
+    assert t.notes[0] == "left out flat pieces (a ground plane?): not solids: 'Plane', 'Plane.001'"
     assert t.notes[1].startswith("left out pieces that touch no other piece") and "'Ground', 'Ball'" in t.notes[1]
     assert t.notes[2:] == alone.notes and t.cells == alone.cells
     np.testing.assert_array_equal(t.exterior_F, alone.exterior_F)

@@ -486,7 +486,6 @@ def label_tiling(V: np.ndarray, polygons: list[list[np.ndarray]], names: list[st
         raise InputError(f"{where}the pieces' vertices all lie in one plane: the object is flat; expected the "
                          "closed pieces of a solid")
     pieces = _piece_triangles(V, polygons)
-    _refuse_twins(pieces, names, where)
     notes: list[str] = []
     turned = []
     for p, (PV, PF) in enumerate(pieces):
@@ -516,6 +515,7 @@ def label_tiling(V: np.ndarray, polygons: list[list[np.ndarray]], names: list[st
     else:
         lo, hi = V.min(axis=0), V.max(axis=0)
         V_used = V[used]
+    _refuse_twins(pieces, names, where)  # among the object's pieces (a ground exported twice is left out)
     across = _ACROSS * float((hi - lo).max()) / max(thinnest_extent(V_used), tol.zero)
     cells = max(cells, min(_MOST_CELLS, int(np.ceil(across))))
     for n in (cells, 2 * cells):  # a piece thinner than a cell everywhere: try once at half the cell size
