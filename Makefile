@@ -36,9 +36,10 @@ bench: install
 	$(BIN)/python benchmarks/fidelity.py
 
 # The two environments are made side by side (each mostly one core: unpacking wheels, then the kernels'
-# compilation in .venv), their output a line at a time.
+# compilation in .venv), their output a line at a time; INSTALL_JOBS=1 makes them one after the other.
+INSTALL_JOBS ?= 2
 install: system-deps
-	@$(MAKE) --no-print-directory --silent -j2 --output-sync=line $(STAMP) $(BLENDER_STAMP)
+	@$(MAKE) --no-print-directory --silent -j$(INSTALL_JOBS) --output-sync=line $(STAMP) $(BLENDER_STAMP)
 
 system-deps:
 	@if command -v dpkg >/dev/null 2>&1; then \

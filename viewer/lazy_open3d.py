@@ -3,8 +3,8 @@
 ``import open3d`` imports Open3D-ML (``open3d.ml``: its datasets import
 scikit-learn and SciPy's statistics), 1.9 s of the 3.3 s the import takes on
 the project's 2-core machine; the viewer uses none of it. The command line's
-``view`` and ``render`` (programs of their own) call :func:`defer_open3d_ml`
-before they import the viewer: ``open3d.ml`` is then a module that Python's
+``view``, ``render`` and the sweep's contact sheet (programs of their own)
+call :func:`defer_open3d_ml` before they import the viewer: ``open3d.ml`` is then a module that Python's
 :class:`importlib.util.LazyLoader` executes at its first attribute access,
 so code that does use it still gets all of it. Importing the viewer as a
 library changes nothing.

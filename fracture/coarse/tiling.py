@@ -216,11 +216,12 @@ def _refuse_twins(pieces, names, where: str) -> None:
     the winding numbers of every node (8 s for the 40-frame test object against a few milliseconds)."""
     seen: dict[bytes, int] = {}
     for p, (PV, _) in enumerate(pieces):
-        key = np.unique(PV, axis=0).tobytes()
+        points = np.unique(PV, axis=0)
+        key = points.tobytes()
         if key in seen:
             q = seen[key]
-            raise InputError(f"{where}pieces {names[q]!r} and {names[p]!r} have the same {len(PV)} vertices: the "
-                             "pieces must tile the object in the rest pose (is a piece exported twice?)")
+            raise InputError(f"{where}pieces {names[q]!r} and {names[p]!r} have the same {len(points)} vertices: "
+                             "the pieces must tile the object in the rest pose (is a piece exported twice?)")
         seen[key] = p
 
 

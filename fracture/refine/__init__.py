@@ -83,10 +83,12 @@ def _digest(paths) -> str:
 def _sources_digest(packages: list[Path]) -> str:
     """The digest of :func:`kernel_sources` of ``packages``. Finding them parses every kernel module and
     what it imports (0.4 s, at every program's start); the digest of every module of the packages and of
-    the top packages, a superset read in 12 ms, is kept with it (``numba-tree.sha1`` in the first
-    package's ``__pycache__``), and while that is unchanged so are the kernel sources."""
+    the top packages, a superset read in 12 ms, is kept with it (``numba-tree-*.sha1`` in the first
+    package's ``__pycache__``, one per list of packages), and while that is unchanged so are the kernel
+    sources."""
     tree = _digest(sorted({p for folder in [*packages, *(_ROOT / top for top in _TOP)] for p in folder.rglob("*.py")}))
-    memo = packages[0] / "__pycache__" / "numba-tree.sha1"
+    asked = hashlib.sha1("\0".join(str(p) for p in packages).encode()).hexdigest()[:12]  # the packages' own memo
+    memo = packages[0] / "__pycache__" / f"numba-tree-{asked}.sha1"
     try:
         known_tree, known = memo.read_text().split()
         if known_tree == tree:
@@ -125,7 +127,7 @@ def clear_stale_numba_cache(packages: Path | list[Path] | None = None) -> bool:
                 f.unlink(missing_ok=True)
             stale += found
             cache.mkdir(exist_ok=True)
-            tmp = stamp.with_suffix(".tmp")
+            tmp = stamp.with_suffix(f".{os.getpid()}.tmp")
             tmp.write_text(digest)
             tmp.replace(stamp)
     except OSError:  # a read-only install: numba caches elsewhere or not at all
