@@ -20,6 +20,7 @@ from fracture.process import environment_problem  # imports nothing that loads n
 
 # commands that refine or load refinement results (the others only read configs)
 _COMPUTING = ("run", "sweep", "view", "render", "export", "compile")
+_DRAWING = ("view", "render", "sweep")  # the commands that may draw (a sweep its contact sheet)
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -244,6 +245,10 @@ def _main(argv: list[str] | None) -> int:
     try:
         if args.command in _COMPUTING:
             prepare_process()  # only where kernels run: config, stages and explain need none of it
+        if args.command in _DRAWING:
+            from viewer.lazy_open3d import defer_open3d_ml
+
+            defer_open3d_ml()  # Open3D without its machine-learning package (1.9 s), which the pictures do not use
         if args.command == "stages":
             from fracture.pipeline import runner
 
@@ -344,9 +349,6 @@ def _render(args) -> int:
     # wrong flag or run directory is said at once
     request = check_request(args.run_dir, whats or None, args.width, args.height, timing, view,
                             args.turntable_seconds, args.supersample)
-    from viewer.lazy_open3d import defer_open3d_ml
-
-    defer_open3d_ml()  # Open3D without its machine-learning package (1.9 s), which the pictures do not use
     from viewer.render import render
 
     done = render(request.run, whats or None, args.out, args.width, args.height, timing, view, args.quiet,
@@ -383,9 +385,6 @@ def _sweep(args) -> int:
     failed = {n: p for n, p in state["points"].items() if p["status"] == "failed"}
     if names and not args.no_sheet and (args.until is None or args.until not in ("coarse", "fields")):
         from viewer.data import read_sweep
-        from viewer.lazy_open3d import defer_open3d_ml
-
-        defer_open3d_ml()  # as for render
         from viewer.render import contact_sheet
 
         done = read_sweep(out)
@@ -406,9 +405,6 @@ def _view(args) -> int:
     if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
         raise InputError("view: no display to open a window on (DISPLAY is not set); `fracref render RUN` makes the "
                          "same pictures without one")
-    from viewer.lazy_open3d import defer_open3d_ml
-
-    defer_open3d_ml()  # as for render
     from viewer.app import main as view_main  # the window's libraries (Open3D: seconds) once it can open
 
     return view_main(args.target, args.out, args.width, args.height, args.camera)

@@ -86,8 +86,8 @@ def test_a_change_in_one_compiled_package_clears_the_caches_of_both(tmp_path):
 
 
 def test_the_kernel_sources_are_parsed_again_only_when_a_module_changes(tmp_path, monkeypatch):
-    """The sources' digest is kept with the digest of every module (numba-tree-*.sha1): an unchanged tree is
-    not parsed again, and a change in a module is still seen (one the kernels import, the tolerances: see
+    """The stamp keeps the digest of every module beside the sources': an unchanged tree is not parsed
+    again, and a change in a module is still seen (one the kernels import, the tolerances: see
     test_a_changed_tolerance_reaches_the_compiled_kernels)."""
     import fracture.refine as refine_package
     from fracture.refine import clear_stale_numba_cache

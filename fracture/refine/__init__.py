@@ -80,55 +80,45 @@ def _digest(paths) -> str:
     return digest.hexdigest()
 
 
-def _sources_digest(packages: list[Path]) -> str:
-    """The digest of :func:`kernel_sources` of ``packages``. Finding them parses every kernel module and
-    what it imports (0.4 s, at every program's start); the digest of every module of the packages and of
-    the top packages, a superset read in 12 ms, is kept with it (``numba-tree-*.sha1`` in the first
-    package's ``__pycache__``, one per list of packages), and while that is unchanged so are the kernel
-    sources."""
-    tree = _digest(sorted({p for folder in [*packages, *(_ROOT / top for top in _TOP)] for p in folder.rglob("*.py")}))
-    asked = hashlib.sha1("\0".join(str(p) for p in packages).encode()).hexdigest()[:12]  # the packages' own memo
-    memo = packages[0] / "__pycache__" / f"numba-tree-{asked}.sha1"
-    try:
-        known_tree, known = memo.read_text().split()
-        if known_tree == tree:
-            return known
-    except (OSError, ValueError):
-        pass
-    digest = _digest(kernel_sources(packages))
-    try:
-        memo.parent.mkdir(exist_ok=True)
-        tmp = memo.with_suffix(f".{os.getpid()}.tmp")  # programs starting together (a sweep's) write their own
-        tmp.write_text(f"{tree} {digest}")
-        tmp.replace(memo)
-    except OSError:  # a read-only install: found again next time
-        pass
-    return digest
+def _tree_digest(packages: list[Path]) -> str:
+    """The digest of every module of ``packages`` and of the top packages: a superset of their
+    :func:`kernel_sources`, read in 12 ms where finding those parses every kernel module and what it
+    imports (0.4 s, at every program's start)."""
+    return _digest(sorted({p for folder in [*packages, *(_ROOT / top for top in _TOP)] for p in folder.rglob("*.py")}))
 
 
 def clear_stale_numba_cache(packages: Path | list[Path] | None = None) -> bool:
     """Delete numba's cache files in every ``package/__pycache__`` (default: every package with compiled
     kernels, whose kernels call each other) unless they were made from the current content of
-    :func:`kernel_sources`; returns whether anything was deleted."""
+    :func:`kernel_sources`; returns whether anything was deleted.
+
+    Each package's stamp (``numba-sources.sha1``) holds the kernel sources' digest and the digest of every
+    module (:func:`_tree_digest`) when it was written: while no module changed, the sources are not looked
+    for again; when one did, they are, and the caches go only if the kernels' own sources changed."""
     packages = _compiled_packages() if packages is None else [packages] if isinstance(packages, Path) else packages
-    digest = _sources_digest(packages)
+    tree = _tree_digest(packages)
     stamps = [package / "__pycache__" / "numba-sources.sha1" for package in packages]
     try:
-        if all(stamp.read_text() == digest for stamp in stamps):
-            return False
+        kept = {tuple(stamp.read_text().split()) for stamp in stamps}  # (sources, tree) each
     except OSError:
-        pass
+        kept = set()
+    known = kept.pop() if len(kept) == 1 else ()
+    if known[1:] == (tree,):
+        return False  # no module changed since the stamps were written
+    digest = _digest(kernel_sources(packages))
+    current = known[:1] == (digest,)  # a module changed, not the kernels' sources: the caches stay
     stale = []
     try:
         for package, stamp in zip(packages, stamps):
             cache = package / "__pycache__"
-            found = list(cache.glob("*.nb[ic]"))
-            for f in found:
-                f.unlink(missing_ok=True)
-            stale += found
+            if not current:
+                found = list(cache.glob("*.nb[ic]"))
+                for f in found:
+                    f.unlink(missing_ok=True)
+                stale += found
             cache.mkdir(exist_ok=True)
-            tmp = stamp.with_suffix(f".{os.getpid()}.tmp")
-            tmp.write_text(digest)
+            tmp = stamp.with_suffix(f".{os.getpid()}.tmp")  # programs starting together (a sweep's) write their own
+            tmp.write_text(f"{digest} {tree}")
             tmp.replace(stamp)
     except OSError:  # a read-only install: numba caches elsewhere or not at all
         return False
