@@ -18,7 +18,6 @@ import shutil
 import subprocess
 import sys
 import sysconfig
-import tempfile
 import textwrap
 import venv
 from pathlib import Path
@@ -71,10 +70,14 @@ def test_the_wheel_runs_a_scene_with_a_preset_by_name_and_exports_it(installed, 
     # first run does not wait for the compilation
     cached = [str(installed / "python"), "-c", "from fracture.refine import kernels_cached; print(kernels_cached())"]
     assert subprocess.run(cached, capture_output=True, text=True, cwd=tmp_path, env=_ENV).stdout.strip() == "False"
-    compiled = _run(installed, tmp_path, "compile")
+    # in a temporary folder of its own: another program's leftovers in the machine's /tmp are not its own
+    scratch = tmp_path / "scratch"
+    scratch.mkdir()
+    compiled = subprocess.run([str(installed / "fracref"), "compile"], capture_output=True, text=True, cwd=tmp_path,
+                              timeout=900, env={**_ENV, "TMPDIR": str(scratch)})
     assert compiled.returncode == 0 and "kernels compiled and cached in" in compiled.stdout, compiled.stderr[-2000:]
     assert subprocess.run(cached, capture_output=True, text=True, cwd=tmp_path, env=_ENV).stdout.strip() == "True"
-    assert not list(Path(tempfile.gettempdir()).glob("fracref-compile-*"))  # its run directory is gone
+    assert not list(scratch.iterdir())  # its run directory is gone
 
     listed = _run(installed, tmp_path, "presets")
     assert listed.returncode == 0 and "strength/marble" in listed.stdout and "bunny" in listed.stdout, listed.stderr
