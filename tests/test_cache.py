@@ -63,31 +63,36 @@ def test_a_psi_change_reuses_the_coarse_stage_and_the_strength(tmp_path, small_c
     assert reuse(refine_only) == {"coarse": "reused", "fields": "reused", "refine": "stored", "animate": "stored"}
 
 
-def test_a_psi_change_reuses_the_search_band_and_gives_the_run_without_the_cache(tmp_path, small_config,
-                                                                                 monkeypatch):
+def test_a_psi_change_reuses_the_search_band_and_the_volumes_and_gives_the_run_without_the_cache(
+        tmp_path, small_config, monkeypatch):
     import fracture.refine.engine as engine
     import fracture.refine.search as search
+    import fracture.refine.volumes as volumes
 
     cache = StageCache(tmp_path / "cache")
     searched = ["refine.search=graphcut", "refine.iterations=3"]
     first = run(load_config(small_config, searched), tmp_path / "a", cache)
     assert first["stats"]["refine"]["search"]["free_nodes"] > 0
     assert len(list((tmp_path / "cache" / "search band").iterdir())) == 1
+    assert len(list((tmp_path / "cache" / "coarse volumes").iterdir())) == 1
 
     def not_again(*args, **kwargs):
-        raise AssertionError("the band was made again")
+        raise AssertionError("the band or the coarse volumes were made again")
 
-    with monkeypatch.context() as m:  # the band does not read psi: a psi change finds it in the cache
+    with monkeypatch.context() as m:  # neither reads psi: a psi change finds them in the cache
         m.setattr(engine, "search_band", not_again)
         m.setattr(search, "search_band", not_again)
+        m.setattr(volumes, "measure_volumes", not_again)
         changed = run(load_config(small_config, [*searched, "psi.stress_weight=1.5"]), tmp_path / "b", cache)
     assert changed["stats"]["refine"]["search"]["free_nodes"] == first["stats"]["refine"]["search"]["free_nodes"]
     plain = run(load_config(small_config, [*searched, "psi.stress_weight=1.5"]), tmp_path / "c", None)
     assert plain["files"] == changed["files"] and untimed(plain["stats"]) == untimed(changed["stats"])
-    # another band, core or grid is another entry
+    assert changed["stats"]["refine"]["piece_volume_shares"] == plain["stats"]["refine"]["piece_volume_shares"]
+    # another band, core or grid is another band; only another grid other volumes
     for k, other in enumerate(["refine.band=6", "refine.core=0.3", "grid.resolution=18"]):
         run(load_config(small_config, [*searched, other]), tmp_path / f"d{k}", cache)
         assert len(list((tmp_path / "cache" / "search band").iterdir())) == 2 + k
+        assert len(list((tmp_path / "cache" / "coarse volumes").iterdir())) == 1 + (other.startswith("grid"))
 
 
 def test_a_changed_input_file_invalidates_the_stages_after_it(tmp_path, small_config):

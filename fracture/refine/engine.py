@@ -228,12 +228,14 @@ class Refiner:
     ``flow`` is the flow (default :class:`~fracture.refine.flow.PsiFlow`, Eq. 3; its integrand and
     field term), ``splits`` the split rule (default :class:`~fracture.refine.remesh.PsiSplits`, the
     paper's): seams for another flow (``AreaFlow``: mean curvature flow) or split rule
-    (``LongEdgeSplits``).
+    (``LongEdgeSplits``). ``coarse_volumes`` (optional) are the pieces' volumes at ``mesh``
+    (:func:`~fracture.refine.volumes.measure_volumes` of it, B and the grid), measured when not given: they do not
+    read psi, so a re-run with another material or stress may bring them.
     """
 
     def __init__(self, mesh: FractureSurface, pyramid, BV: np.ndarray, BF: np.ndarray, params: RefineParams,
                  rng: np.random.Generator, *, collisions=stop_collisions, search="default", grain=None, flow=None,
-                 splits=None):
+                 splits=None, coarse_volumes: np.ndarray | None = None):
         self.mesh, self.pyramid, self.params, self.rng = mesh, pyramid, params, rng
         self.grain = grain
         self.flow = PsiFlow() if flow is None else flow
@@ -251,8 +253,10 @@ class Refiner:
         self.solve = ImplicitStep()  # keeps its factorisation for a retried step
         self.state = VertexState.empty(len(mesh.V))
         # each piece's volume, kept above its share of the coarse one (None: no limit)
-        self.volumes = (PieceVolumes.measure(mesh.V, mesh.F, mesh.sides, self.B, pyramid.grid, params.keep_volume)
-                        if params.keep_volume > 0.0 and len(mesh.F) else None)
+        self.volumes = None
+        if params.keep_volume > 0.0 and len(mesh.F):
+            self.volumes = (PieceVolumes.measure(mesh.V, mesh.F, mesh.sides, self.B, pyramid.grid, params.keep_volume)
+                            if coarse_volumes is None else PieceVolumes.of(coarse_volumes, params.keep_volume))
         self.begin_stage(*self.stages()[0])  # sets first, count, near, offset and the step size
         # the boundary constraint on B: owns B's answers about the vertices, the boundary and what is off B
         self.onb = BoundaryOnB(mesh, self.state, self.B, self.h, params, collisions)

@@ -52,8 +52,14 @@ class PieceVolumes:
     def measure(cls, V: np.ndarray, F: np.ndarray, sides: np.ndarray, B: Exterior, grid, keep: float
                 ) -> PieceVolumes:
         """The volumes of the pieces the surface ``(V, F, sides)`` cuts B into, kept at ``keep`` of them."""
-        volume = measure_volumes(V, F, sides, B, grid)
-        return cls(volume, volume.copy(), float(keep))
+        return cls.of(measure_volumes(V, F, sides, B, grid), keep)
+
+    @classmethod
+    def of(cls, coarse: np.ndarray, keep: float) -> PieceVolumes:
+        """The pieces at their coarse volumes ``coarse`` (:func:`measure_volumes` of the coarse surface), kept at
+        ``keep`` of them."""
+        coarse = np.array(coarse, np.float64)
+        return cls(coarse, coarse.copy(), float(keep))
 
     def copy(self, volume: np.ndarray | None = None) -> PieceVolumes:
         """A copy of its own (the volumes and the pieces held so far), with the volumes ``volume`` if given."""

@@ -39,13 +39,18 @@ def refine_stage(ctx: RunContext) -> None:
     mesh = FractureSurface.from_coarse(cf.V, cf.F, cf.sides)
     BV, BF = ctx.products.exterior
     grain = getattr(fs, "grain", None)
-    bands = _CachedBand(ctx) if ctx.cache is not None else None
+    bands = _Cached(ctx, "search band", (config.refine.band, config.refine.core)) if ctx.cache is not None else None
+    volumes = _Cached(ctx, "coarse volumes") if ctx.cache is not None else None
+    coarse_volumes = None if volumes is None else volumes.get()
     # draw 0 is the seed's own generator; another draw one derived from both (the material keeps the seed)
     draw = config.refine.draw
     rng = np.random.default_rng(config.seed if draw == 0 else [config.seed, draw])
     refiner = Refiner(mesh, fs.pyramid, BV, BF, params, rng, grain=grain,
                       search=default_search(params, distance=fs.field("distance"), names=cf.names, grain=grain,
-                                            bands=bands))
+                                            bands=bands),
+                      coarse_volumes=coarse_volumes)
+    if volumes is not None and coarse_volumes is None and refiner.volumes is not None:
+        volumes.put(refiner.volumes.coarse)
     snaps = Snapshots() if config.refine.snapshots else None
     if snaps is not None:
         snaps.add(mesh.V, mesh.F, refiner.psi, np.linalg.norm(refiner.velocity, axis=1))
@@ -151,25 +156,25 @@ def _volume_notes(volumes, names: list[str]) -> list[str]:
             f"where the material would have shrunk {'them' if many else 'it'} further; at the end {ends}"]
 
 
-class _CachedBand:
-    """The search's band (:func:`fracture.refine.search.search_band`) in the stage cache, under the coarse
-    stage's key, the grid and the band's parameters: it does not read psi, so a re-run with the material
-    or the stress changed (the viewer's, a sweep's) reuses it."""
+class _Cached:
+    """What the refinement makes of the coarse surface, B and the grid alone, in the stage cache under the coarse
+    stage's key, the grid and ``extra`` (the parameters it reads): the search's band
+    (:func:`fracture.refine.search.search_band`; ``extra`` the band's and the core's widths) and the pieces'
+    coarse volumes (:func:`fracture.refine.volumes.measure_volumes`). Neither reads psi, so a re-run with the
+    material or the stress changed (the viewer's, a sweep's) reuses them."""
 
-    def __init__(self, ctx: RunContext):
+    def __init__(self, ctx: RunContext, name: str, extra=()):
         from fracture.pipeline.cache import code_version, digest
         from fracture.pipeline.stages.fields import grid_inputs
 
-        cfg = ctx.config.tree()
-        self.cache = ctx.cache
-        self.key = digest("search band", ctx.keys["coarse"], grid_inputs(cfg),
-                          (cfg["refine"]["band"], cfg["refine"]["core"]), code_version())
+        self.cache, self.name = ctx.cache, name
+        self.key = digest(name, ctx.keys["coarse"], grid_inputs(ctx.config.tree()), tuple(extra), code_version())
 
     def get(self):
-        return self.cache.value("search band", self.key)
+        return self.cache.value(self.name, self.key)
 
-    def put(self, band) -> None:
-        self.cache.keep("search band", self.key, band)
+    def put(self, value) -> None:
+        self.cache.keep(self.name, self.key, value)
 
 
 def _search_stats(result) -> dict | None:
