@@ -111,13 +111,12 @@ class StrengthPyramid:
                 raise ValueError("pyramids of different grids or levels cannot be combined")
         out = cls.__new__(cls)
         out.grid, out.sigmas = first.grid, first.sigmas
-        out.levels = np.multiply(first.levels, w0)
-        out._table = np.multiply(first._table, w0)
-        scratch = np.empty(max(out.levels.size, out._table.size))  # w * a term: no new array per term and part
-        for w, p in rest:
-            for mine, theirs in ((out.levels, p.levels), (out._table, p._table)):
-                part = scratch[: theirs.size].reshape(theirs.shape)
-                np.add(mine, np.multiply(theirs, w, out=part), out=mine)
+        out.levels, out._table = np.empty_like(first.levels), np.empty_like(first._table)
+        for mine, part in ((out.levels, "levels"), (out._table, "_table")):
+            # one pass over the terms' arrays per term (NumPy's products and sum took three times as long)
+            _scaled(mine.reshape(-1), w0, np.ascontiguousarray(getattr(first, part)).reshape(-1))
+            for w, p in rest:
+                _add_scaled(mine.reshape(-1), w, np.ascontiguousarray(getattr(p, part)).reshape(-1))
         out._coarse = ((-1, -1), None)
         return out
 
@@ -203,6 +202,20 @@ class StrengthPyramid:
     def level_gradient(self, k: int, P: np.ndarray) -> np.ndarray:
         """Finite-difference gradient of level ``k`` at points, ``(n, 3)``."""
         return trilinear(self.grid, self.level_gradient_grid(k), P)
+
+
+@numba.njit(cache=True)
+def _scaled(out, w, a):
+    """``out = w a`` (flat arrays)."""
+    for i in range(out.shape[0]):
+        out[i] = w * a[i]
+
+
+@numba.njit(cache=True)
+def _add_scaled(out, w, a):
+    """``out += w a`` (flat arrays): the products and the sums NumPy would take, in one pass."""
+    for i in range(out.shape[0]):
+        out[i] += w * a[i]
 
 
 @numba.njit(cache=True)
