@@ -185,3 +185,34 @@ def test_gnu_openmp_reads_the_wait_policy_the_process_set_up_chose():
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.split() == ["omp"]
     assert f"OMP_WAIT_POLICY = '{WAIT_POLICY.upper()}'" in out.stderr
+
+
+def test_a_stopped_compile_stops_its_second_process_and_leaves_no_run_behind(tmp_path):
+    """``fracref compile`` on two processes, stopped by SIGTERM once both have made their run directories: one
+    line, the terminated status, and neither directory nor the second process left."""
+    import signal
+    import time
+
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    fracref = Path(sys.executable).with_name("fracref")
+    proc = subprocess.Popen([str(fracref), "compile"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, "TMPDIR": str(scratch)}, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        while len(list(scratch.glob("fracref-compile-*"))) < 2 and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert proc.poll() is None, "the compile ended before both processes had begun"
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 128 + signal.SIGTERM, err
+    assert "terminated" in err and "Traceback" not in err, err
+    assert not list(scratch.iterdir())
+    deadline = time.monotonic() + 20  # multiprocessing's resource tracker ends once the program has
+    while (alive := subprocess.run(["pgrep", "-a", "-s", str(proc.pid)], capture_output=True, text=True).stdout
+           ) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not alive, f"processes of the compile left: {alive}"

@@ -7,6 +7,15 @@ first ``fracref run`` wait for it (about half a minute). :func:`compile_kernels`
 runs a tiny built-in scene through every stage instead, with the global search
 and a grain (the branch: virtual fracture, the anisotropic flow), into a
 temporary directory that it removes, with no stage cache (every stage runs).
+
+On two cores or more a second process (started with ``spawn``) compiles at
+the same time: it refines the same scene without the search
+(:data:`FLOW_FIRST`), so that it reaches the flow's kernels (the collision
+tests, the edge flips, the step limits: 45 of the 125 s) while the first
+process is still compiling the search's, and the first one finds them in the
+cache. numba writes its cache files whole (a temporary file, then a rename),
+so the two may write the same kernel's. ``fracref compile`` took 125 s on one
+core and 93 s on two (`docs/design-measurements.md`).
 """
 
 from __future__ import annotations
@@ -27,18 +36,75 @@ WARMUP_CONFIG = {
 }
 
 
-def compile_kernels() -> float:
+# The second process's run: the same scene refined without the search, up to the refinement.
+FLOW_FIRST = {**WARMUP_CONFIG, "refine": {**WARMUP_CONFIG["refine"], "search": "none", "iterations": 3}}
+
+
+def compile_kernels(processes: int | None = None) -> float:
     """Run :data:`WARMUP_CONFIG` through every stage in a temporary directory (numba compiles and caches the
-    kernels on the way); returns the seconds it took."""
+    kernels on the way), with :data:`FLOW_FIRST` in a second process beside it when ``processes`` (default:
+    the cores) is 2 or more; returns the seconds it took. If the second process fails, its run is made here
+    after the first (an error in it then says what it is)."""
+    import multiprocessing
+
+    from fracture.process import cores
+    from fracture.refine import clear_stale_numba_cache
+
+    start = time.perf_counter()
+    clear_stale_numba_cache()  # here, before the second process looks (it would clear what this one wrote)
+    helper = None
+    if (cores() if processes is None else processes) >= 2:
+        helper = multiprocessing.get_context("spawn").Process(target=_helper, name="fracref compile", daemon=True)
+        helper.start()
+    try:
+        _warm(WARMUP_CONFIG)
+        if helper is not None:
+            helper.join()
+    finally:
+        if helper is not None and helper.is_alive():  # stopped: the helper removes its run directory
+            helper.terminate()
+            helper.join()
+    if helper is not None and helper.exitcode != 0:
+        _warm(FLOW_FIRST, until="refine")
+    _imports_kernels()
+    return time.perf_counter() - start
+
+
+def _warm(config: dict, until: str | None = None) -> None:
+    """Run ``config`` into a temporary directory, which goes with it."""
     from fracture.pipeline import runner
     from fracture.pipeline.config import check_config
 
-    start = time.perf_counter()
-    cfg = check_config(WARMUP_CONFIG, "fracref compile")
+    cfg = check_config(config, "fracref compile")
     with tempfile.TemporaryDirectory(prefix="fracref-compile-") as tmp:
-        runner.run(cfg, Path(tmp) / "run", progress=False)
-    _imports_kernels()
-    return time.perf_counter() - start
+        runner.run(cfg, Path(tmp) / "run", until=until, progress=False)
+
+
+def _helper() -> None:
+    """The second process: :data:`FLOW_FIRST` up to the refinement. Ctrl-C is the first process's to answer
+    (it stops this one); SIGTERM unwinds, so that the run directory goes, and ends it without a word (what
+    the stop broke on the way, an import half done, is not an error to tell)."""
+    import os
+    import signal
+
+    from fracture.process import later_if_compiling, prepare_process
+
+    stopped = []
+
+    def stop(signum, frame):
+        if not later_if_compiling(signum, frame):
+            stopped.append(signum)
+            raise SystemExit(128 + signum)
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, stop)
+    try:
+        prepare_process()
+        _warm(FLOW_FIRST, until="refine")
+    except BaseException:
+        if stopped:
+            os._exit(128 + stopped[0])
+        raise
 
 
 def _imports_kernels() -> None:
