@@ -57,8 +57,11 @@ def _parser() -> argparse.ArgumentParser:
     w.add_argument("--quiet", action="store_true", help="no progress bar")
     _cache_flags(w)
 
-    sub.add_parser("compile", help="compile the kernels now (once per install; make install does it), so that "
-                   "the first run does not wait for it")
+    k = sub.add_parser("compile", help="compile the kernels now (once per install; make install does it), so that "
+                       "the first run does not wait for it")
+    k.add_argument("--processes", type=int, choices=(1, 2), default=None, metavar="{1,2}",
+                   help="compile in one process, or in two side by side (default: two on a machine of two cores or "
+                   "more)")
 
     c = sub.add_parser("config", help="print the resolved config, or what config keys mean")
     c.add_argument("config", type=Path, nargs="?", help="experiment YAML file (not needed with --explain)")
@@ -263,7 +266,7 @@ def _main(argv: list[str] | None) -> int:
         if args.command == "compile":
             from fracture.pipeline.warmup import compile_kernels
 
-            print(f"kernels compiled and cached in {compile_kernels():.1f} s")
+            print(f"kernels compiled and cached in {compile_kernels(args.processes):.1f} s")
             return 0
         if args.command == "render":
             return _render(args)

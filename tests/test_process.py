@@ -196,7 +196,7 @@ def test_a_stopped_compile_stops_its_second_process_and_leaves_no_run_behind(tmp
     scratch = tmp_path / "tmp"
     scratch.mkdir()
     fracref = Path(sys.executable).with_name("fracref")
-    proc = subprocess.Popen([str(fracref), "compile"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    proc = subprocess.Popen([str(fracref), "compile", "--processes", "2"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env={**os.environ, "TMPDIR": str(scratch)}, start_new_session=True)
     try:
         deadline = time.monotonic() + 120

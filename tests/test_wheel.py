@@ -70,11 +70,13 @@ def test_the_wheel_runs_a_scene_with_a_preset_by_name_and_exports_it(installed, 
     # first run does not wait for the compilation
     cached = [str(installed / "python"), "-c", "from fracture.refine import kernels_cached; print(kernels_cached())"]
     assert subprocess.run(cached, capture_output=True, text=True, cwd=tmp_path, env=_ENV).stdout.strip() == "False"
-    # in a temporary folder of its own: another program's leftovers in the machine's /tmp are not its own
+    # in a temporary folder of its own: another program's leftovers in the machine's /tmp are not its own; in one
+    # process, as this test's worker shares the cores with another (make install compiles in two, and
+    # test_process stops the two)
     scratch = tmp_path / "scratch"
     scratch.mkdir()
-    compiled = subprocess.run([str(installed / "fracref"), "compile"], capture_output=True, text=True, cwd=tmp_path,
-                              timeout=900, env={**_ENV, "TMPDIR": str(scratch)})
+    compiled = subprocess.run([str(installed / "fracref"), "compile", "--processes", "1"], capture_output=True,
+                              text=True, cwd=tmp_path, timeout=900, env={**_ENV, "TMPDIR": str(scratch)})
     assert compiled.returncode == 0 and "kernels compiled and cached in" in compiled.stdout, compiled.stderr[-2000:]
     assert subprocess.run(cached, capture_output=True, text=True, cwd=tmp_path, env=_ENV).stdout.strip() == "True"
     assert not list(scratch.iterdir())  # its run directory is gone
