@@ -111,7 +111,7 @@ class StrengthPyramid:
                 raise ValueError("pyramids of different grids or levels cannot be combined")
         out = cls.__new__(cls)
         out.grid, out.sigmas = first.grid, first.sigmas
-        out.levels, out._table = np.empty_like(first.levels), np.empty_like(first._table)
+        out.levels, out._table = np.empty(first.levels.shape), np.empty(first._table.shape)  # C order: flat views
         for mine, part in ((out.levels, "levels"), (out._table, "_table")):
             # one pass over the terms' arrays per term (NumPy's products and sum took three times as long)
             _scaled(mine.reshape(-1), w0, np.ascontiguousarray(getattr(first, part)).reshape(-1))

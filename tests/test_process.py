@@ -1,5 +1,6 @@
 """Process set-up: explicit, and importing the package changes nothing."""
 
+import contextlib
 import os
 import subprocess
 import sys
@@ -189,30 +190,32 @@ def test_gnu_openmp_reads_the_wait_policy_the_process_set_up_chose():
 
 def test_a_stopped_compile_stops_its_second_process_and_leaves_no_run_behind(tmp_path):
     """``fracref compile`` on two processes, stopped by SIGTERM once both have made their run directories: one
-    line, the terminated status, and neither directory nor the second process left."""
+    line, the terminated status, and neither directory nor the second process left. It compiles into a numba
+    cache of its own, so that it is still compiling when the signal comes."""
     import signal
     import time
 
     scratch = tmp_path / "tmp"
     scratch.mkdir()
     fracref = Path(sys.executable).with_name("fracref")
-    proc = subprocess.Popen([str(fracref), "compile", "--processes", "2"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env={**os.environ, "TMPDIR": str(scratch)}, start_new_session=True)
+    env = {**os.environ, "TMPDIR": str(scratch), "NUMBA_CACHE_DIR": str(tmp_path / "numba")}
+    proc = subprocess.Popen([str(fracref), "compile", "--processes", "2"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=env, start_new_session=True)
     try:
         deadline = time.monotonic() + 120
         while len(list(scratch.glob("fracref-compile-*"))) < 2 and proc.poll() is None and time.monotonic() < deadline:
             time.sleep(0.05)
-        assert proc.poll() is None, "the compile ended before both processes had begun"
+        assert len(list(scratch.glob("fracref-compile-*"))) == 2 and proc.poll() is None, "both did not begin"
         proc.send_signal(signal.SIGTERM)
         out, err = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
+        assert proc.returncode == 128 + signal.SIGTERM, err
+        assert "terminated" in err and "Traceback" not in err, err
+        assert not list(scratch.iterdir())
+        deadline = time.monotonic() + 20  # multiprocessing's resource tracker ends once the program has
+        while (alive := subprocess.run(["pgrep", "-a", "-s", str(proc.pid)], capture_output=True, text=True).stdout
+               ) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not alive, f"processes of the compile left: {alive}"
+    finally:  # whatever is left of the session, the second process too
+        with contextlib.suppress(ProcessLookupError):
             os.killpg(proc.pid, signal.SIGKILL)
-    assert proc.returncode == 128 + signal.SIGTERM, err
-    assert "terminated" in err and "Traceback" not in err, err
-    assert not list(scratch.iterdir())
-    deadline = time.monotonic() + 20  # multiprocessing's resource tracker ends once the program has
-    while (alive := subprocess.run(["pgrep", "-a", "-s", str(proc.pid)], capture_output=True, text=True).stdout
-           ) and time.monotonic() < deadline:
-        time.sleep(0.1)
-    assert not alive, f"processes of the compile left: {alive}"

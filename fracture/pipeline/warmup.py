@@ -14,12 +14,14 @@ the same time: it refines the same scene without the search
 tests, the edge flips, the step limits: 45 of the 125 s) while the first
 process is still compiling the search's, and the first one finds them in the
 cache. numba writes its cache files whole (a temporary file, then a rename),
-so the two may write the same kernel's. ``fracref compile`` took 125 s on one
+so the two may write the same kernel's (the same
+scene calls it with the same types in both). ``fracref compile`` took 125 s on one
 core and 93 s on two (`docs/design-measurements.md`).
 """
 
 from __future__ import annotations
 
+import signal
 import tempfile
 import time
 from pathlib import Path
@@ -36,6 +38,8 @@ WARMUP_CONFIG = {
 }
 
 
+# Seconds the second process has to unwind once told to stop, before it is killed.
+_STOP_SECONDS = 10.0
 # The second process's run: the same scene refined without the search, up to the refinement.
 FLOW_FIRST = {**WARMUP_CONFIG, "refine": {**WARMUP_CONFIG["refine"], "search": "none", "iterations": 3}}
 
@@ -53,21 +57,38 @@ def compile_kernels(processes: int | None = None) -> float:
     start = time.perf_counter()
     clear_stale_numba_cache()  # here, before the second process looks (it would clear what this one wrote)
     helper = None
-    if (cores() if processes is None else processes) >= 2:
-        helper = multiprocessing.get_context("spawn").Process(target=_helper, name="fracref compile", daemon=True)
-        helper.start()
     try:
+        if (cores() if processes is None else processes) >= 2:
+            helper = multiprocessing.get_context("spawn").Process(target=_helper, name="fracref compile",
+                                                                  daemon=True)
+            # started with Ctrl-C ignored (an ignored signal stays so in the new program, until it sets its own):
+            # a Ctrl-C during its start-up would print a traceback of it
+            previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if _on_main_thread() else None
+            try:
+                helper.start()
+            finally:
+                if previous is not None:
+                    signal.signal(signal.SIGINT, previous)
         _warm(WARMUP_CONFIG)
         if helper is not None:
             helper.join()
     finally:
-        if helper is not None and helper.is_alive():  # stopped: the helper removes its run directory
+        if helper is not None and helper.is_alive():  # stopped: the helper removes its run directory ...
             helper.terminate()
-            helper.join()
+            helper.join(_STOP_SECONDS)
+            if helper.is_alive():  # ... unless a compiler pass holds it past this
+                helper.kill()
+                helper.join()
     if helper is not None and helper.exitcode != 0:
         _warm(FLOW_FIRST, until="refine")
     _imports_kernels()
     return time.perf_counter() - start
+
+
+def _on_main_thread() -> bool:
+    import threading
+
+    return threading.current_thread() is threading.main_thread()
 
 
 def _warm(config: dict, until: str | None = None) -> None:
@@ -82,10 +103,10 @@ def _warm(config: dict, until: str | None = None) -> None:
 
 def _helper() -> None:
     """The second process: :data:`FLOW_FIRST` up to the refinement. Ctrl-C is the first process's to answer
-    (it stops this one); SIGTERM unwinds, so that the run directory goes, and ends it without a word (what
-    the stop broke on the way, an import half done, is not an error to tell)."""
+    (it stops this one); SIGTERM and SIGHUP unwind, so that the run directory goes, and end it without a word
+    (what the stop broke on the way, an import half done, is not an error to tell). It stops so too when the
+    first process has gone (killed: a daemon process is stopped only by a parent that exits normally)."""
     import os
-    import signal
 
     from fracture.process import later_if_compiling, prepare_process
 
@@ -97,7 +118,9 @@ def _helper() -> None:
             raise SystemExit(128 + signum)
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, stop)
+    for signum in (signal.SIGTERM, signal.SIGHUP):  # SIGHUP: the terminal closed
+        signal.signal(signum, stop)
+    _follow_parent()
     try:
         prepare_process()
         _warm(FLOW_FIRST, until="refine")
@@ -115,3 +138,21 @@ def _imports_kernels() -> None:
     from fracture.mesh.topology import winding_numbers
 
     winding_numbers(np.eye(3), np.array([[0, 1, 2]]), np.zeros((1, 3)))
+
+
+def _follow_parent() -> None:
+    """SIGTERM to this process once the process that started it has ended (a thread waits for it)."""
+    import multiprocessing
+    import os
+    import threading
+    from multiprocessing.connection import wait
+
+    parent = multiprocessing.parent_process()
+    if parent is None:
+        return
+
+    def watch():
+        wait([parent.sentinel])
+        os.kill(os.getpid(), signal.SIGTERM)
+
+    threading.Thread(target=watch, name="fracref compile: parent", daemon=True).start()
