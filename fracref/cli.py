@@ -15,7 +15,7 @@ import os
 import sys
 from pathlib import Path
 
-from fracture.process import environment_problem  # imports nothing that loads numba (it reads the environment)
+from fracture.process import environment_problem, on_main_thread  # they load nothing (numba neither)
 
 
 # commands that refine or load refinement results (the others only read configs)
@@ -197,7 +197,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"fracref: error: {problem}", file=sys.stderr)
         return 2
     # SIGHUP: the terminal it ran in was closed
-    signals = [signal.SIGINT, signal.SIGTERM, signal.SIGHUP] if _on_main_thread() else []
+    signals = [signal.SIGINT, signal.SIGTERM, signal.SIGHUP] if on_main_thread() else []
     previous = [signal.signal(s, _stop) for s in signals]
     _stopped_by.clear()
     try:
@@ -211,13 +211,6 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         for s, handler in zip(signals, previous):
             signal.signal(s, handler)
-
-
-def _on_main_thread() -> bool:
-    """Whether this is the main thread (the only one that may set signal handlers)."""
-    import threading
-
-    return threading.current_thread() is threading.main_thread()
 
 
 def _say_stopped(code: int, argv: list[str] | None, run_in_place: Path | None = None) -> int:

@@ -51,7 +51,7 @@ def compile_kernels(processes: int | None = None) -> float:
     after the first (an error in it then says what it is)."""
     import multiprocessing
 
-    from fracture.process import cores
+    from fracture.process import cores, on_main_thread
     from fracture.refine import clear_stale_numba_cache
 
     start = time.perf_counter()
@@ -63,7 +63,7 @@ def compile_kernels(processes: int | None = None) -> float:
                                                                   daemon=True)
             # started with Ctrl-C ignored (an ignored signal stays so in the new program, until it sets its own):
             # a Ctrl-C during its start-up would print a traceback of it
-            previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if _on_main_thread() else None
+            previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if on_main_thread() else None
             try:
                 helper.start()
             finally:
@@ -83,12 +83,6 @@ def compile_kernels(processes: int | None = None) -> float:
         _warm(FLOW_FIRST, until="refine")
     _imports_kernels()
     return time.perf_counter() - start
-
-
-def _on_main_thread() -> bool:
-    import threading
-
-    return threading.current_thread() is threading.main_thread()
 
 
 def _warm(config: dict, until: str | None = None) -> None:
