@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from fracture.refine.cut_weights import area_weights, cut_cost, grain_cost, grain_weight_table, sphere_directions
-from fracture.refine.expansion import PottsGraph, _move, expand
+from fracture.refine.expansion import PottsGraph, Prices, _move, expand
 
 
 def _graph(rng, n=9, density=0.5):
@@ -61,6 +61,45 @@ def test_two_labels_reach_the_global_minimum_and_three_within_twice_it(seed):
             assert g.energy(out) == pytest.approx(best, abs=1e-12)
         else:
             assert g.energy(out) <= 2 * best + 1e-12
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_a_move_with_prices_is_the_best_move_of_the_potts_energy_plus_the_prices(seed):
+    rng = np.random.default_rng(20 + seed)
+    g = _graph(rng)
+    labels = rng.integers(0, 3, g.n)
+    prices = Prices(rng.integers(0, 3, g.n), rng.random(g.n) * (rng.random(g.n) < 0.7))
+
+    def energy(labels):
+        return g.energy(labels) + prices.energy(labels)
+
+    for a in range(3):
+        nodes = np.flatnonzero(labels != a)
+        switch = _move(g, labels, nodes, a, prices)
+        moved = labels.copy()
+        moved[nodes[switch]] = a
+        best = min(energy(np.where(np.isin(np.arange(g.n), nodes[list(s)]), a, labels))
+                   for k in range(len(nodes) + 1) for s in itertools.combinations(range(len(nodes)), k))
+        assert energy(moved) == pytest.approx(best, abs=1e-12)
+
+
+@pytest.mark.parametrize("price", [0.0, 0.05, 0.2, 1.0])
+def test_a_price_on_leaving_home_holds_a_two_label_boundary_where_the_saving_pays_for_it(price):
+    """A chain 0..n-1 labelled 0 up to its home boundary k and 1 after, its ends fixed: the cut of one edge
+    j (between j and j + 1) costs w_j plus the price of every node between j and k, so the minimum is
+    w_j + price |j - k| over j, the analytic answer."""
+    rng = np.random.default_rng(3)
+    n, k = 30, 14
+    w = 1.0 + rng.random(n - 1)
+    w[4] = 0.2  # a weak edge ten nodes from home: worth the walk only while the price is low
+    g = PottsGraph(n, np.arange(n - 1), np.arange(1, n), w)
+    home = (np.arange(n) > k).astype(np.int64)
+    free = np.ones(n, bool)
+    free[[0, -1]] = False
+    out, _ = expand(g, home, free, prices=Prices(home, np.full(n, price)))
+    j = int(np.argmin(w + price * np.abs(np.arange(n - 1) - k)))
+    assert out.tolist() == (np.arange(n) > j).astype(int).tolist()
+    assert (j == 4) == (price * 10 < w[k] - w[4])
 
 
 def test_a_label_the_reach_does_not_name_is_taken_by_no_node():

@@ -63,8 +63,9 @@ def _share_of_piece_0(r, x0: float) -> float:
 @pytest.mark.parametrize("search", ["none", "graphcut"])
 def test_the_refinement_keeps_each_piece_its_share_of_volume(search):
     """Without a limit the cut goes to the weak sheet, taking piece 0 to about 70 % of its volume; asked to
-    keep 85 %, the flow stops there, and the search, whose cut would go further, keeps piece 0's coarse
-    nodes (its cut is then no lower than the coarse surface, which is kept) and says so."""
+    keep 85 %, the flow stops there, and the search, whose cut would go further, cuts again with a price on
+    piece 0's lost volume (across uniform strong material the priced cut goes back to the coarse plane, no
+    lower than the coarse surface, which is kept) and says so."""
     case, V, F, sides = _case(8.0)
     free, _ = _refine(case, V, F, sides, search=search, keep_volume=0.0)
     assert free.volumes is None
@@ -75,7 +76,8 @@ def test_the_refinement_keeps_each_piece_its_share_of_volume(search):
     assert share >= 0.83 and kept.volumes.held == {0}  # the floor, less the grid's error in the coarse volume
     assert _share_of_piece_0(free, x0) < 0.75  # unheld: at the weak sheet
     if search == "graphcut":
-        assert any("kept its coarse grid nodes" in n for n in log.search.notes), log.search.notes
+        assert any("with a price on the volume lost it was cut again" in n and "piece 0 7" in n
+                   for n in log.search.notes), log.search.notes
 
 
 def test_a_run_says_which_pieces_the_flow_held():
@@ -87,3 +89,14 @@ def test_a_run_says_which_pieces_the_flow_held():
         "would have shrunk it further; at the end 'a' 50 %"]
     assert _volume_notes(PieceVolumes(np.ones(2), np.ones(2), 0.5), ["a", "b"]) == []
     assert _volume_notes(None, ["a"]) == []
+
+
+def test_a_search_with_a_price_on_the_volume_takes_a_piece_only_as_far_as_its_share():
+    """Asked to keep 75 %, the priced cut stops short of the weak sheet (at 70 %) with piece 0 at its share, is
+    accepted (lower than the coarse surface), and the flow then keeps it there."""
+    case, V, F, sides = _case(8.0)
+    r, log = _refine(case, V, F, sides, search="graphcut", keep_volume=0.75)
+    assert not any("coarse surface is kept" in n for n in log.search.notes), log.search.notes
+    grid_share = (r.volumes.coarse[0] + log.search.volume_change[0]) / r.volumes.coarse[0]
+    assert 0.75 <= grid_share < 0.85, log.search.notes  # the cut's nodes: at the share, not back at the coarse cut
+    assert _share_of_piece_0(r, float(V[0, 0])) >= 0.68  # the contour lies within a fraction of a cell of them

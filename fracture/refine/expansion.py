@@ -85,6 +85,22 @@ def _grouped(keys, n):
     return order, ptr
 
 
+@dataclass(frozen=True)
+class Prices:
+    """A unary term beside the Potts energy: node ``i`` costs ``price[i]`` wherever its label is not
+    ``home[i]`` (the search's price of volume: a node a piece loses costs that piece's price)."""
+
+    home: np.ndarray  # (n,) int64
+    price: np.ndarray  # (n,) float64, >= 0
+
+    def energy(self, labels: np.ndarray) -> float:
+        return float(self.price[np.asarray(labels) != self.home].sum())
+
+    def of(self, nodes: np.ndarray, scale: float = 1.0) -> Prices:
+        """The prices of ``nodes`` only (a coarser graph of them), times ``scale``."""
+        return Prices(self.home[nodes], scale * self.price[nodes])
+
+
 @dataclass
 class ExpansionLog:
     energy: list  # after each cycle over the labels, entry 0 the start
@@ -92,12 +108,15 @@ class ExpansionLog:
 
 
 def expand(graph: PottsGraph, labels: np.ndarray, free: np.ndarray, reach: dict | None = None,
-           cycles: int = 4) -> tuple[np.ndarray, ExpansionLog]:
+           cycles: int = 4, prices: Prices | None = None) -> tuple[np.ndarray, ExpansionLog]:
     """Labels that lower ``graph``'s Potts energy by expansion moves from ``labels`` (free nodes only).
 
     ``reach[a]`` (optional) are the nodes that may take label ``a`` (without ``reach``: every free node;
     a label ``reach`` does not name takes none): a region with no energy of its own never grows an
     island of ``a`` away from ``a``'s nodes, so the caller may limit each move to the nodes near them.
+    ``prices`` (optional) adds its unary term to the energy the moves lower (a node priced away from its home
+    label no longer has "no energy of its own": the caller's reach must then name every node a label may
+    take). The log's energies are the Potts energy's.
     Cycles over the labels until one changes nothing or ``cycles`` are done. With two labels one cut gives the global minimum: every free node starts
     with the first, and the move of the second reaches every labelling of them.
     """
@@ -109,7 +128,7 @@ def expand(graph: PottsGraph, labels: np.ndarray, free: np.ndarray, reach: dict 
     if len(present) == 2:
         start = labels.copy()
         start[every] = present[0]
-        switch = _move(graph, start, every, int(present[1]))
+        switch = _move(graph, start, every, int(present[1]), prices)
         labels[every] = np.where(switch, present[1], present[0])
         log.moves = 1
         log.energy.append(graph.energy(labels))
@@ -128,7 +147,7 @@ def expand(graph: PottsGraph, labels: np.ndarray, free: np.ndarray, reach: dict 
             tried_at[int(a)] = step
             if not len(nodes):
                 continue
-            switch = _move(graph, labels, nodes, int(a))
+            switch = _move(graph, labels, nodes, int(a), prices)
             if switch.any():
                 labels[nodes[switch]] = a
                 changed_at[nodes[switch]] = step
@@ -140,7 +159,8 @@ def expand(graph: PottsGraph, labels: np.ndarray, free: np.ndarray, reach: dict 
     return labels, log
 
 
-def _move(graph: PottsGraph, labels: np.ndarray, nodes: np.ndarray, a: int) -> np.ndarray:
+def _move(graph: PottsGraph, labels: np.ndarray, nodes: np.ndarray, a: int, prices: Prices | None = None
+          ) -> np.ndarray:
     """The best expansion of label ``a`` over ``nodes`` (the others keep their labels): which of them
     take ``a``.
 
@@ -151,8 +171,15 @@ def _move(graph: PottsGraph, labels: np.ndarray, nodes: np.ndarray, a: int) -> n
     and q takes ``a``). An edge with one moving end is a unary term of it.
     """
     order, ptr_p, ptr_q = graph._by_node
-    arc_p, arc_q, cap, source, sink = _move_terms(np.asarray(nodes, np.int64), int(a), np.asarray(labels, np.int64),
+    nodes = np.asarray(nodes, np.int64)
+    arc_p, arc_q, cap, source, sink = _move_terms(nodes, int(a), np.asarray(labels, np.int64),
                                                   graph.p, graph.q, graph.w, order, ptr_p, ptr_q)
+    if prices is not None:  # a node's price is paid where it keeps or takes a label not its home's
+        home, price = prices.home[nodes], prices.price[nodes]
+        keeps = np.where(labels[nodes] != home, price, 0.0)
+        takes = np.where(home != a, price, 0.0)
+        low = np.minimum(keeps, takes)
+        source, sink = source + takes - low, sink + keeps - low
     return min_cut(len(nodes), arc_p, arc_q, cap, source, sink)
 
 

@@ -40,7 +40,13 @@ pieces is a labelling of space by piece. On the field grid:
    area, and so a lower functional, and would drop cracks the animation has).
 3. **Pieces stay whole.** A region of a piece that the cut separates from
    the piece's kept nodes (an island) joins the piece around it; a piece
-   that would vanish keeps the coarse surface. A band in which a piece holds
+   that would vanish keeps the coarse surface. A cut that leaves a piece
+   below its share of volume (``refine.keep_volume``) is made again with a
+   price on every node that piece loses (a Lagrange multiplier of its
+   volume, raised cut by cut): the piece gives up only the nodes whose
+   weak material pays for them, where keeping its coarse nodes whole (as
+   before) left the marble bunny's and the clay's cuts above the coarse
+   surface. A band in which a piece holds
    fewer nodes than a tenth of the cells its fracture surface covers is not
    searched: the piece is thinner than a cell over most of its crack (a
    search from a searched surface that put the crack on a weak layer a cell
@@ -77,7 +83,7 @@ from fracture.mesh.fracture_surface import FractureSurface
 from fracture.mesh.sampling import uniform_barycentric
 from fracture.mesh.topology import barycentric_weights, face_frames
 from fracture.refine.cut_weights import OFFSETS, GrainWeights, area_weights
-from fracture.refine.expansion import PottsGraph, expand
+from fracture.refine.expansion import PottsGraph, Prices, expand
 from fracture.refine.flow import energy, sampled_energy
 from fracture.refine.label_surface import NODE_GAP, label_surface, sheet_key
 from fracture.refine.reach import near_label, nodes_near_sheets
@@ -124,6 +130,12 @@ _MOST_ROUNDS = 4
 _THIN = 0.1
 # Rounds of joining islands to the pieces around them.
 _ISLAND_ROUNDS = 3
+# A cut that leaves a piece below its share of volume (refine.keep_volume) is made again with a price on every
+# grid node the piece loses (a Lagrange multiplier of its volume): first this share of the price at which the
+# piece's giving up all its band nodes saves nothing, then this many times the last, up to this many cuts more.
+_PRICE_START = 0.25
+_PRICE_GROWTH = 2.0
+_PRICE_ROUNDS = 6
 
 
 @dataclass
@@ -286,10 +298,12 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
         return _reach(sub, near[ids], V0, F0, S0, band * h + h)
 
     notes: list[str] = []
-    held: list[int] = []  # pieces that keep their coarse nodes: the cut left them below their share of volume
-    for attempt in range(2):
-        kept = keep | np.isin(coarse, held)
-        labels, graph, log = _cut(sub, near, kept, coarse, shifted, node_weights, reach_of)
+    # per piece, what each grid node it loses costs: zero until a cut leaves it below its share of volume
+    price = np.zeros(n_pieces)
+    first = None  # what the first cut would have left of the pieces it left short, and how many
+    for attempt in range(_PRICE_ROUNDS + 1):
+        prices = Prices(coarse, price[coarse]) if price.any() else None
+        labels, graph, log = _cut(sub, near, keep, coarse, shifted, node_weights, reach_of, prices)
         cut = labels[graph.p] != labels[graph.q]
         pressed = float(graph.w[cut & (keep[graph.p] | keep[graph.q])].sum() / max(graph.w[cut].sum(), tol.tiny))
         tick("cut")
@@ -297,34 +311,39 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
         # 3. islands join the piece around them; every piece keeps enough of its volume
         islands = 0
         for _ in range(_ISLAND_ROUNDS):
-            labels, count = _mend(sub, near, labels, kept)
+            labels, count = _mend(sub, near, labels, keep)
             islands += count
             if not count:
                 break
         else:
-            if _islands(sub, near, labels, kept).any():
+            if _islands(sub, near, labels, keep).any():
                 return SearchResult(None, free_nodes=int(free.sum()), seconds=seconds, notes=[
                     "search: the cut leaves a piece in parts; the coarse surface is kept"])
-        present = np.bincount(labels, minlength=n_pieces) > 0
-        lost = [c for c in range(n_pieces) if (coarse == c).any() and not present[c]]
-        if lost:
-            return SearchResult(None, free_nodes=int(free.sum()), seconds=seconds, notes=[
-                f"search: piece{'s' if len(lost) > 1 else ''} {_named(lost, names)} would vanish; the coarse "
-                "surface is kept"])
         change = (np.bincount(labels, minlength=n_pieces) - np.bincount(coarse, minlength=n_pieces))[:n_pieces]
         change = change * float(np.prod(grid.spacing))
         short = _short(volumes, change, n_pieces)
         if not len(short):
             break
         said = _shares(volumes, change, short, names)
-        if attempt:  # the pieces held, the cut still leaves another below its share
+        first = first or (said, len(short))
+        if attempt == _PRICE_ROUNDS:
             return SearchResult(None, free_nodes=int(free.sum()), seconds=seconds, notes=[
-                f"search: the cut would leave {said} of {_their(short)} coarse volume (refine.keep_volume: at least "
-                f"{100 * volumes.keep:.0f} %), with {_named(held, names)} held; the coarse surface is kept"])
-        held = short.tolist()
-        notes.append(f"search: the cut left {said} of {_their(short)} coarse volume (refine.keep_volume: at least "
-                     f"{100 * volumes.keep:.0f} %): {'they' if len(short) > 1 else 'it'} kept {_their(short)} "
-                     "coarse grid nodes, and the band was cut again")
+                f"search: the cut would leave {first[0]} of {_their(range(first[1]))} coarse volume "
+                f"(refine.keep_volume: at least {100 * volumes.keep:.0f} %), and cut again {attempt} times with a "
+                f"rising price on the volume lost, still {said}; the coarse surface is kept"])
+        start = _break_even_price(graph, coarse, short)
+        price[short] = np.where(price[short] > 0.0, _PRICE_GROWTH * price[short], _PRICE_START * start)
+    if first:
+        notes.append(f"search: the cut would leave {first[0]} of {_their(range(first[1]))} coarse volume "
+                     f"(refine.keep_volume: at least {100 * volumes.keep:.0f} %); with a price on the volume lost it "
+                     f"was cut again {'once' if attempt == 1 else f'{attempt} times'}, and every piece keeps its "
+                     "share")
+    present = np.bincount(labels, minlength=n_pieces) > 0
+    lost = [c for c in range(n_pieces) if (coarse == c).any() and not present[c]]
+    if lost:
+        return SearchResult(None, free_nodes=int(free.sum()), seconds=seconds, notes=[
+            f"search: piece{'s' if len(lost) > 1 else ''} {_named(lost, names)} would vanish; the coarse "
+            "surface is kept"])
     if islands:
         notes.append(f"search: {islands} grid nodes the cut had cut off from their piece joined the piece around "
                      "them")
@@ -408,6 +427,17 @@ def search_in_rounds(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
 
 def _named(pieces, names) -> str:
     return ", ".join(repr(names[c]) if names is not None and c < len(names) else str(c) for c in pieces)
+
+
+def _break_even_price(graph: PottsGraph, coarse: np.ndarray, pieces: np.ndarray) -> np.ndarray:
+    """Per piece of ``pieces``, the price per band node at which giving up all of its band nodes saves
+    nothing: the cut's energy of the coarse labels ``coarse`` on the piece's boundary over its band nodes."""
+    cut = coarse[graph.p] != coarse[graph.q]
+    out = np.empty(len(pieces))
+    for i, c in enumerate(pieces):
+        mine = cut & ((coarse[graph.p] == c) | (coarse[graph.q] == c))
+        out[i] = float(graph.w[mine].sum()) / max(int((coarse == c).sum()), 1)
+    return out
 
 
 def _short(volumes, change: np.ndarray, n_pieces: int) -> np.ndarray:
@@ -597,7 +627,7 @@ def _crossing_psi(pa: float, pb: float, gap: float) -> float:
     return min((1.0 - gap) * pa + gap * pb, gap * pa + (1.0 - gap) * pb)
 
 
-def _cut(sub: _BoxGrid, near, keep, labels, shifted, node_weights, reach_of
+def _cut(sub: _BoxGrid, near, keep, labels, shifted, node_weights, reach_of, prices: Prices | None = None
          ) -> tuple[np.ndarray, PottsGraph, object]:
     """The labels of least cut (alpha-expansion), coarse to fine (banded graph cuts: Lombaert, Sun, Grady
     and Xu, "A multilevel banded graph cuts method for fast image segmentation", ICCV 2005).
@@ -613,20 +643,23 @@ def _cut(sub: _BoxGrid, near, keep, labels, shifted, node_weights, reach_of
     farther, and on a concave Cell Fracture export, Suzanne, one of the pieces assembled from the
     result was not closed). Returns the labels, the
     full-resolution graph (every edge with a free end: the cut's energy) and the expansion's log (its
-    energies on that graph)."""
+    energies on that graph). ``prices`` (optional, per node of ``near``) is the unary term of
+    :func:`~fracture.refine.expansion.expand` (the coarse level's nodes, each for eight cells, pay eight)."""
     free = ~keep
     graph = _graph(sub, near, free, shifted, node_weights)
     start = graph.energy(labels)
     ijk = np.stack(np.unravel_index(near, sub.shape), 1)
     even = np.flatnonzero(np.all(ijk % 2 == 0, axis=1))
     if free.sum() < _COARSE_MIN or not len(even):
-        out, log = expand(graph, labels, free, _free_reach(reach_of, np.arange(len(near)), free), cycles=_CYCLES)
+        out, log = expand(graph, labels, free, _free_reach(reach_of, np.arange(len(near)), free), cycles=_CYCLES,
+                          prices=prices)
         return out, graph, log
     # the coarse level: the nodes of even index and their labels' regions
     coarse_graph = _graph(sub, near[even], free[even], shifted,
                           None if node_weights is None else 4.0 * node_weights[even], stride=2)
     coarse_reach = _free_reach(reach_of, even, free[even])
-    coarse_labels, _ = expand(coarse_graph, labels[even], free[even], coarse_reach, cycles=_CYCLES)
+    coarse_labels, _ = expand(coarse_graph, labels[even], free[even], coarse_reach, cycles=_CYCLES,
+                              prices=None if prices is None else prices.of(even, 8.0))
     # each node takes the label its coarse nodes (the corners of the coarse cell it lies in) agree on
     cshape = tuple((n + 1) // 2 for n in sub.shape)
     lattice = np.full(cshape, -1, np.int64)
@@ -649,7 +682,7 @@ def _cut(sub: _BoxGrid, near, keep, labels, shifted, node_weights, reach_of
         if not len(r):
             continue
         fine_reach[a] = ids[r][near_label(start_vol, near[ids[r]], a, _FINE_BAND)]
-    out, log = expand(graph.among(moving), start_labels, moving, fine_reach, cycles=_CYCLES)
+    out, log = expand(graph.among(moving), start_labels, moving, fine_reach, cycles=_CYCLES, prices=prices)
     log.energy = [start, graph.energy(out)]
     return out, graph, log
 

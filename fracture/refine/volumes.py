@@ -16,9 +16,9 @@ field, moves of a cell per iteration); with other materials the search took piec
   normal, which the piece behind it gains and the piece in front loses. The volumes follow the steps taken.
 - A step that would leave a piece below ``keep_volume`` of its coarse volume moves no vertex of that piece's
   sheets further into it (its sheets may still move out of it).
-- A search's cut that would leave a piece below it (its labels give the change, node by node) keeps that
-  piece's coarse nodes and is cut again; if another piece then falls short, the coarse surface is kept
-  (:func:`fracture.refine.search.graph_cut_search`).
+- A search's cut that would leave a piece below it (its labels give the change, node by node) is cut again
+  with a rising price on every node that piece loses; if one is still short after a few cuts, the coarse
+  surface is kept (:func:`fracture.refine.search.graph_cut_search`).
 """
 
 from __future__ import annotations
