@@ -54,8 +54,8 @@ class RefineParams(Section):
                                  "more (a tilted weak sheet beyond the first search's cores)")
     keep_volume: float = number(0.5, 0.0, 1.0, "every piece keeps at least this share of its coarse volume: a "
                                 "flow step moves no sheet further into a piece it would leave below it, and a "
-                                "search's cut that would keeps that piece's coarse grid nodes and is cut again (the "
-                                "coarse animation moves each piece as a rigid body of its own mass; "
+                                "search's cut that would is made again with a price on the volume that piece "
+                                "loses (the coarse animation moves each piece as a rigid body of its own mass; "
                                 "fracture/refine/volumes.py); 0: no limit")
     polish_stages: int = integer(0, 0, 8, "after the search, the flow polishes its surface on this many stages of the "
                                  "coarse-to-fine schedule before the last one, on level 0 (0: level 0 alone, which "
