@@ -300,10 +300,11 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
     notes: list[str] = []
     # per piece, what each grid node it loses costs: zero until a cut leaves it below its share of volume
     price = np.zeros(n_pieces)
-    first = None  # what the first cut would have left of the pieces it left short, and how many
+    first = None  # what the first cut would have left of the pieces it left short, and those pieces
+    start = None  # the pieces' first prices, made when a cut first leaves one short
+    cut_band = _Cut(sub, near, keep, coarse, shifted, node_weights, reach_of)
     for attempt in range(_PRICE_ROUNDS + 1):
-        prices = Prices(coarse, price[coarse]) if price.any() else None
-        labels, graph, log = _cut(sub, near, keep, coarse, shifted, node_weights, reach_of, prices)
+        labels, graph, log = cut_band(Prices(coarse, price[coarse]) if price.any() else None)
         cut = labels[graph.p] != labels[graph.q]
         pressed = float(graph.w[cut & (keep[graph.p] | keep[graph.q])].sum() / max(graph.w[cut].sum(), tol.tiny))
         tick("cut")
@@ -325,16 +326,17 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
         if not len(short):
             break
         said = _shares(volumes, change, short, names)
-        first = first or (said, len(short))
+        first = first or (said, short)
         if attempt == _PRICE_ROUNDS:
             return SearchResult(None, free_nodes=int(free.sum()), seconds=seconds, notes=[
-                f"search: the cut would leave {first[0]} of {_their(range(first[1]))} coarse volume "
+                f"search: the cut would leave {first[0]} of {_their(first[1])} coarse volume "
                 f"(refine.keep_volume: at least {100 * volumes.keep:.0f} %), and cut again {attempt} times with a "
                 f"rising price on the volume lost, still {said}; the coarse surface is kept"])
-        start = _break_even_price(graph, coarse, short)
-        price[short] = np.where(price[short] > 0.0, _PRICE_GROWTH * price[short], _PRICE_START * start)
+        if start is None:
+            start = _PRICE_START * _break_even_prices(graph, coarse, n_pieces)
+        price[short] = np.where(price[short] > 0.0, _PRICE_GROWTH * price[short], start[short])
     if first:
-        notes.append(f"search: the cut would leave {first[0]} of {_their(range(first[1]))} coarse volume "
+        notes.append(f"search: the cut would leave {first[0]} of {_their(first[1])} coarse volume "
                      f"(refine.keep_volume: at least {100 * volumes.keep:.0f} %); with a price on the volume lost it "
                      f"was cut again {'once' if attempt == 1 else f'{attempt} times'}, and every piece keeps its "
                      "share")
@@ -429,15 +431,13 @@ def _named(pieces, names) -> str:
     return ", ".join(repr(names[c]) if names is not None and c < len(names) else str(c) for c in pieces)
 
 
-def _break_even_price(graph: PottsGraph, coarse: np.ndarray, pieces: np.ndarray) -> np.ndarray:
-    """Per piece of ``pieces``, the price per band node at which giving up all of its band nodes saves
-    nothing: the cut's energy of the coarse labels ``coarse`` on the piece's boundary over its band nodes."""
+def _break_even_prices(graph: PottsGraph, coarse: np.ndarray, n_pieces: int) -> np.ndarray:
+    """Per piece, the price per band node at which giving up all of its band nodes saves nothing: the cut's
+    energy of the coarse labels ``coarse`` on the piece's boundary over its band nodes."""
     cut = coarse[graph.p] != coarse[graph.q]
-    out = np.empty(len(pieces))
-    for i, c in enumerate(pieces):
-        mine = cut & ((coarse[graph.p] == c) | (coarse[graph.q] == c))
-        out[i] = float(graph.w[mine].sum()) / max(int((coarse == c).sum()), 1)
-    return out
+    w = graph.w[cut]
+    boundary = (np.bincount(coarse[graph.p[cut]], w, n_pieces) + np.bincount(coarse[graph.q[cut]], w, n_pieces))
+    return boundary[:n_pieces] / np.maximum(np.bincount(coarse, minlength=n_pieces)[:n_pieces], 1)
 
 
 def _short(volumes, change: np.ndarray, n_pieces: int) -> np.ndarray:
@@ -627,8 +627,7 @@ def _crossing_psi(pa: float, pb: float, gap: float) -> float:
     return min((1.0 - gap) * pa + gap * pb, gap * pa + (1.0 - gap) * pb)
 
 
-def _cut(sub: _BoxGrid, near, keep, labels, shifted, node_weights, reach_of, prices: Prices | None = None
-         ) -> tuple[np.ndarray, PottsGraph, object]:
+class _Cut:
     """The labels of least cut (alpha-expansion), coarse to fine (banded graph cuts: Lombaert, Sun, Grady
     and Xu, "A multilevel banded graph cuts method for fast image segmentation", ICCV 2005).
 
@@ -641,50 +640,64 @@ def _cut(sub: _BoxGrid, near, keep, labels, shifted, node_weights, reach_of, pri
     (a piece it names no node for takes none; on the clay 0.16 s against 0.2 s for every node; a
     full-grid node given the pieces its coarse cell's corners may take would reach up to two cells
     farther, and on a concave Cell Fracture export, Suzanne, one of the pieces assembled from the
-    result was not closed). Returns the labels, the
-    full-resolution graph (every edge with a free end: the cut's energy) and the expansion's log (its
-    energies on that graph). ``prices`` (optional, per node of ``near``) is the unary term of
-    :func:`~fracture.refine.expansion.expand` (the coarse level's nodes, each for eight cells, pay eight)."""
-    free = ~keep
-    graph = _graph(sub, near, free, shifted, node_weights)
-    start = graph.energy(labels)
-    ijk = np.stack(np.unravel_index(near, sub.shape), 1)
-    even = np.flatnonzero(np.all(ijk % 2 == 0, axis=1))
-    if free.sum() < _COARSE_MIN or not len(even):
-        out, log = expand(graph, labels, free, _free_reach(reach_of, np.arange(len(near)), free), cycles=_CYCLES,
-                          prices=prices)
+    result was not closed).
+
+    Made once per band and called once per set of prices (the search's cuts again with a price on the
+    volume a piece loses): the two levels' graphs, their edges grouped by node and the coarse level's
+    reach do not read the prices."""
+
+    def __init__(self, sub: _BoxGrid, near, keep, labels, shifted, node_weights, reach_of):
+        self.sub, self.near, self.labels, self.reach_of = sub, near, labels, reach_of
+        self.free = free = ~keep
+        self.graph = _graph(sub, near, free, shifted, node_weights)  # the full resolution's: the cut's energy
+        self.start = self.graph.energy(labels)
+        self.ijk = np.stack(np.unravel_index(near, sub.shape), 1)
+        self.even = even = np.flatnonzero(np.all(self.ijk % 2 == 0, axis=1))
+        self.levels = 2 if free.sum() >= _COARSE_MIN and len(even) else 1
+        if self.levels == 1:
+            self.reach = _free_reach(reach_of, np.arange(len(near)), free)
+        else:  # the coarse level: the nodes of even index and their labels' regions
+            self.coarse_graph = _graph(sub, near[even], free[even], shifted,
+                                       None if node_weights is None else 4.0 * node_weights[even], stride=2)
+            self.coarse_reach = _free_reach(reach_of, even, free[even])
+
+    def __call__(self, prices: Prices | None = None) -> tuple[np.ndarray, PottsGraph, object]:
+        """The labels, the full-resolution graph (every edge with a free end: the cut's energy) and the
+        expansion's log (its energies on that graph). ``prices`` (optional, per node of ``near``) is the
+        unary term of :func:`~fracture.refine.expansion.expand` (the coarse level's nodes, each for eight
+        cells, pay eight)."""
+        sub, near, labels, free, graph, ijk, even = (self.sub, self.near, self.labels, self.free, self.graph,
+                                                     self.ijk, self.even)
+        if self.levels == 1:
+            out, log = expand(graph, labels, free, self.reach, cycles=_CYCLES, prices=prices)
+            return out, graph, log
+        coarse_labels, _ = expand(self.coarse_graph, labels[even], free[even], self.coarse_reach, cycles=_CYCLES,
+                                  prices=None if prices is None else prices.of(even, 8.0))
+        # each node takes the label its coarse nodes (the corners of the coarse cell it lies in) agree on
+        cshape = tuple((n + 1) // 2 for n in sub.shape)
+        lattice = np.full(cshape, -1, np.int64)
+        lattice[tuple((ijk[even] // 2).T)] = coarse_labels
+        agreed = _agreed(ijk, lattice)
+        unsure = np.zeros(sub.size, bool)
+        unsure[near[agreed < 0]] = True
+        unsure = _cube_dilation(unsure.reshape(sub.shape), _FINE_BAND).ravel()
+        moving = free & unsure[near]
+        start_labels = np.where(free & (agreed >= 0), agreed, labels)
+        # a label grows only within the fine band of its coarse region: each move a few cells around one
+        # piece, not the whole band around every sheet of it (on the clay 1.1 s instead of 2.6 s of
+        # minimum cuts, the same cut within 0.01 %)
+        fine_reach = {}
+        ids = np.flatnonzero(moving)
+        start_vol = np.full(sub.size, -1, np.int64)
+        start_vol[near] = start_labels
+        start_vol = start_vol.reshape(sub.shape)
+        for a, r in self.reach_of(ids).items():
+            if not len(r):
+                continue
+            fine_reach[a] = ids[r][near_label(start_vol, near[ids[r]], a, _FINE_BAND)]
+        out, log = expand(graph.among(moving), start_labels, moving, fine_reach, cycles=_CYCLES, prices=prices)
+        log.energy = [self.start, graph.energy(out)]
         return out, graph, log
-    # the coarse level: the nodes of even index and their labels' regions
-    coarse_graph = _graph(sub, near[even], free[even], shifted,
-                          None if node_weights is None else 4.0 * node_weights[even], stride=2)
-    coarse_reach = _free_reach(reach_of, even, free[even])
-    coarse_labels, _ = expand(coarse_graph, labels[even], free[even], coarse_reach, cycles=_CYCLES,
-                              prices=None if prices is None else prices.of(even, 8.0))
-    # each node takes the label its coarse nodes (the corners of the coarse cell it lies in) agree on
-    cshape = tuple((n + 1) // 2 for n in sub.shape)
-    lattice = np.full(cshape, -1, np.int64)
-    lattice[tuple((ijk[even] // 2).T)] = coarse_labels
-    agreed = _agreed(ijk, lattice)
-    unsure = np.zeros(sub.size, bool)
-    unsure[near[agreed < 0]] = True
-    unsure = _cube_dilation(unsure.reshape(sub.shape), _FINE_BAND).ravel()
-    moving = free & unsure[near]
-    start_labels = np.where(free & (agreed >= 0), agreed, labels)
-    # a label grows only within the fine band of its coarse region: each move a few cells around one
-    # piece, not the whole band around every sheet of it (on the clay 1.1 s instead of 2.6 s of
-    # minimum cuts, the same cut within 0.01 %)
-    fine_reach = {}
-    ids = np.flatnonzero(moving)
-    start_vol = np.full(sub.size, -1, np.int64)
-    start_vol[near] = start_labels
-    start_vol = start_vol.reshape(sub.shape)
-    for a, r in reach_of(ids).items():
-        if not len(r):
-            continue
-        fine_reach[a] = ids[r][near_label(start_vol, near[ids[r]], a, _FINE_BAND)]
-    out, log = expand(graph.among(moving), start_labels, moving, fine_reach, cycles=_CYCLES, prices=prices)
-    log.energy = [start, graph.energy(out)]
-    return out, graph, log
 
 
 @numba.njit(cache=True)
