@@ -76,7 +76,7 @@ def test_the_refinement_keeps_each_piece_its_share_of_volume(search):
     assert share >= 0.83 and kept.volumes.held == {0}  # the floor, less the grid's error in the coarse volume
     assert _share_of_piece_0(free, x0) < 0.75  # unheld: at the weak sheet
     if search == "graphcut":
-        assert any("with a price on the volume lost it was cut again" in n and "piece 0 7" in n
+        assert any("with a price on the volume 0 lost it was cut again" in n and "piece 0 7" in n
                    for n in log.search.notes), log.search.notes
 
 

@@ -336,10 +336,11 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
             start = _PRICE_START * _break_even_prices(graph, coarse, n_pieces)
         price[short] = np.where(price[short] > 0.0, _PRICE_GROWTH * price[short], start[short])
     if first:
+        priced = np.flatnonzero(price > 0.0)
+        again = {1: "once", 2: "twice"}.get(attempt, f"{attempt} times")
         notes.append(f"search: the cut would leave {first[0]} of {_their(first[1])} coarse volume "
-                     f"(refine.keep_volume: at least {100 * volumes.keep:.0f} %); with a price on the volume lost it "
-                     f"was cut again {'once' if attempt == 1 else f'{attempt} times'}, and every piece keeps its "
-                     "share")
+                     f"(refine.keep_volume: at least {100 * volumes.keep:.0f} %); with a price on the volume "
+                     f"{_named(priced, names)} lost it was cut again {again}, and every piece keeps its share")
     present = np.bincount(labels, minlength=n_pieces) > 0
     lost = [c for c in range(n_pieces) if (coarse == c).any() and not present[c]]
     if lost:
