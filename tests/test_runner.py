@@ -395,7 +395,7 @@ def test_a_run_shows_full_bars_and_ends_with_its_seconds_per_stage(tmp_path, sma
 
 
 def test_a_cold_kernel_cache_is_told_apart_from_a_warm_one(tmp_path):
-    from fracture.refine import kernels_cached
+    from fracture.refine import kernels_cached, uncached_kernels
 
     pkg = tmp_path / "kernels"
     (pkg / "__pycache__").mkdir(parents=True)
@@ -405,6 +405,7 @@ def test_a_cold_kernel_cache_is_told_apart_from_a_warm_one(tmp_path):
     assert not kernels_cached(pkg)  # nothing compiled yet: a first run compiles
     (pkg / "__pycache__" / "a.one-4.py311.nbi").write_bytes(b"")
     assert kernels_cached(pkg)  # most of it (a run compiles only what it calls)
+    assert uncached_kernels(pkg) == ["kernels.a.two"]
     (pkg / "__pycache__" / "a.one-4.py311.nbi").unlink()
     (pkg / "__pycache__" / "b.one-4.py311.nbi").write_bytes(b"")  # another module's
     assert not kernels_cached(pkg)

@@ -79,6 +79,11 @@ def test_the_wheel_runs_a_scene_with_a_preset_by_name_and_exports_it(installed, 
                               text=True, cwd=tmp_path, timeout=900, env={**_ENV, "TMPDIR": str(scratch)})
     assert compiled.returncode == 0 and "kernels compiled and cached in" in compiled.stdout, compiled.stderr[-2000:]
     assert subprocess.run(cached, capture_output=True, text=True, cwd=tmp_path, env=_ENV).stdout.strip() == "True"
+    # every one of the refinement's: those a small grid does not reach too (the two-level search's, the flips'
+    # collision test), which the built-in example calls
+    uncached = [str(installed / "python"), "-c", "import pathlib, fracture.refine as r; "
+                "print(r.uncached_kernels(pathlib.Path(r.__file__).parent))"]
+    assert subprocess.run(uncached, capture_output=True, text=True, cwd=tmp_path, env=_ENV).stdout.strip() == "[]"
     assert not list(scratch.iterdir())  # its run directory is gone
 
     listed = _run(installed, tmp_path, "presets")

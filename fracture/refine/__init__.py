@@ -130,12 +130,24 @@ def kernels_cached(package: Path | None = None) -> bool:
     refinement's and the mesh queries', which the refine stage calls), i.e. whether a run starts at once
     rather than after a one-off compilation. A run compiles only what it calls, so most of them (not every
     one) is enough."""
+    want, missing = _kernel_names(package)
+    return len(missing) <= 0.5 * len(want)
+
+
+def uncached_kernels(package: Path | None = None) -> list[str]:
+    """``package.module.function`` of the compiled functions of ``package`` (default as
+    :func:`kernels_cached`) that numba's cache does not hold."""
+    return sorted(_kernel_names(package)[1])
+
+
+def _kernel_names(package: Path | None) -> tuple[set[str], set[str]]:
+    """The compiled functions of ``package`` (default as :func:`kernels_cached`), and those not cached."""
     packages = [_ROOT / "fracture" / "refine", _ROOT / "fracture" / "mesh"] if package is None else [package]
     want, have = set(), set()
     for package in packages:
         want |= _compiled_names(package)
         have |= {f"{package.name}.{f.name.split('-')[0]}" for f in (package / "__pycache__").glob("*.nbi")}
-    return len(want & have) >= 0.5 * len(want)
+    return want, want - have
 
 
 def _compiled_names(package: Path) -> set[str]:
