@@ -81,8 +81,7 @@ def compile_kernels(processes: int | None = None) -> float:
                 helper.join()
     if helper is not None and helper.exitcode != 0:
         _warm(FLOW_FIRST, until="refine")
-    _imports_kernels()
-    _large_grid_kernels()
+    _unreached_kernels()
     return time.perf_counter() - start
 
 
@@ -125,25 +124,18 @@ def _helper() -> None:
         raise
 
 
-def _imports_kernels() -> None:
-    """The kernels of a Cell Fracture import that the built-in scene does not reach: the exact winding
-    numbers of its pinholes' apexes and of its shells' probes."""
+def _unreached_kernels() -> None:
+    """The kernels the built-in scene does not reach, called directly with the types a run passes: a Cell
+    Fracture import's exact winding numbers (its pinholes' apexes, its shells' probes); the two-level
+    search's (a band of more than a few thousand free nodes: the full grid's labels from the coarse
+    level's, and the fine band of every piece) and the flips' test of changed triangles against the rest,
+    which the built-in example (the collapsing wall) calls."""
     import numpy as np
 
     from fracture.mesh.topology import winding_numbers
-
-    winding_numbers(np.eye(3), np.array([[0, 1, 2]]), np.zeros((1, 3)))
-
-
-def _large_grid_kernels() -> None:
-    """The kernels the built-in scene's small grid and budget do not reach: the two-level search's (a band
-    of more than a few thousand free nodes: its full grid's labels from the coarse level's, and the fine
-    band of every piece) and the collision test of the triangles changed by flips against the rest. The
-    built-in example (the collapsing wall) calls them; called here with the types the run passes."""
-    import numpy as np
-
     from fracture.refine import flips, reach, search
 
+    winding_numbers(np.eye(3), np.array([[0, 1, 2]]), np.zeros((1, 3)))
     labels = np.zeros((3, 3, 3), np.int64)
     search._agreed(np.zeros((1, 3), np.int64), labels)
     reach.near_label(labels, np.arange(2, dtype=np.int64), 0, 1)
