@@ -14,7 +14,7 @@ from fracture.mesh.exterior import Exterior
 from fracture.mesh.fracture_surface import FractureSurface
 from fracture.mesh.intersect import self_intersections
 from fracture.refine.engine import SEARCH_STAGE, RefineParams, Refiner
-from fracture.refine.search import _BoxGrid, _mend, graph_cut_search
+from fracture.refine.search import _BoxGrid, _mend, _parts, graph_cut_search
 
 
 def _coarse(case):
@@ -132,6 +132,49 @@ def test_an_island_cut_off_from_its_piece_joins_the_piece_around_it():
     grown[(ijk[:, 0] == 3) & (ijk[:, 1] < 3)] = 0  # piece 0 grows: still one region with its kept nodes
     out, count = _mend(sub, near, grown, keep)
     assert count == 0 and (out == grown).all()
+
+
+def test_the_parts_of_a_piece_are_its_6_connected_regions():
+    sub = _BoxGrid(Grid.from_bounds([0, 0, 0], [1, 1, 1], (6, 6, 6)), (slice(0, 6),) * 3)
+    near = np.arange(sub.size)
+    ijk = np.stack(np.unravel_index(near, sub.shape), 1)
+    labels = (ijk[:, 0] >= 3).astype(np.int64)
+    assert _parts(sub, near, labels, 3).tolist() == [1, 1, 0]
+    labels[ijk[:, 1] == 2] = 2  # a slab of piece 2 across both: each cut in two
+    assert _parts(sub, near, labels, 3).tolist() == [2, 2, 1]
+    diagonal = labels.copy()
+    diagonal[:] = 0
+    diagonal[np.all(ijk == [1, 1, 1], axis=1) | np.all(ijk == [2, 2, 2], axis=1)] = 1  # touching at a corner only
+    assert _parts(sub, near, diagonal, 2).tolist() == [1, 2]
+
+
+def test_a_cut_that_splits_a_piece_is_made_again_with_the_piece_whole(monkeypatch):
+    """A piece whose kept nodes lie in two lobes may be cut through between them with both parts anchored (no
+    island to join back): the search cuts again with that piece holding its coarse nodes and says so."""
+    import fracture.refine.search as search
+
+    case = weak_sheet_case("flat", 4.0)
+    pyramid = StrengthPyramid(case.grid, case.zeta, levels=5, sigma=1.0)
+    calls = []
+    real = search._Cut.__call__
+
+    def splitting(self, prices=None):
+        labels, graph, log = real(self, prices)
+        calls.append(prices)
+        if len(calls) == 1:  # the first cut puts a slab of piece 0 through piece 1, across its kept nodes
+            ijk = np.stack(np.unravel_index(self.near, self.sub.shape), 1)
+            labels = labels.copy()
+            labels[ijk[:, 1] == self.sub.shape[1] // 2] = 0
+        return labels, graph, log
+
+    monkeypatch.setattr(search._Cut, "__call__", splitting)
+    res = graph_cut_search(_coarse(case), pyramid, Exterior(case.BV, case.BF), band=8, tension=0.05)
+    assert len(calls) == 2 and calls[0] is None
+    held = calls[1].home == 1  # piece 1's nodes: each lost costs more than the whole coarse cut
+    assert held.any() and calls[1].price[held].min() > res.cut_energy[0] and (calls[1].price[~held] == 0).all()
+    assert any("would split piece 1 in parts" in n and "holding its coarse nodes" in n for n in res.notes)
+    assert res.surface is not None  # the second cut, made whole, found the sheet
+    assert res.sampled[1] < res.sampled[0]
 
 
 def test_the_viewer_names_the_searched_step():

@@ -40,7 +40,12 @@ pieces is a labelling of space by piece. On the field grid:
    area, and so a lower functional, and would drop cracks the animation has).
 3. **Pieces stay whole.** A region of a piece that the cut separates from
    the piece's kept nodes (an island) joins the piece around it; a piece
-   that would vanish keeps the coarse surface. A cut that leaves a piece
+   that would vanish keeps the coarse surface. A piece whose kept nodes lie
+   in several lobes (the marble bunny's two thinnest pieces) may be cut
+   through between them with every part anchored: a cut that leaves a piece
+   in more 6-connected parts than its coarse labels is made again with that
+   piece holding its coarse nodes (each priced above any cut's saving), so
+   the searched surface separates as many regions as the coarse one. A cut that leaves a piece
    below its share of volume (``refine.keep_volume``) is made again with a
    price on every node that piece loses (a Lagrange multiplier of its
    volume, raised cut by cut): the piece gives up only the nodes whose
@@ -303,6 +308,8 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
     first = None  # what the first cut would have left of the pieces it left short, and those pieces
     start = None  # the pieces' first prices, made when a cut first leaves one short
     cut_band = _Cut(sub, near, keep, coarse, shifted, node_weights, reach_of)
+    parts = _parts(sub, near, coarse, n_pieces)  # a piece the cut leaves in more parts than these is split
+    held = np.zeros(n_pieces, bool)  # pieces split by a cut, holding their coarse nodes since
     for attempt in range(_PRICE_ROUNDS + 1):
         labels, graph, log = cut_band(Prices(coarse, price[coarse]) if price.any() else None)
         cut = labels[graph.p] != labels[graph.q]
@@ -320,9 +327,21 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
             if _islands(sub, near, labels, keep).any():
                 return SearchResult(None, free_nodes=int(free.sum()), seconds=seconds, notes=[
                     "search: the cut leaves a piece in parts; the coarse surface is kept"])
+        # a piece whose kept nodes lie in several parts (a core in two lobes) may be cut through between them,
+        # every part anchored: such a piece holds its coarse nodes (their price above any cut's saving)
+        split = np.flatnonzero(~held & (_parts(sub, near, labels, n_pieces) > parts))
+        if len(split):
+            if attempt == _PRICE_ROUNDS:
+                return SearchResult(None, free_nodes=int(free.sum()), seconds=seconds, notes=[
+                    f"search: the cut leaves {_piece_s(split)} {_named(split, names)} in parts; the coarse "
+                    "surface is kept"])
+            held[split] = True
+            price[split] = graph.w.sum() + 1.0
+            continue
         change = (np.bincount(labels, minlength=n_pieces) - np.bincount(coarse, minlength=n_pieces))[:n_pieces]
         change = change * float(np.prod(grid.spacing))
         short = _short(volumes, change, n_pieces)
+        short = short[~held[short]]  # a held piece loses no node
         if not len(short):
             break
         said = _shares(volumes, change, short, names)
@@ -335,8 +354,12 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
         if start is None:
             start = _PRICE_START * _break_even_prices(graph, coarse, n_pieces)
         price[short] = np.where(price[short] > 0.0, _PRICE_GROWTH * price[short], start[short])
+    if held.any():
+        notes.append(f"search: the cut would split {_piece_s(np.flatnonzero(held))} {_named(np.flatnonzero(held), names)} "
+                     f"in parts; cut again with {_them(held.sum())} holding {_their(np.flatnonzero(held))} coarse "
+                     "nodes")
     if first:
-        priced = np.flatnonzero(price > 0.0)
+        priced = np.flatnonzero((price > 0.0) & ~held)
         again = {1: "once", 2: "twice"}.get(attempt, f"{attempt} times")
         notes.append(f"search: the cut would leave {first[0]} of {_their(first[1])} coarse volume "
                      f"(refine.keep_volume: at least {100 * volumes.keep:.0f} %); with a price on the volume "
@@ -457,6 +480,14 @@ def _shares(volumes, change: np.ndarray, pieces: np.ndarray, names) -> str:
 
 def _their(pieces) -> str:
     return "their" if len(pieces) > 1 else "its"
+
+
+def _them(count) -> str:
+    return "them" if count > 1 else "it"
+
+
+def _piece_s(pieces) -> str:
+    return "pieces" if len(pieces) > 1 else "piece"
 
 
 # -- the band ---------------------------------------------------------------------------------------------
@@ -762,6 +793,20 @@ def _islands(sub: _BoxGrid, near, labels, keep) -> np.ndarray:
         anchored = np.unique(parts[kept[box] & (vol[box] == c)])
         lost[mine] = ~np.isin(parts[tuple((ijk[mine] - lo).T)], anchored)
     return lost
+
+
+def _parts(sub: _BoxGrid, near, labels, n_pieces: int) -> np.ndarray:
+    """Per piece, the number of 6-connected regions its band nodes ``near`` (labelled ``labels``) make."""
+    vol = np.full(sub.size, -1, np.int64)
+    vol[near] = labels
+    vol = vol.reshape(sub.shape)
+    ijk = np.stack(np.unravel_index(near, sub.shape), 1)
+    out = np.zeros(n_pieces, np.int64)
+    for c in np.unique(labels):
+        mine = ijk[labels == c]
+        box = tuple(slice(a, b) for a, b in zip(mine.min(axis=0), mine.max(axis=0) + 1))
+        out[c] = ndimage.label(vol[box] == c)[1]
+    return out
 
 
 def _mend(sub: _BoxGrid, near, labels, keep) -> tuple[np.ndarray, int]:
