@@ -18,6 +18,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from fracture.mesh.edges import edge_table
+from fracture.mesh.decimate import quadric_decimation
 from fracture.mesh.intersect import self_intersections
 from fracture.mesh.topology import corner_groups, unique_edges
 from fracture.tolerances import tol
@@ -79,15 +80,8 @@ def _collapse_curved(V: np.ndarray, F: np.ndarray, target: int) -> tuple[np.ndar
 def _collapse_flat(V: np.ndarray, F: np.ndarray, target: int) -> tuple[np.ndarray, np.ndarray]:
     """Quadric edge collapse of a flat sheet to ``target`` triangles (a planar quadric keeps them well
     shaped), its boundary vertices kept."""
-    import pymeshlab
-
-    ms = pymeshlab.MeshSet()
-    ms.add_mesh(pymeshlab.Mesh(V, F))
-    ms.meshing_decimation_quadric_edge_collapse(
-        targetfacenum=target, preserveboundary=True, boundaryweight=1000.0, preservenormal=True,
-        preservetopology=True, planarquadric=True, qualitythr=0.3, autoclean=False)
-    m = ms.current_mesh()
-    return m.vertex_matrix(), m.face_matrix().astype(np.int64)
+    return quadric_decimation(V, F, target, preserveboundary=True, boundaryweight=1000.0, preservenormal=True,
+                              preservetopology=True, planarquadric=True, qualitythr=0.3, autoclean=False)
 
 
 def _simplify_sheets(X: np.ndarray, FF: np.ndarray, sides: np.ndarray, cell: float | None, done: dict,

@@ -27,6 +27,7 @@ import triangle
 from fracture.coarse.surface import CoarseFracture, make_coarse, special_edges
 from fracture.errors import InputError
 from fracture.io.meshes import check_triangle_mesh
+from fracture.mesh.decimate import quadric_decimation
 from fracture.mesh.primitives import box, cylinder
 from fracture.coarse.animation import exterior_points, lattice_animation
 from fracture.coarse.scenes.animator import rigid_bodies, rigid_motion, rotation
@@ -52,13 +53,7 @@ def bunny_mesh() -> tuple[np.ndarray, np.ndarray]:
 
 
 def _decimate(V, F, faces):
-    import pymeshlab
-
-    ms = pymeshlab.MeshSet()
-    ms.add_mesh(pymeshlab.Mesh(V, F))
-    ms.meshing_decimation_quadric_edge_collapse(targetfacenum=faces, preservetopology=True)
-    m = ms.current_mesh()
-    return m.vertex_matrix().astype(np.float64), m.face_matrix().astype(np.int64)
+    return quadric_decimation(V, F, faces, preservetopology=True)
 
 
 def _voronoi(BV, BF, coarse, count, spacing, edge_length, rng, what, plane=None
