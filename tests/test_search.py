@@ -148,33 +148,53 @@ def test_the_parts_of_a_piece_are_its_6_connected_regions():
     assert _parts(sub, near, diagonal, 2).tolist() == [1, 2]
 
 
-def test_a_cut_that_splits_a_piece_is_made_again_with_the_piece_whole(monkeypatch):
-    """A piece whose kept nodes lie in two lobes may be cut through between them with both parts anchored (no
-    island to join back): the search cuts again with that piece holding its coarse nodes and says so."""
+def _splitting_cuts(monkeypatch, cuts: int) -> list:
+    """The search's first ``cuts`` cuts put a slab of piece 0 through piece 1, across its kept nodes (a core in
+    two lobes, cut between them); returns the prices of every cut made, as it is made."""
     import fracture.refine.search as search
 
-    case = weak_sheet_case("flat", 4.0)
-    pyramid = StrengthPyramid(case.grid, case.zeta, levels=5, sigma=1.0)
-    calls = []
     real = search._Cut.__call__
+    calls = []
 
     def splitting(self, prices=None):
         labels, graph, log = real(self, prices)
         calls.append(prices)
-        if len(calls) == 1:  # the first cut puts a slab of piece 0 through piece 1, across its kept nodes
+        if len(calls) <= cuts:
             ijk = np.stack(np.unravel_index(self.near, self.sub.shape), 1)
             labels = labels.copy()
             labels[ijk[:, 1] == self.sub.shape[1] // 2] = 0
         return labels, graph, log
 
     monkeypatch.setattr(search._Cut, "__call__", splitting)
-    res = graph_cut_search(_coarse(case), pyramid, Exterior(case.BV, case.BF), band=8, tension=0.05)
+    return calls
+
+
+def _flat_sheet_search():
+    case = weak_sheet_case("flat", 4.0)
+    pyramid = StrengthPyramid(case.grid, case.zeta, levels=5, sigma=1.0)
+    return graph_cut_search(_coarse(case), pyramid, Exterior(case.BV, case.BF), band=8, tension=0.05)
+
+
+def test_a_cut_that_splits_a_piece_is_made_again_with_the_piece_whole(monkeypatch):
+    """A piece whose kept nodes lie in two lobes may be cut through between them with both parts anchored (no
+    island to join back): the search cuts again with that piece holding its coarse nodes and says so."""
+    calls = _splitting_cuts(monkeypatch, 1)
+    res = _flat_sheet_search()
     assert len(calls) == 2 and calls[0] is None
     held = calls[1].home == 1  # piece 1's nodes: each lost costs more than the whole coarse cut
     assert held.any() and calls[1].price[held].min() > res.cut_energy[0] and (calls[1].price[~held] == 0).all()
     assert any("would split piece 1 in parts" in n and "holding its coarse nodes" in n for n in res.notes)
     assert res.surface is not None  # the second cut, made whole, found the sheet
     assert res.sampled[1] < res.sampled[0]
+
+
+def test_a_piece_still_in_parts_while_it_holds_its_nodes_keeps_the_coarse_surface(monkeypatch):
+    """Should a cut leave a piece in parts even while it holds its coarse nodes, no further cut helps: the coarse
+    surface is kept, and the note names the piece."""
+    calls = _splitting_cuts(monkeypatch, 2)
+    res = _flat_sheet_search()
+    assert len(calls) == 2 and res.surface is None
+    assert res.notes == ["search: the cut leaves piece 1 in parts; the coarse surface is kept"]
 
 
 def test_the_viewer_names_the_searched_step():

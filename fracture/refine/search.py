@@ -329,14 +329,15 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
                     "search: the cut leaves a piece in parts; the coarse surface is kept"])
         # a piece whose kept nodes lie in several parts (a core in two lobes) may be cut through between them,
         # every part anchored: such a piece holds its coarse nodes (their price above any cut's saving)
-        split = np.flatnonzero(~held & (_parts(sub, near, labels, n_pieces) > parts))
-        if len(split):
-            if attempt == _PRICE_ROUNDS:
-                return SearchResult(None, free_nodes=int(free.sum()), seconds=seconds, notes=[
-                    f"search: the cut leaves {_piece_s(split)} {_named(split, names)} in parts; the coarse "
-                    "surface is kept"])
-            held[split] = True
-            price[split] = graph.w.sum() + 1.0
+        over = _parts(sub, near, labels, n_pieces) > parts
+        if over[held].any() or (over.any() and attempt == _PRICE_ROUNDS):
+            # (a piece holding its coarse nodes keeps its coarse region whole: not expected, but then no cut helps)
+            return SearchResult(None, free_nodes=int(free.sum()), seconds=seconds, notes=[
+                f"search: the cut leaves {_piece_s(np.flatnonzero(over))} {_named(np.flatnonzero(over), names)} "
+                "in parts; the coarse surface is kept"])
+        if over.any():
+            held |= over
+            price[over] = graph.w.sum() + 1.0
             continue
         change = (np.bincount(labels, minlength=n_pieces) - np.bincount(coarse, minlength=n_pieces))[:n_pieces]
         change = change * float(np.prod(grid.spacing))
