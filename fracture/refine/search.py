@@ -75,6 +75,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field, replace
+from typing import NamedTuple
 
 import igl
 import numba
@@ -318,18 +319,18 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
 
         # 3. islands join the piece around them; every piece keeps enough of its volume
         islands = 0
-        for _ in range(_ISLAND_ROUNDS):
-            labels, count = _mend(sub, near, labels, keep)
-            islands += count
-            if not count:
+        for mended in range(_ISLAND_ROUNDS + 1):
+            regions = _regions(sub, near, labels, keep)
+            if not regions.lost.any():
                 break
-        else:
-            if _islands(sub, near, labels, keep).any():
+            if mended == _ISLAND_ROUNDS:
                 return SearchResult(None, free_nodes=int(free.sum()), seconds=seconds, notes=[
                     "search: the cut leaves a piece in parts; the coarse surface is kept"])
+            labels = _joined(sub, near, labels, regions.lost)
+            islands += int(regions.lost.sum())
         # a piece whose kept nodes lie in several parts (a core in two lobes) may be cut through between them,
         # every part anchored: such a piece holds its coarse nodes (their price above any cut's saving)
-        over = _parts(sub, near, labels, n_pieces) > parts
+        over = np.pad(regions.parts, (0, n_pieces))[:n_pieces] > parts
         if over[held].any() or (over.any() and attempt == _PRICE_ROUNDS):
             # (a piece holding its coarse nodes keeps its coarse region whole: not expected, but then no cut helps)
             return SearchResult(None, free_nodes=int(free.sum()), seconds=seconds, notes=[
@@ -356,9 +357,9 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
             start = _PRICE_START * _break_even_prices(graph, coarse, n_pieces)
         price[short] = np.where(price[short] > 0.0, _PRICE_GROWTH * price[short], start[short])
     if held.any():
-        notes.append(f"search: the cut would split {_piece_s(np.flatnonzero(held))} {_named(np.flatnonzero(held), names)} "
-                     f"in parts; cut again with {_them(held.sum())} holding {_their(np.flatnonzero(held))} coarse "
-                     "nodes")
+        split = np.flatnonzero(held)
+        notes.append(f"search: the cut would split {_piece_s(split)} {_named(split, names)} in parts; cut again with "
+                     f"{_them(split)} holding {_their(split)} coarse nodes")
     if first:
         priced = np.flatnonzero((price > 0.0) & ~held)
         again = {1: "once", 2: "twice"}.get(attempt, f"{attempt} times")
@@ -483,8 +484,8 @@ def _their(pieces) -> str:
     return "their" if len(pieces) > 1 else "its"
 
 
-def _them(count) -> str:
-    return "them" if count > 1 else "it"
+def _them(pieces) -> str:
+    return "them" if len(pieces) > 1 else "it"
 
 
 def _piece_s(pieces) -> str:
@@ -776,46 +777,45 @@ def _reach(sub: _BoxGrid, near, V0, F0, S0, radius: float) -> dict:
     return nodes_near_sheets(where.reshape(sub.shape), sub.origin, sub.spacing, V0, F0, S0, radius, len(near))
 
 
-def _islands(sub: _BoxGrid, near, labels, keep) -> np.ndarray:
-    """Which band nodes lie in a region of their label (6-connected) that holds none of its kept nodes."""
+class _Regions(NamedTuple):
+    """The 6-connected regions of each label among a band's nodes (:func:`_regions`)."""
+
+    lost: np.ndarray  # (len(near),) bool: in a region of its label that holds none of its kept nodes (an island)
+    parts: np.ndarray  # (labels.max() + 1,) int: per label, its regions
+
+
+def _regions(sub: _BoxGrid, near, labels, keep=None) -> _Regions:
+    """The regions of each label of the band's nodes ``near`` (flat indices of the box ``sub``), each in the box
+    of its label's nodes only; without ``keep`` (which nodes keep their label) no node is lost."""
     vol = np.full(sub.size, -1, np.int64)
     vol[near] = labels
     vol = vol.reshape(sub.shape)
     kept = np.zeros(sub.size, bool)
-    kept[near[keep]] = True
+    if keep is not None:
+        kept[near[keep]] = True
     kept = kept.reshape(sub.shape)
     ijk = np.stack(np.unravel_index(near, sub.shape), 1)
     lost = np.zeros(len(near), bool)
+    parts = np.zeros(int(labels.max()) + 1 if len(labels) else 0, np.int64)
     for c in np.unique(labels):
         mine = np.flatnonzero(labels == c)
-        lo, hi = ijk[mine].min(axis=0), ijk[mine].max(axis=0) + 1  # the box of the piece's nodes only
+        lo, hi = ijk[mine].min(axis=0), ijk[mine].max(axis=0) + 1
         box = tuple(slice(a, b) for a, b in zip(lo, hi))
-        parts, _ = ndimage.label(vol[box] == c)
-        anchored = np.unique(parts[kept[box] & (vol[box] == c)])
-        lost[mine] = ~np.isin(parts[tuple((ijk[mine] - lo).T)], anchored)
-    return lost
+        regions, parts[c] = ndimage.label(vol[box] == c)
+        if keep is not None:
+            anchored = np.unique(regions[kept[box] & (vol[box] == c)])
+            lost[mine] = ~np.isin(regions[tuple((ijk[mine] - lo).T)], anchored)
+    return _Regions(lost, parts)
 
 
 def _parts(sub: _BoxGrid, near, labels, n_pieces: int) -> np.ndarray:
     """Per piece, the number of 6-connected regions its band nodes ``near`` (labelled ``labels``) make."""
-    vol = np.full(sub.size, -1, np.int64)
-    vol[near] = labels
-    vol = vol.reshape(sub.shape)
-    ijk = np.stack(np.unravel_index(near, sub.shape), 1)
-    out = np.zeros(n_pieces, np.int64)
-    for c in np.unique(labels):
-        mine = ijk[labels == c]
-        box = tuple(slice(a, b) for a, b in zip(mine.min(axis=0), mine.max(axis=0) + 1))
-        out[c] = ndimage.label(vol[box] == c)[1]
-    return out
+    parts = _regions(sub, near, labels).parts
+    return np.pad(parts, (0, n_pieces - len(parts)))[:n_pieces]
 
 
-def _mend(sub: _BoxGrid, near, labels, keep) -> tuple[np.ndarray, int]:
-    """The coarse labels with their islands (a few nodes a junction's sampling put on the wrong side, the
-    tip of a piece the band cuts off) given the label of the nearest node outside them; and how many."""
-    lost = _islands(sub, near, labels, keep)
-    if not lost.any():
-        return labels, 0
+def _joined(sub: _BoxGrid, near, labels, lost) -> np.ndarray:
+    """``labels`` with the ``lost`` nodes given the label of the nearest node not lost."""
     mask = np.ones(sub.size, bool)  # True: no label to take
     mask[near[~lost]] = False
     _, nearest = ndimage.distance_transform_edt(mask.reshape(sub.shape), return_indices=True)
@@ -824,7 +824,16 @@ def _mend(sub: _BoxGrid, near, labels, keep) -> tuple[np.ndarray, int]:
     where[near] = np.arange(len(near))
     out = labels.copy()
     out[lost] = labels[where[source]]
-    return out, int(lost.sum())
+    return out
+
+
+def _mend(sub: _BoxGrid, near, labels, keep) -> tuple[np.ndarray, int]:
+    """The coarse labels with their islands (a few nodes a junction's sampling put on the wrong side, the
+    tip of a piece the band cuts off) given the label of the nearest node outside them; and how many."""
+    lost = _regions(sub, near, labels, keep).lost
+    if not lost.any():
+        return labels, 0
+    return _joined(sub, near, labels, lost), int(lost.sum())
 
 
 def _tree_base(V, F, sides, V0, F0, S0) -> tuple[sp.csr_matrix, np.ndarray]:
