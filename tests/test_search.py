@@ -156,8 +156,8 @@ def _splitting_cuts(monkeypatch, cuts: int) -> list:
     real = search._Cut.__call__
     calls = []
 
-    def splitting(self, prices=None):
-        labels, graph, log = real(self, prices)
+    def splitting(self, prices=None, coarse_labels=None):
+        labels, graph, log = real(self, prices, coarse_labels)
         calls.append(prices)
         if len(calls) <= cuts:
             ijk = np.stack(np.unravel_index(self.near, self.sub.shape), 1)

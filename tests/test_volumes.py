@@ -100,3 +100,32 @@ def test_a_search_with_a_price_on_the_volume_takes_a_piece_only_as_far_as_its_sh
     grid_share = (r.volumes.coarse[0] + log.search.volume_change[0]) / r.volumes.coarse[0]
     assert 0.75 <= grid_share < 0.85, log.search.notes  # the cut's nodes: at the share, not back at the coarse cut
     assert _share_of_piece_0(r, float(V[0, 0])) >= 0.68  # the contour lies within a fraction of a cell of them
+
+
+def test_a_cut_made_again_for_the_volume_finds_its_prices_on_the_coarse_level(monkeypatch):
+    """Coarse to fine, a cut that leaves a piece short is made again with prices raised on the coarse level's
+    cuts until that level keeps the piece its share, then the full grid is cut once at them, and the piece
+    is at its share."""
+    import fracture.refine.search as search
+
+    full, coarse = [], []
+    real_full, real_coarse = search._Cut.__call__, search._Cut.coarse_labels
+
+    def full_cut(self, prices=None, coarse_labels=None):
+        full.append(None if prices is None else prices.price.max())
+        return real_full(self, prices, coarse_labels)
+
+    def coarse_cut(self, prices=None):
+        coarse.append(None if prices is None else prices.price.max())
+        return real_coarse(self, prices)
+
+    monkeypatch.setattr(search._Cut, "__call__", full_cut)
+    monkeypatch.setattr(search._Cut, "coarse_labels", coarse_cut)
+    case, V, F, sides = _case(8.0)
+    r, log = _refine(case, V, F, sides, search="graphcut", keep_volume=0.8)
+    assert full[0] is None and len(full) == 2  # the first cut, and one at the prices the coarse level found
+    priced = [p for p in coarse if p is not None]
+    assert len(priced) >= 3 and priced == sorted(priced)  # raised cut by cut on the coarse level
+    assert full[1] == priced[-1]
+    assert any("would leave piece 0 72 %" in n and f"cut again {len(priced)} times" in n for n in log.search.notes)
+    assert log.search.volume_change[0] >= -0.2 * r.volumes.coarse[0], log.search.notes  # its share kept

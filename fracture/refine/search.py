@@ -51,7 +51,12 @@ pieces is a labelling of space by piece. On the field grid:
    volume, raised cut by cut): the piece gives up only the nodes whose
    weak material pays for them, where keeping its coarse nodes whole (as
    before) left the marble bunny's and the clay's cuts above the coarse
-   surface. A band in which a piece holds
+   surface. Coarse to fine, the prices are raised on the coarse level's cuts
+   alone (each of its nodes for eight cells) until it keeps every piece its
+   share, and the full grid is cut once at them: its cut moves the coarse
+   boundaries by a cell or two, and a piece it still leaves short is priced
+   again. The clay's three full cuts became two and its cut took 1.4 s
+   instead of 1.8 s, every figure of the result the same. A band in which a piece holds
    fewer nodes than a tenth of the cells its fracture surface covers is not
    searched: the piece is thinner than a cell over most of its crack (a
    search from a searched surface that put the crack on a weak layer a cell
@@ -311,8 +316,36 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
     cut_band = _Cut(sub, near, keep, coarse, shifted, node_weights, reach_of)
     parts = _parts(sub, near, coarse, n_pieces)  # a piece the cut leaves in more parts than these is split
     held = np.zeros(n_pieces, bool)  # pieces split by a cut, holding their coarse nodes since
-    for attempt in range(_PRICE_ROUNDS + 1):
-        labels, graph, log = cut_band(Prices(coarse, price[coarse]) if price.any() else None)
+    cell = float(np.prod(grid.spacing))
+
+    def priced() -> Prices | None:
+        return Prices(coarse, price[coarse]) if price.any() else None
+
+    def raise_prices(short: np.ndarray) -> None:
+        nonlocal start
+        if start is None:
+            start = _PRICE_START * _break_even_prices(cut_band.graph, coarse, n_pieces)
+        price[short] = np.where(price[short] > 0.0, _PRICE_GROWTH * price[short], start[short])
+
+    attempt = 0  # cuts made again
+    bias = np.zeros(n_pieces)  # per piece, the volume the last full-grid cut gave it less what its coarse level did
+    while True:
+        coarse_cut = cut_band.coarse_labels(priced()) if cut_band.levels == 2 else None
+        if coarse_cut is not None and attempt > 0:
+            # a cut made again for the volume finds its prices on the coarse level (each node for eight cells,
+            # its volumes corrected by the last full cut's difference), and cuts the full grid once at them
+            # (module notes, 3)
+            while volumes is not None and attempt < _PRICE_ROUNDS:
+                change = cut_band.coarse_change(coarse_cut, n_pieces) * cell + bias
+                short = _short(volumes, change, n_pieces)
+                short = short[~held[short]]
+                if not len(short):
+                    break
+                first = first or (_shares(volumes, change, short, names), short)
+                raise_prices(short)
+                attempt += 1
+                coarse_cut = cut_band.coarse_labels(priced())
+        labels, graph, log = cut_band(priced(), coarse_cut)
         cut = labels[graph.p] != labels[graph.q]
         pressed = float(graph.w[cut & (keep[graph.p] | keep[graph.q])].sum() / max(graph.w[cut].sum(), tol.tiny))
         tick("cut")
@@ -339,9 +372,12 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
         if over.any():
             held |= over
             price[over] = graph.w.sum() + 1.0
+            attempt += 1
             continue
         change = (np.bincount(labels, minlength=n_pieces) - np.bincount(coarse, minlength=n_pieces))[:n_pieces]
-        change = change * float(np.prod(grid.spacing))
+        change = change * cell
+        if coarse_cut is not None:
+            bias = change - cut_band.coarse_change(coarse_cut, n_pieces) * cell
         short = _short(volumes, change, n_pieces)
         short = short[~held[short]]  # a held piece loses no node
         if not len(short):
@@ -353,9 +389,8 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
                 f"search: the cut would leave {first[0]} of {_their(first[1])} coarse volume "
                 f"(refine.keep_volume: at least {100 * volumes.keep:.0f} %), and cut again {attempt} times with a "
                 f"rising price on the volume lost, still {said}; the coarse surface is kept"])
-        if start is None:
-            start = _PRICE_START * _break_even_prices(graph, coarse, n_pieces)
-        price[short] = np.where(price[short] > 0.0, _PRICE_GROWTH * price[short], start[short])
+        raise_prices(short)
+        attempt += 1
     if held.any():
         split = np.flatnonzero(held)
         notes.append(f"search: the cut would split {_piece_s(split)} {_named(split, names)} in parts; cut again with "
@@ -695,18 +730,33 @@ class _Cut:
                                        None if node_weights is None else 4.0 * node_weights[even], stride=2)
             self.coarse_reach = _free_reach(reach_of, even, free[even])
 
-    def __call__(self, prices: Prices | None = None) -> tuple[np.ndarray, PottsGraph, object]:
+    def coarse_labels(self, prices: Prices | None = None) -> np.ndarray:
+        """The coarse level's labels (per node of ``near[even]``; two levels only)."""
+        even, free = self.even, self.free
+        labels, _ = expand(self.coarse_graph, self.labels[even], free[even], self.coarse_reach, cycles=_CYCLES,
+                           prices=None if prices is None else prices.of(even, 8.0))
+        return labels
+
+    def coarse_change(self, coarse_labels: np.ndarray, n_pieces: int) -> np.ndarray:
+        """Per piece, the band nodes it gains (or loses) at the coarse level's ``coarse_labels``, eight for each
+        coarse node (the full grid's cells it stands for)."""
+        before = np.bincount(self.labels[self.even], minlength=n_pieces)[:n_pieces]
+        return 8 * (np.bincount(coarse_labels, minlength=n_pieces)[:n_pieces] - before)
+
+    def __call__(self, prices: Prices | None = None, coarse_labels: np.ndarray | None = None
+                 ) -> tuple[np.ndarray, PottsGraph, object]:
         """The labels, the full-resolution graph (every edge with a free end: the cut's energy) and the
         expansion's log (its energies on that graph). ``prices`` (optional, per node of ``near``) is the
         unary term of :func:`~fracture.refine.expansion.expand` (the coarse level's nodes, each for eight
-        cells, pay eight)."""
+        cells, pay eight); ``coarse_labels`` (optional) the coarse level's labels at those prices, when the
+        caller has them (:meth:`coarse_labels`)."""
         sub, near, labels, free, graph, ijk, even = (self.sub, self.near, self.labels, self.free, self.graph,
                                                      self.ijk, self.even)
         if self.levels == 1:
             out, log = expand(graph, labels, free, self.reach, cycles=_CYCLES, prices=prices)
             return out, graph, log
-        coarse_labels, _ = expand(self.coarse_graph, labels[even], free[even], self.coarse_reach, cycles=_CYCLES,
-                                  prices=None if prices is None else prices.of(even, 8.0))
+        if coarse_labels is None:
+            coarse_labels = self.coarse_labels(prices)
         # each node takes the label its coarse nodes (the corners of the coarse cell it lies in) agree on
         cshape = tuple((n + 1) // 2 for n in sub.shape)
         lattice = np.full(cshape, -1, np.int64)
