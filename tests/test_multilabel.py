@@ -67,3 +67,26 @@ def _points(V, F):
 def _area(V, F):
     T = V[F]
     return float(np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1).sum() / 2)
+
+
+def test_the_mixed_cubes_are_those_whose_corners_differ_each_in_kuhns_six_tetrahedra():
+    """Every cube with two labels or more among its eight corners, in C order, split into Kuhn's six
+    tetrahedra (the nodes of each by flat id); no cube with one label; no cube in a grid one node thin."""
+    from fracture.mesh.multilabel import _KUHN, _mixed_tets
+
+    rng = np.random.default_rng(3)
+    label = rng.integers(0, 2, (5, 4, 3)) * rng.integers(1, 4, (5, 4, 3))
+    label[:2] = 1  # the first row of cubes has one label
+    tets = _mixed_tets(label)
+    expected = []
+    for c in np.ndindex(4, 3, 2):
+        if len(np.unique(label[c[0]:c[0] + 2, c[1]:c[1] + 2, c[2]:c[2] + 2])) > 1:
+            for tet in _KUHN:
+                expected.append([np.ravel_multi_index(tuple(np.add(c, corner)), label.shape) for corner in tet])
+    assert tets.tolist() == expected and len(expected) > 0
+    assert len(_mixed_tets(np.ones((1, 4, 4), np.int64))) == 0
+    # of those, pieces_only keeps the tetrahedra with two pieces or more among their corners (0 is no piece)
+    pieces = [len(set(label.ravel()[t].tolist()) - {0}) for t in tets]
+    kept = _mixed_tets(label, pieces_only=True)
+    assert kept.tolist() == [t for t, n in zip(tets.tolist(), pieces) if n >= 2]
+    assert 0 < len(kept) < len(tets)

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 # Crossings keep this fraction of the edge from its nodes.
@@ -58,15 +59,64 @@ _KUHN = np.array([[[0, 0, 0], a, a + b, [1, 1, 1]] for a, b in [
     (np.eye(3, dtype=int)[i], np.eye(3, dtype=int)[j]) for i in range(3) for j in range(3) if i != j]])
 
 
-def _mixed_tets(label: np.ndarray) -> np.ndarray:
-    """Node ids ``(t, 4)`` of the Kuhn tetrahedra of every cube whose corners carry more than one label."""
+def _mixed_tets(label: np.ndarray, pieces_only: bool = False) -> np.ndarray:
+    """Node ids ``(t, 4)`` of the Kuhn tetrahedra of every cube whose corners carry more than one label, the
+    cubes in C order; with ``pieces_only`` only the tetrahedra whose corners carry two pieces or more (labels
+    above 0)."""
     shape = label.shape
-    corners = [label[i:shape[0] - 1 + i, j:shape[1] - 1 + j, k:shape[2] - 1 + k]
-               for i in (0, 1) for j in (0, 1) for k in (0, 1)]
-    lo, hi = np.minimum.reduce(corners), np.maximum.reduce(corners)
-    cube = np.argwhere(lo != hi)  # (c, 3)
-    node = cube[:, None, None, :] + _KUHN[None]  # (c, 6, 4, 3)
-    return np.ravel_multi_index(tuple(np.moveaxis(node, -1, 0)), shape).reshape(-1, 4)
+    strides = np.array([shape[1] * shape[2], shape[2], 1], np.int64)
+    kuhn = (_KUHN @ strides).astype(np.int64)  # (6, 4) node offsets from a cube's first corner
+    return _mixed_tets_compiled(np.ascontiguousarray(label, np.int64).ravel(), shape[0], shape[1], shape[2], kuhn,
+                                pieces_only)
+
+
+@numba.njit(cache=True)
+def _pieces_in(lab, c, kuhn_row) -> int:
+    """How many different pieces (labels above 0) the corners of one tetrahedron carry."""
+    n = 0
+    for b in range(4):
+        x = lab[c + kuhn_row[b]]
+        if x > 0:
+            new = True
+            for e in range(b):
+                if lab[c + kuhn_row[e]] == x:
+                    new = False
+                    break
+            n += new
+    return n
+
+
+@numba.njit(cache=True)
+def _mixed_tets_compiled(lab, nx, ny, nz, kuhn, pieces_only):
+    """:func:`_mixed_tets` in two passes over the cubes (count, then fill): the eight shifted views of the
+    grid and their reductions took 0.08 s of the collapsing wall's contour (a box of 600,000 nodes), and
+    the pieces' filter over the gathered tetrahedra 0.05 s more."""
+    syz, sz = ny * nz, nz
+    corner = np.array([0, 1, sz, sz + 1, syz, syz + 1, syz + sz, syz + sz + 1])
+    out = np.empty((0, 4), np.int64)
+    for fill in (False, True):
+        t = 0
+        for i in range(nx - 1):
+            for j in range(ny - 1):
+                for k in range(nz - 1):
+                    c = i * syz + j * sz + k
+                    mixed = False
+                    for q in range(1, 8):
+                        if lab[c + corner[q]] != lab[c]:
+                            mixed = True
+                            break
+                    if not mixed:
+                        continue
+                    for a in range(6):
+                        if pieces_only and _pieces_in(lab, c, kuhn[a]) < 2:
+                            continue
+                        if fill:
+                            for b in range(4):
+                                out[t, b] = c + kuhn[a, b]
+                        t += 1
+        if not fill:
+            out = np.empty((t, 4), np.int64)
+    return out
 
 
 class _FaceKeys:
@@ -190,11 +240,7 @@ def contour_labels(label: np.ndarray, origin, spacing, crossing, pieces_only: bo
     shape = label.shape
     lab = label.ravel()
     n_nodes = lab.size
-    tets = _mixed_tets(label)
-    if pieces_only:
-        Ls = np.sort(lab[tets], axis=1)
-        pieces = (Ls[:, 0] > 0).astype(np.int64) + ((Ls[:, 1:] != Ls[:, :-1]) & (Ls[:, 1:] > 0)).sum(axis=1)
-        tets = tets[pieces >= 2]
+    tets = _mixed_tets(label, pieces_only)
     if not len(tets):
         none = np.zeros((0, 3), np.int64)
         return LabelContour(np.zeros((0, 3)), none, np.zeros((0, 2), np.int64), none, np.zeros(0, np.int64))
