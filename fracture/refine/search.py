@@ -80,6 +80,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from typing import NamedTuple
 
 import igl
@@ -740,8 +741,15 @@ class _Cut:
     def coarse_change(self, coarse_labels: np.ndarray, n_pieces: int) -> np.ndarray:
         """Per piece, the band nodes it gains (or loses) at the coarse level's ``coarse_labels``, eight for each
         coarse node (the full grid's cells it stands for)."""
-        before = np.bincount(self.labels[self.even], minlength=n_pieces)[:n_pieces]
-        return 8 * (np.bincount(coarse_labels, minlength=n_pieces)[:n_pieces] - before)
+        start = self._coarse_start
+        now = np.bincount(coarse_labels, minlength=len(start))
+        change = 8 * (now - np.pad(start, (0, len(now) - len(start))))
+        return np.pad(change, (0, n_pieces))[:n_pieces]
+
+    @cached_property
+    def _coarse_start(self) -> np.ndarray:
+        """Per label, the coarse level's nodes it holds before any cut."""
+        return np.bincount(self.labels[self.even])
 
     def __call__(self, prices: Prices | None = None, coarse_labels: np.ndarray | None = None
                  ) -> tuple[np.ndarray, PottsGraph, object]:
