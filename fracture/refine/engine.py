@@ -47,11 +47,11 @@ triangle budget is full when an iteration lowers the functional by less than
 1 % (full-size iterations are the dearest and gain the least), the last
 stage of a flow from the coarse surface after coarser stages (which made the
 large moves: a lone stage, the paper's field, travels in it) when its
-functional on dense samples
-(which the splits do not move, as they move the corners' quadrature) fell by
-less than half a percent over its last three iterations (on the marble bunny
-the weakest fifth of zeta stops growing halfway through that stage, while
-the triangles still grow by a quarter), when no
+functional on dense samples (which the splits do not move, as they move the
+corners' quadrature) fell by less than half a percent over its last three
+iterations (on the marble bunny the weakest fifth of zeta stops growing
+halfway through that stage, while the triangles still grow by a quarter),
+when no
 step lowers the functional even at the least ``tau`` (the surface is at a
 minimum of what the step reaches, and the next iterations would only split
 triangles that do not move; the branch's polish spent its last three
