@@ -309,6 +309,38 @@ def test_a_split_vertex_inside_its_parents_clear_balls_is_not_asked_about():
     assert r.onb.leaving(X1, np.array([new])).tolist() == [new] and asked == [1]
 
 
+
+def test_a_vertex_two_rings_from_any_answer_is_proved_clear_by_its_neighbours_proofs():
+    """BoundaryOnB.leaving keeps what the answers prove as the vertex's own: split an edge, then an edge from
+    the new vertex, and the second new vertex, whose neighbours were never asked about, is proved clear by
+    the first one's proof; B is not asked about either. Without kept proofs the second is asked."""
+    pyramid = two_weak_sheets()
+    BV, BF = box([0, 0, 0], [1, 1, 1], (8, 8, 8))
+    mesh = flat_cut()
+    r = Refiner(mesh, pyramid, BV, BF, RefineParams(), np.random.default_rng(0))
+    inner = np.flatnonzero((np.abs(mesh.V[:, 1:] - 0.5) < 0.3).all(axis=1))
+    a = inner[np.argmin(np.linalg.norm(mesh.V[inner, 1:] - 0.5, axis=1))]
+    r.onb.closest(np.array([a]))  # the only answer
+    nbr = np.unique(mesh.F[(mesh.F == a).any(axis=1)])
+    b = nbr[nbr != a][0]
+    first = mesh.split_edges(np.array([[a, b]]), np.array([0.5]))[0]
+    r.state.grow(len(mesh.V))
+    asked = []
+    closest = r.B.closest
+    r.B.closest = lambda P: (asked.append(len(P)), closest(P))[1]
+    X1 = mesh.V.copy()
+    assert r.onb.leaving(X1, np.array([first])).size == 0 and asked == []  # proved by a's answer
+    assert np.array_equal(r.state.clear_at[first], X1[first]) and r.state.clear_d2[first] > 0.0
+    far = [v for v in np.unique(mesh.F[(mesh.F == first).any(axis=1)]) if v not in (a, first)][0]
+    second = mesh.split_edges(np.array([[first, far]]), np.array([0.5]))[0]
+    r.state.grow(len(mesh.V))
+    X1 = mesh.V.copy()
+    ring = np.unique(mesh.F[(mesh.F == second).any(axis=1)])
+    assert a not in ring  # two rings from the only answer
+    assert r.onb.leaving(X1, np.array([second])).size == 0 and asked == []
+    r.state.clear_at[:] = np.nan  # no kept proofs: B is asked
+    assert r.onb.leaving(X1, np.array([second])).size == 0 and asked == [1]
+
 def test_the_clearance_bound_is_the_same_on_one_thread_and_two():
     import numba
 

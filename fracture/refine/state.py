@@ -34,6 +34,10 @@ class VertexState:
         The positions the closest points on B below were asked for (NaN: not yet).
     near_d2, near_tri, near_point : (n,), (n,), (n, 3)
         Squared distance to B, B's triangle and the closest point there.
+    clear_at : (n, 3) float
+        Inside points the vertex was proved clear of B at, by the answers of its neighbours (NaN: none).
+    clear_d2 : (n,) float
+        The square of the distance to B proved there (a lower bound: B was not asked).
     """
 
     field_at: np.ndarray
@@ -46,14 +50,16 @@ class VertexState:
     near_d2: np.ndarray
     near_tri: np.ndarray
     near_point: np.ndarray
+    clear_at: np.ndarray
+    clear_d2: np.ndarray
 
     # the value a new vertex starts with, per array
     _FRESH = dict(field_at=np.nan, psi=0.0, psibar=0.0, grad=0.0, velocity=0.0, hold=0, near_at=np.nan,
-                  near_d2=np.inf, near_tri=-1, near_point=np.nan)
+                  near_d2=np.inf, near_tri=-1, near_point=np.nan, clear_at=np.nan, clear_d2=np.inf)
 
     @classmethod
     def empty(cls, n: int) -> VertexState:
-        state = cls(*(np.zeros((0, 3)) if f.name in ("field_at", "grad", "velocity", "near_at", "near_point")
+        state = cls(*(np.zeros((0, 3)) if f.name in ("field_at", "grad", "velocity", "near_at", "near_point", "clear_at")
                       else np.zeros(0, np.int64 if f.name in ("hold", "near_tri") else np.float64)
                       for f in fields(cls)))
         state.grow(n)
