@@ -283,24 +283,30 @@ def test_inner_vertices_that_would_leave_b_are_found_and_only_near_ones_are_aske
     assert r.onb.leaving(X1, np.array([edge])).size == 0 and asked == []
 
 
+def _asking_refiner():
+    """A refiner on a flat cut in the unit box, its inner vertices, and the list that records the size of every
+    question asked of B from now on."""
+    mesh = flat_cut()
+    BV, BF = box([0, 0, 0], [1, 1, 1], (8, 8, 8))
+    r = Refiner(mesh, two_weak_sheets(), BV, BF, RefineParams(), np.random.default_rng(0))
+    asked = []
+    closest = r.B.closest
+    r.B.closest = lambda P: (asked.append(len(P)), closest(P))[1]
+    return mesh, r, np.flatnonzero((np.abs(mesh.V[:, 1:] - 0.5) < 0.3).all(axis=1)), asked
+
+
 def test_a_split_vertex_inside_its_parents_clear_balls_is_not_asked_about():
     """BoundaryOnB.leaving: a vertex made by a split has never been asked about, but it lies within the balls
     free of B around its parents' last answers: B is not asked about it, unless its move takes it out
     of them (then it is asked, and reported if it leaves)."""
-    pyramid = two_weak_sheets()
-    BV, BF = box([0, 0, 0], [1, 1, 1], (8, 8, 8))
-    mesh = flat_cut()
-    r = Refiner(mesh, pyramid, BV, BF, RefineParams(), np.random.default_rng(0))
-    inner = np.flatnonzero((np.abs(mesh.V[:, 1:] - 0.5) < 0.3).all(axis=1))
+    mesh, r, inner, asked = _asking_refiner()
     r.onb.closest(inner)
     table = r.edges()
     a, b = inner[0], inner[np.argmin(np.linalg.norm(mesh.V[inner[1:]] - mesh.V[inner[0]], axis=1)) + 1]
     assert table.find(np.array([[a, b]]))[0] >= 0  # neighbours
     new = mesh.split_edges(np.array([[a, b]]), np.array([0.5]))[0]
     r.state.grow(len(mesh.V))
-    asked = []
-    closest = r.B.closest
-    r.B.closest = lambda P: (asked.append(len(P)), closest(P))[1]
+    asked.clear()
     X1 = mesh.V.copy()
     X1[new, 0] += 0.02
     assert r.onb.leaving(X1, np.array([new])).size == 0 and asked == []
@@ -314,20 +320,14 @@ def test_a_vertex_two_rings_from_any_answer_is_proved_clear_by_its_neighbours_pr
     """BoundaryOnB.leaving keeps what the answers prove as the vertex's own: split an edge, then an edge from
     the new vertex, and the second new vertex, whose neighbours were never asked about, is proved clear by
     the first one's proof; B is not asked about either. Without kept proofs the second is asked."""
-    pyramid = two_weak_sheets()
-    BV, BF = box([0, 0, 0], [1, 1, 1], (8, 8, 8))
-    mesh = flat_cut()
-    r = Refiner(mesh, pyramid, BV, BF, RefineParams(), np.random.default_rng(0))
-    inner = np.flatnonzero((np.abs(mesh.V[:, 1:] - 0.5) < 0.3).all(axis=1))
+    mesh, r, inner, asked = _asking_refiner()
     a = inner[np.argmin(np.linalg.norm(mesh.V[inner, 1:] - 0.5, axis=1))]
     r.onb.closest(np.array([a]))  # the only answer
     nbr = np.unique(mesh.F[(mesh.F == a).any(axis=1)])
     b = nbr[nbr != a][0]
     first = mesh.split_edges(np.array([[a, b]]), np.array([0.5]))[0]
     r.state.grow(len(mesh.V))
-    asked = []
-    closest = r.B.closest
-    r.B.closest = lambda P: (asked.append(len(P)), closest(P))[1]
+    asked.clear()
     X1 = mesh.V.copy()
     assert r.onb.leaving(X1, np.array([first])).size == 0 and asked == []  # proved by a's answer
     assert np.array_equal(r.state.clear_at[first], X1[first]) and r.state.clear_d2[first] > 0.0
