@@ -173,14 +173,17 @@ def sampled_energy(V: np.ndarray, F: np.ndarray, psi_at, h: float, offset: float
     surface whose corners lie in a thin weak layer and whose triangles cross strong material between them,
     and differs between a coarse and a fine mesh of the same surface. This one compares surfaces meshed
     any way: the search's against the coarse one, the search's polish against the flow alone."""
-    from fracture.mesh.sampling import area_samples
+    from fracture.mesh.sampling import area_barycentric
 
     A, G, _ = face_terms(V, F, grain)
     total = float(A.sum())
     if not total > 0.0:
         return 0.0
     count = int(np.clip(_SAMPLES_PER_CELL * total / (h * h), _SAMPLES_MIN, _SAMPLES_MAX))
-    X, f = area_samples(V, F, count, np.random.default_rng(0))
+    # the points of mesh.sampling.area_samples, from the areas at hand (its own gather and areas of every
+    # triangle took 9 of the 15 ms of a call on the bunny's 80,000 triangles)
+    f, bary = area_barycentric(A, count, np.random.default_rng(0))
+    X = np.einsum("nk,nkc->nc", bary, V[F[f]])
     factor = G[f] / np.maximum(A[f], tol.tiny)
     return total * float(np.mean((psi_at(X) + offset) * factor))
 
