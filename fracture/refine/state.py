@@ -53,13 +53,15 @@ class VertexState:
     clear_at: np.ndarray
     clear_d2: np.ndarray
 
+    # the arrays of points and vectors, (n, 3); the others are (n,)
+    _POINTS = ("field_at", "grad", "velocity", "near_at", "near_point", "clear_at")
     # the value a new vertex starts with, per array
     _FRESH = dict(field_at=np.nan, psi=0.0, psibar=0.0, grad=0.0, velocity=0.0, hold=0, near_at=np.nan,
                   near_d2=np.inf, near_tri=-1, near_point=np.nan, clear_at=np.nan, clear_d2=np.inf)
 
     @classmethod
     def empty(cls, n: int) -> VertexState:
-        state = cls(*(np.zeros((0, 3)) if f.name in ("field_at", "grad", "velocity", "near_at", "near_point", "clear_at")
+        state = cls(*(np.zeros((0, 3)) if f.name in cls._POINTS
                       else np.zeros(0, np.int64 if f.name in ("hold", "near_tri") else np.float64)
                       for f in fields(cls)))
         state.grow(n)
