@@ -31,7 +31,7 @@ import resource
 import sys
 import time
 
-from scenes import in_processes, refine, scene_with_fields
+from scenes import checked_configs, in_processes, refine, scene_with_fields
 
 # output triangles and seconds reported in Section 6
 PAPER = {"bunny": (174_000, 11.7), "branch": (123_000, 5.0), "wall": (208_000, 13.6),
@@ -89,6 +89,7 @@ def main() -> None:
     for flag in ("repeat", "rounds", "cores"):
         if getattr(args, flag) is not None and getattr(args, flag) < 1:
             ap.error(f"--{flag} must be at least 1, got {getattr(args, flag)}")
+    checked_configs(args.scenes, args.set)
     t0 = time.perf_counter()
     for _ in in_processes(run_scene, ["jello"], 2, 1, args.cores, args.set):  # compiles the kernels, or loads them from the cache
         pass

@@ -24,7 +24,7 @@ sys.path.insert(0, str(ROOT))
 from fracture.io import layout  # noqa: E402
 from fracture.pipeline import runner  # noqa: E402
 from fracture.pipeline.config import load_config  # noqa: E402
-from fracture.errors import InputError, ResultError, StageError  # noqa: E402
+from fracture.errors import ConfigError, InputError, ResultError, StageError  # noqa: E402
 
 
 def main() -> int:
@@ -51,8 +51,12 @@ def main() -> int:
                 with tarfile.open(ROOT / "examples" / "cellfracture" / f"{case}.tar.xz") as tar:
                     tar.extractall(root, filter="data")
             pattern = "*.ply" if args.format == "ply" else "*.obj"
-            cfg = load_config(ROOT / "configs" / "blender_cube8.yaml",
-                              [f"input.path={root / case / args.format}", f"input.glob='{pattern}'"] + args.overrides)
+            try:
+                cfg = load_config(ROOT / "configs" / "blender_cube8.yaml",
+                                  [f"input.path={root / case / args.format}", f"input.glob='{pattern}'"]
+                                  + args.overrides)
+            except ConfigError as exc:  # a wrong --set: the same for every case
+                raise SystemExit(f"error: {exc}") from None
             start = time.perf_counter()
             try:
                 out = runner.run(cfg, Path(tmp) / f"run_{case}", progress=False)

@@ -39,6 +39,7 @@ from fracture.pipeline.config import load_config  # noqa: E402
 from fracture.fidelity import area_samples, run_figures  # noqa: E402
 from fracture.refine.engine import Refiner, RefineParams  # noqa: E402
 from fracture.mesh.fracture_surface import FractureSurface  # noqa: E402
+from scenes import checked_configs  # noqa: E402
 
 SCENES = ["example", "wall", "bunny", "branch", "clay", "jello"]
 SEARCHES = ["graphcut", "none"]
@@ -75,6 +76,8 @@ def main(argv=None) -> None:
     ap.add_argument("--sheets-only", action="store_true")
     ap.add_argument("--no-sheets", action="store_true")
     args = ap.parse_args(argv)
+    if not args.sheets_only:
+        checked_configs(args.scenes, args.set)  # before the first scene's minutes, not after them
     if not args.sheets_only:
         print("| scene | search | weak 10 % | weak 20 % | weak 30 % | strong 10 % | mean zeta | mean psi "
               "| distance mean (cells) | distance p90 | area refined / coarse | functional | triangles | iterations "

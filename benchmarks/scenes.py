@@ -7,6 +7,7 @@ one scene's caches do not speed up the next.
 from __future__ import annotations
 
 import multiprocessing as mp
+import queue
 from pathlib import Path
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
@@ -37,15 +38,38 @@ def refine(cfg, cf, fs):
     return mesh, log
 
 
+def checked_configs(scenes, overrides: list[str]) -> None:
+    """Load every scene's config with ``overrides`` before any process starts: a wrong key or value ends the
+    benchmark with the loader's one line (file or ``--set``, key, what was given and expected), not a
+    traceback in a child process."""
+    from fracture.errors import ConfigError
+    from fracture.pipeline.config import load_config
+
+    for name in scenes:
+        try:
+            load_config(CONFIGS / f"{name}.yaml", overrides)
+        except ConfigError as exc:
+            raise SystemExit(f"error: {exc}") from None
+
+
 def in_processes(target, scenes, *args):
     """Yield ``(scene, result)`` where ``target(scene, *args, queue)`` puts its result on the queue, one process each
-    (started with ``spawn``: a fresh interpreter, no threads or locks inherited from this one)."""
+    (started with ``spawn``: a fresh interpreter, no threads or locks inherited from this one). A process that
+    ends without a result (its error printed by it) ends the benchmark, naming the scene, instead of leaving this
+    one waiting for it."""
     ctx = mp.get_context("spawn")
     for name in scenes:
         q = ctx.Queue()
         p = ctx.Process(target=_prepared, args=(target, name, *args, q))
         p.start()
-        result = q.get()
+        while True:
+            try:
+                result = q.get(timeout=1.0)
+                break
+            except queue.Empty:
+                if not p.is_alive() and q.empty():
+                    raise SystemExit(f"error: the process of scene {name!r} ended without a result (exit code "
+                                     f"{p.exitcode}); its error is above")
         p.join()
         yield name, result
 
