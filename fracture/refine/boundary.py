@@ -141,7 +141,8 @@ class BoundaryOnB:
         # what the answers prove is kept as the vertex's own: a vertex made by a split, two rings from any
         # answer, is proved clear by its neighbours' proofs (on the marble bunny 12,500 points asked of B,
         # at 10 microseconds each, a median 3.4 cells inside)
-        s.clear_at[ids[clear]], s.clear_d2[ids[clear]] = X1[ids[clear]], bound[clear] ** 2
+        proved = ids[clear]
+        s.clear_at[proved], s.clear_d2[proved] = X1[proved], bound[clear] ** 2
         near = ids[~clear]
         if not len(near):
             return near

@@ -637,7 +637,7 @@ class Refiner:
             # functional 6 % above the flow's alone)
             small = gain < little or (move < p.tolerance and not self.searched)
             settled = (small and (made <= _FEW_SPLITS * len(self.mesh.F) or self.full)) or self.at_minimum
-            if trail is not None:
+            if trail is not None and not settled:  # (a stage that settled otherwise needs no measure)
                 trail.append(self.sampled_functional())
                 settled |= len(trail) > _SETTLE_SPAN and trail[-1 - _SETTLE_SPAN] - trail[-1] < _SETTLE_GAIN * abs(
                     trail[-1])
