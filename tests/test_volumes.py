@@ -129,3 +129,37 @@ def test_a_cut_made_again_for_the_volume_finds_its_prices_on_the_coarse_level(mo
     assert full[1] == priced[-1]
     assert any("would leave piece 0 72 %" in n and f"cut again {len(priced)} times" in n for n in log.search.notes)
     assert log.search.volume_change[0] >= -0.2 * r.volumes.coarse[0], log.search.notes  # its share kept
+
+
+def test_a_piece_the_coarse_level_leaves_clearly_short_is_priced_before_the_full_grid_is_cut(monkeypatch):
+    """The coarse level's first cut leaves piece 0 about 72 % of its volume, asked to keep 95 %: more than a tenth
+    below its share, so its price is raised on the coarse level before the full grid is cut: no cut of the full grid
+    is made without prices (one per round of the search), and the piece keeps its share."""
+    import fracture.refine.search as search
+
+    full = []
+    real_full = search._Cut.__call__
+
+    def full_cut(self, prices=None, coarse_labels=None):
+        full.append(None if prices is None else prices.price.max())
+        return real_full(self, prices, coarse_labels)
+
+    monkeypatch.setattr(search._Cut, "__call__", full_cut)
+    case, V, F, sides = _case(8.0)
+    r, log = _refine(case, V, F, sides, search="graphcut", keep_volume=0.95)
+    assert full and all(p is not None for p in full), full
+    assert any("would leave piece 0 7" in n and "every piece keeps its share" in n for n in log.search.notes), \
+        log.search.notes
+    assert log.search.volume_change[0] >= -0.05 * r.volumes.coarse[0], log.search.notes
+
+
+def test_only_a_piece_the_coarse_level_leaves_well_below_its_share_and_not_empty_is_clearly_short():
+    """Before the full grid is cut, the coarse level's volumes price a piece only when they leave it more than
+    a tenth of its volume below its share and some volume at all (a piece the coarse level takes whole may be
+    in lobes the full grid holds)."""
+    from fracture.refine.search import _clearly_short
+
+    volumes = PieceVolumes(np.ones(4), np.ones(4), 0.5)
+    change = np.array([-0.45, -0.65, -1.02, 0.2])  # left: 55 %, 35 %, nothing, 120 %
+    assert _clearly_short(volumes, change, 4).tolist() == [1]
+    assert _clearly_short(None, change, 4).tolist() == []
