@@ -17,10 +17,10 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from fracture.mesh.edges import edge_table
+from fracture.mesh.edges import edge_table, row_edges
 from fracture.mesh.decimate import quadric_decimation
 from fracture.mesh.intersect import self_intersections
-from fracture.mesh.topology import corner_groups, unique_edges
+from fracture.mesh.topology import corner_groups
 from fracture.tolerances import tol
 
 # A coarsened curved sheet keeps about one triangle per this many cells of its area.
@@ -37,10 +37,15 @@ def _simplify_sheet(X: np.ndarray, FF: np.ndarray, cell: float | None) -> tuple[
     """One sheet (triangles ``FF`` of points ``X``) coarsened (module notes): its new inner points and its
     triangles, whose entries are ids of ``X`` for the kept vertices and ``-1 - j`` for new point ``j``; None
     when the sheet is already as coarse as asked."""
-    used, inv = np.unique(FF, return_inverse=True)
-    local = inv.reshape(-1, 3)
-    e, c = unique_edges(local)
-    rim = np.unique(e[c == 1])
+    # the sheet's vertices in ascending order and its triangles on them: what np.unique(FF, return_inverse=True)
+    # gives, by marking instead of sorting (a sheet's vertices are a part of X's: 26 sheets of the collapsing
+    # wall's 89,000 contour triangles took 0.03 s of sorts)
+    mark = np.zeros(len(X), bool)
+    mark[FF] = True
+    used = np.flatnonzero(mark)
+    local = (np.cumsum(mark) - 1)[FF]
+    table = edge_table(local, len(used))
+    rim = np.unique(row_edges(local, table.first)[table.count == 1])
     target = max(2 * len(rim), 4)
     if cell is not None:  # triangles of about two cells' area
         T = X[used][local]
