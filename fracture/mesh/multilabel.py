@@ -221,7 +221,6 @@ def _positions(crossing, nodes, lab, edge_keys, face_keys, tet_ids, tets, n_node
     return PE, _mean_preferring(PE, Fg, outside), _mean_preferring(PE, Tg, outside)
 
 
-
 @numba.njit(cache=True)
 def _around_axes(index, first, size, corners, A, B, lab, Xo, origin, spacing, shape):
     """``index`` (point ids grouped by polygon: ``first`` and ``size`` per polygon) with each polygon's
@@ -242,20 +241,17 @@ def _around_axes(index, first, size, corners, A, B, lab, Xo, origin, spacing, sh
             node[b, 0] = origin[0] + (c // syz) * spacing[0]
             node[b, 1] = origin[1] + ((c // sz) % shape[1]) * spacing[1]
             node[b, 2] = origin[2] + (c % sz) * spacing[2]
-        axis = np.zeros(3)
-        mean_b = np.zeros(3)
+        sum_a = np.zeros(3)
+        sum_b = np.zeros(3)
         na = nb = 0
         for b in range(4):
             la = lab[corners[g, b]]
-            if la == A[g]:
-                na += 1
-            if la == B[g]:
-                nb += 1
+            na += la == A[g]
+            nb += la == B[g]
             for x in range(3):
-                axis[x] += node[b, x] * (la == A[g])
-                mean_b[x] += node[b, x] * (la == B[g])
-        for x in range(3):
-            axis[x] = mean_b[x] / nb - axis[x] / na
+                sum_a[x] += node[b, x] * (la == A[g])
+                sum_b[x] += node[b, x] * (la == B[g])
+        axis = sum_b / nb - sum_a / na
         length = np.sqrt(axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2])
         if abs(axis[0]) < 0.9 * length:
             hx, hy, hz = 1.0, 0.0, 0.0
