@@ -148,7 +148,8 @@ def test_a_piece_the_coarse_level_leaves_clearly_short_is_priced_before_the_full
     case, V, F, sides = _case(8.0)
     r, log = _refine(case, V, F, sides, search="graphcut", keep_volume=0.95)
     assert full and all(p is not None for p in full), full
-    assert any("would leave piece 0 7" in n and "every piece keeps its share" in n for n in log.search.notes), \
+    assert any("the cut's coarse level would leave piece 0 7" in n and "every piece keeps its share" in n
+               for n in log.search.notes), \
         log.search.notes
     assert log.search.volume_change[0] >= -0.05 * r.volumes.coarse[0], log.search.notes
 

@@ -352,7 +352,8 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
                 short = short[~held[short]]
                 if not len(short):
                     break
-                first = first or (_shares(volumes, change, short, names), short)
+                first = first or (_shares(volumes, change, short, names), short,
+                                  "the cut" if cut_before else "the cut's coarse level")
                 raise_prices(short)
                 attempt += 1
                 coarse_cut = cut_band.coarse_labels(priced())
@@ -395,10 +396,10 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
         if not len(short):
             break
         said = _shares(volumes, change, short, names)
-        first = first or (said, short)
+        first = first or (said, short, "the cut")
         if attempt == _PRICE_ROUNDS:
             return SearchResult(None, free_nodes=int(free.sum()), seconds=seconds, notes=[
-                f"search: the cut would leave {first[0]} of {_their(first[1])} coarse volume "
+                f"search: {first[2]} would leave {first[0]} of {_their(first[1])} coarse volume "
                 f"(refine.keep_volume: at least {100 * volumes.keep:.0f} %), and cut again {attempt} times with a "
                 f"rising price on the volume lost, still {said}; the coarse surface is kept"])
         raise_prices(short)
@@ -410,7 +411,7 @@ def graph_cut_search(mesh: FractureSurface, pyramid, B: Exterior, band: float, t
     if first:
         priced = np.flatnonzero((price > 0.0) & ~held)
         again = {1: "once", 2: "twice"}.get(attempt, f"{attempt} times")
-        notes.append(f"search: the cut would leave {first[0]} of {_their(first[1])} coarse volume "
+        notes.append(f"search: {first[2]} would leave {first[0]} of {_their(first[1])} coarse volume "
                      f"(refine.keep_volume: at least {100 * volumes.keep:.0f} %); with a price on the volume "
                      f"{_named(priced, names)} lost it was cut again {again}, and every piece keeps its share")
     present = np.bincount(labels, minlength=n_pieces) > 0
