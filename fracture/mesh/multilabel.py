@@ -222,35 +222,29 @@ def _positions(crossing, nodes, lab, edge_keys, face_keys, tet_ids, tets, n_node
 
 
 @numba.njit(cache=True)
-def _around_axes(index, first, size, corners, A, B, lab, Xo, origin, spacing, shape):
+def _around_axes(index, first, size, corners, corner_labels, A, B, Xo):
     """``index`` (point ids grouped by polygon: ``first`` and ``size`` per polygon) with each polygon's
     points in counter-clockwise order around its axis, from the mean of its tetrahedron's corners
-    ``corners`` labelled ``A`` to the mean of those labelled ``B``, as seen at the points ``Xo``: their
+    ``corners`` ``(p, 4, 3)`` labelled ``A`` to the mean of those labelled ``B`` (``corner_labels``
+    ``(p, 4)``), as seen at the points ``Xo``: their
     angles about the polygon's centre in the frame ``e1 = axis x helper``, ``e2 = axis x e1``, ties in the
     order given. One pass per polygon (the same NumPy steps over gathered copies of every point took half
     the contour's time on the collapsing wall)."""
     out = index.copy()
     ang = np.empty(4)
     ids = np.empty(4, np.int64)
-    node = np.empty((4, 3))
-    syz, sz = shape[1] * shape[2], shape[2]
     for g in range(first.shape[0]):
         f, m = first[g], size[g]
-        for b in range(4):
-            c = corners[g, b]
-            node[b, 0] = origin[0] + (c // syz) * spacing[0]
-            node[b, 1] = origin[1] + ((c // sz) % shape[1]) * spacing[1]
-            node[b, 2] = origin[2] + (c % sz) * spacing[2]
         sum_a = np.zeros(3)
         sum_b = np.zeros(3)
         na = nb = 0
         for b in range(4):
-            la = lab[corners[g, b]]
+            la = corner_labels[g, b]
             na += la == A[g]
             nb += la == B[g]
             for x in range(3):
-                sum_a[x] += node[b, x] * (la == A[g])
-                sum_b[x] += node[b, x] * (la == B[g])
+                sum_a[x] += corners[g, b, x] * (la == A[g])
+                sum_b[x] += corners[g, b, x] * (la == B[g])
         axis = sum_b / nb - sum_a / na
         length = np.sqrt(axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2])
         if abs(axis[0]) < 0.9 * length:
@@ -339,8 +333,8 @@ def contour_labels(label: np.ndarray, origin, spacing, crossing, pieces_only: bo
     size = np.diff(np.r_[first, len(poly)])
     if (size < 3).any() or (size > 4).any():
         raise AssertionError("marching tetrahedra: an interface polygon without 3 or 4 points")
-    index = _around_axes(index, first, size, tets[tet[first]], A[first], B[first], lab,
-                         np.ascontiguousarray(Xo), nodes.origin, nodes.spacing, np.array(shape, np.int64))
+    corners = tets[tet[first]]
+    index = _around_axes(index, first, size, nodes[corners], lab[corners], A[first], B[first], np.ascontiguousarray(Xo))
     tris, tri_poly = [], []
     for m in (3, 4):
         sel = np.flatnonzero(size == m)
