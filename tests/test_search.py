@@ -14,7 +14,8 @@ from fracture.mesh.exterior import Exterior
 from fracture.mesh.fracture_surface import FractureSurface
 from fracture.mesh.intersect import self_intersections
 from fracture.refine.engine import SEARCH_STAGE, RefineParams, Refiner
-from fracture.refine.search import _BoxGrid, _mend, _parts, graph_cut_search
+from fracture.mesh.primitives import box, sheet
+from fracture.refine.search import _BoxGrid, _mend, _parts, _unanchored, graph_cut_search
 
 
 def _coarse(case):
@@ -132,6 +133,36 @@ def test_an_island_cut_off_from_its_piece_joins_the_piece_around_it():
     grown[(ijk[:, 0] == 3) & (ijk[:, 1] < 3)] = 0  # piece 0 grows: still one region with its kept nodes
     out, count = _mend(sub, near, grown, keep)
     assert count == 0 and (out == grown).all()
+
+
+def test_a_part_of_the_band_that_no_kept_node_reaches_is_unanchored():
+    sub = _BoxGrid(Grid.from_bounds([0, 0, 0], [1, 1, 1], (6, 6, 6)), (slice(0, 6),) * 3)
+    ijk = np.stack(np.unravel_index(np.arange(sub.size), sub.shape), 1)
+    tip = np.all(ijk == [4, 2, 2], axis=1) | np.all(ijk == [4, 2, 3], axis=1)  # two nodes, apart from the slab
+    near = np.flatnonzero((ijk[:, 0] <= 2) | tip)
+    keep = ijk[near, 0] == 0
+    assert (_unanchored(sub, near, keep) == tip[near]).all()
+    keep |= tip[near] & (ijk[near, 2] == 3)  # a kept node in the tip: nothing is unanchored
+    assert not _unanchored(sub, near, keep).any()
+
+
+def test_a_part_of_the_object_apart_from_every_kept_node_keeps_its_piece_and_the_rest_is_searched():
+    """B in two parts, the cut through the large one, the small one a few cells above it and within the band:
+    none of its nodes is kept (all nearer the cut than the band and the piece's core), so no labelling of it
+    is tied to a kept node of its piece and every cut counted it an island (the search kept the coarse
+    surface: 'the cut leaves a piece in parts'). Its nodes keep their piece, and the rest is searched."""
+    case = weak_sheet_case("flat", 4.0)
+    x = 0.5 + 4.0 * case.h
+    V1, F1 = box([0, 0, 0], [1, 1, 0.8], (8, 8, 8))
+    V2, F2 = box([0.45, 0.3, 0.86], [0.58, 0.45, 0.96], (2, 2, 2))
+    B = Exterior(np.vstack([V1, V2]), np.vstack([F1, F2 + len(V1)]))
+    V, F = sheet(lambda u, v: np.stack([np.full_like(u, x), u, v], 1), (0, 1), (0, 0.8), 9, 9)
+    coarse = FractureSurface.from_coarse(V, F, np.tile([0, 1], (len(F), 1)))
+    pyramid = StrengthPyramid(case.grid, case.zeta, levels=5, sigma=1.0)
+    res = graph_cut_search(coarse, pyramid, B, band=14, tension=0.05)
+    assert res.surface is not None, res.notes
+    assert res.surface.V[:, 2].max() <= 0.8 + 1e-9  # no crack in the small part, which lies in one piece
+    assert res.sampled[1] < res.sampled[0]
 
 
 def test_the_parts_of_a_piece_are_its_6_connected_regions():

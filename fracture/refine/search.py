@@ -17,7 +17,10 @@ pieces is a labelling of space by piece. On the field grid:
    area (the flow alone: 100 %); with 0.4 on 100 % and 99 %, and the
    collapsing wall's polished functional fell from 0.599 to 0.567; with a
    half the marble bunny's network lost half its area to shortcuts through
-   the strong marble (`docs/design-measurements.md`). The band reads no psi
+   the strong marble (`docs/design-measurements.md`). A part of the band
+   that no kept node reaches (a tip of the object that the band meets only
+   across B) keeps its pieces too: no labelling of it could be tied to a
+   piece, and every cut would count it an island (step 3). The band reads no psi
    (:func:`search_band`): the refine stage keeps it in the stage cache, and a
    re-run with another material or stress weight takes it from there.
 2. **Cut.** Neighbouring nodes of two pieces cost the least ``psi`` along
@@ -234,6 +237,8 @@ def search_band(mesh: FractureSurface, grid, B: Exterior, band: float, core: flo
     deepest = np.zeros(n_pieces)
     np.maximum.at(deepest, coarse, dn)
     keep |= dn >= deepest[coarse]
+    # a part of the band that no kept node reaches keeps its pieces as they are (_unanchored)
+    keep |= _unanchored(sub, near, keep)
     if keep.all():
         return SearchBand(box, near, coarse, keep, empty=(
             f"search: the band of {band:g} cells holds no free grid node inside the object; the coarse surface "
@@ -253,6 +258,22 @@ def search_band(mesh: FractureSurface, grid, B: Exterior, band: float, core: flo
             f"{'their' if len(thin) > 1 else 'its'} fracture surface (thinner than a cell over most of it); the "
             "coarse surface is kept"))
     return SearchBand(box, near, coarse, keep)
+
+
+def _unanchored(sub: _BoxGrid, near: np.ndarray, keep: np.ndarray) -> np.ndarray:
+    """Which of the band's nodes ``near`` lie in a 6-connected part of the band that holds no kept node: a tip
+    of the object that the band meets only across B (a Suzanne's ear, a corner between two outside regions).
+    No labelling ties such a part to a node that keeps its piece, so every label there would count as an
+    island of the cut (:func:`_regions`) and no cut could be kept: these nodes keep their pieces instead, and
+    the coarse surface stays as it is there (a Cell Fracture export of a Suzanne: two such parts of 4 nodes
+    in all made every cut of its 7 pieces leave a piece in parts)."""
+    inside = np.zeros(sub.size, bool)
+    inside[near] = True
+    parts, n = ndimage.label(inside.reshape(sub.shape))
+    part = parts.ravel()[near]
+    anchored = np.zeros(n + 1, bool)
+    anchored[part[keep]] = True
+    return ~anchored[part]
 
 
 def _thin_pieces(V, F, sides, coarse, n_pieces, spacing) -> np.ndarray:
